@@ -1,0 +1,205 @@
+"""Pinhole camera in the OpenCV convention (x right, y down, z forward), distances in metres.
+
+``K`` is the 3×3 intrinsics matrix. As in OpenCV, integer pixel coordinates are pixel centres:
+``u = fx * x / z + s * y / z + cx`` and image column ``i`` is centred at ``u = i``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from paz6d.backend.checks import as_array, as_camera_matrix, as_points
+
+
+def _as_distortion(distortion) -> np.ndarray | None:
+    if distortion is None:
+        return None
+    coefficients = as_array(distortion, "distortion", (np.asarray(distortion).shape[-1],)).ravel()
+    if coefficients.size not in (4, 5, 8, 12, 14):
+        raise ValueError(f"distortion: expected 4, 5, 8, 12 or 14 OpenCV coefficients, got {coefficients.size}")
+    return None if not np.any(coefficients) else coefficients
+
+
+def project_points(points_cam, K, distortion=None) -> np.ndarray:
+    """Projects ``(N, 3)`` camera-frame points (metres) to ``(N, 2)`` pixels.
+
+    Points with ``z <= 0`` produce non-finite pixels (they are behind the camera). With
+    ``distortion`` (OpenCV coefficients) OpenCV's model is applied.
+    """
+    points = as_array(points_cam, "points_cam", (3,))
+    K = as_camera_matrix(K)
+    distortion = _as_distortion(distortion)
+    if distortion is not None:
+        flat = points.reshape(-1, 3)
+        pixels, _ = cv2.projectPoints(flat, np.zeros(3), np.zeros(3), K, distortion)
+        return pixels.reshape(points.shape[:-1] + (2,))
+    z = points[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.where(z > 0, points[..., 0] / z, np.nan)
+        y = np.where(z > 0, points[..., 1] / z, np.nan)
+    u = K[0, 0] * x + K[0, 1] * y + K[0, 2]
+    v = K[1, 1] * y + K[1, 2]
+    return np.stack([u, v], axis=-1)
+
+
+def transform_and_project(points_model, T_model2cam, K, distortion=None) -> np.ndarray:
+    """Projects ``(N, 3)`` model points posed by ``T_model2cam`` ``(4, 4)`` to ``(N, 2)`` pixels."""
+    from paz6d.backend.transform import apply
+
+    return project_points(apply(T_model2cam, points_model), K, distortion)
+
+
+def unproject(pixels, depths, K) -> np.ndarray:
+    """Back-projects ``(N, 2)`` pixels at depths ``(N,)`` (metres, along z) to ``(N, 3)`` camera points."""
+    pixels = as_array(pixels, "pixels", (2,))
+    depths = np.asarray(depths, dtype=np.float64)
+    if depths.shape != pixels.shape[:-1]:
+        raise ValueError(f"depths: expected shape {pixels.shape[:-1]} to match pixels, got {depths.shape}")
+    K = as_camera_matrix(K)
+    y = (pixels[..., 1] - K[1, 2]) / K[1, 1]
+    x = (pixels[..., 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+    return np.stack([x * depths, y * depths, depths], axis=-1)
+
+
+def depth_to_points(depth, K) -> np.ndarray:
+    """Back-projects a depth image ``(H, W)`` (metres, 0 = none) to ``(N, 3)`` camera points.
+
+    Pixel ``(row, col)`` is taken at its centre coordinate ``(u, v) = (col, row)``.
+    """
+    depth = np.asarray(depth, dtype=np.float64)
+    if depth.ndim != 2:
+        raise ValueError(f"depth: expected shape (H, W), got {depth.shape}")
+    rows, cols = np.nonzero(depth > 0)
+    pixels = np.stack([cols, rows], axis=-1).astype(np.float64)
+    return unproject(pixels, depth[rows, cols], K)
+
+
+def opengl_projection(K, width: int, height: int, near: float, far: float) -> np.ndarray:
+    """OpenGL projection matrix (4×4) equivalent to ``K`` for an image of ``width×height`` px.
+
+    Assumes the OpenGL camera looks down -z with y up and NDC in [-1, 1]; the matching change
+    of camera axes lives in ``renderers``.
+    """
+    K = as_camera_matrix(K)
+    if not 0 < near < far:
+        raise ValueError(f"near/far: expected 0 < near < far, got near={near}, far={far}")
+    fx, fy, cx, cy, skew = K[0, 0], K[1, 1], K[0, 2], K[1, 2], K[0, 1]
+    P = np.zeros((4, 4))
+    P[0, 0] = 2 * fx / width
+    P[0, 1] = -2 * skew / width
+    P[0, 2] = 1 - 2 * cx / width
+    P[1, 1] = 2 * fy / height
+    P[1, 2] = 2 * cy / height - 1
+    P[2, 2] = -(far + near) / (far - near)
+    P[2, 3] = -2 * far * near / (far - near)
+    P[3, 2] = -1
+    return P
+
+
+def camera_matrix_from_opengl(P, width: int, height: int) -> np.ndarray:
+    """Inverse of :func:`opengl_projection` for the intrinsics part: returns 3×3 ``K``."""
+    P = as_array(P, "P", (4, 4))
+    K = np.eye(3)
+    K[0, 0] = P[0, 0] * width / 2
+    K[0, 1] = -P[0, 1] * width / 2
+    K[0, 2] = (1 - P[0, 2]) * width / 2
+    K[1, 1] = P[1, 1] * height / 2
+    K[1, 2] = (P[1, 2] + 1) * height / 2
+    return K
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Intrinsics ``K`` (3×3), image ``width``/``height`` (px) and optional OpenCV distortion."""
+
+    K: np.ndarray
+    width: int
+    height: int
+    distortion: np.ndarray | None = field(default=None)
+
+    def __post_init__(self):
+        object.__setattr__(self, "K", as_camera_matrix(self.K))
+        if int(self.width) <= 0 or int(self.height) <= 0:
+            raise ValueError(f"width/height: expected positive pixel sizes, got {self.width}x{self.height}")
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+        object.__setattr__(self, "distortion", _as_distortion(self.distortion))
+
+    def project(self, points_cam) -> np.ndarray:
+        """``(N, 3)`` camera points (m) to ``(N, 2)`` pixels."""
+        return project_points(points_cam, self.K, self.distortion)
+
+    def unproject(self, pixels, depths) -> np.ndarray:
+        """``(N, 2)`` undistorted pixels + depths (m) to ``(N, 3)`` camera points."""
+        return unproject(pixels, depths, self.K)
+
+    def undistort_points(self, pixels) -> np.ndarray:
+        """Removes lens distortion from ``(N, 2)`` pixel coordinates (returns pixels for ``K``)."""
+        pixels = as_points(pixels, "pixels", dimension=2)
+        if self.distortion is None:
+            return pixels
+        undistorted = cv2.undistortPoints(pixels.reshape(-1, 1, 2), self.K, self.distortion, P=self.K)
+        return undistorted.reshape(-1, 2)
+
+    def undistort_image(self, image: np.ndarray) -> np.ndarray:
+        """Undistorts an image with this camera's distortion (identity when there is none)."""
+        if self.distortion is None:
+            return image
+        return cv2.undistort(image, self.K, self.distortion)
+
+    def opengl_projection(self, near: float = 0.01, far: float = 100.0) -> np.ndarray:
+        """OpenGL projection matrix for this camera (see :func:`opengl_projection`)."""
+        return opengl_projection(self.K, self.width, self.height, near, far)
+
+    def scaled(self, factor: float) -> "Camera":
+        """Camera for an image resized by ``factor`` (pixel-centre convention preserved)."""
+        K = self.K.copy()
+        K[:2] *= factor
+        K[0, 2] = (self.K[0, 2] + 0.5) * factor - 0.5
+        K[1, 2] = (self.K[1, 2] + 0.5) * factor - 0.5
+        return Camera(K, round(self.width * factor), round(self.height * factor), self.distortion)
+
+    def to_dict(self) -> dict:
+        """JSON-safe dictionary."""
+        return {"K": self.K.tolist(), "width": self.width, "height": self.height,
+                "distortion": None if self.distortion is None else self.distortion.tolist()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Camera":
+        for key in ("K", "width", "height"):
+            if key not in data:
+                raise ValueError(f"camera dict: missing field {key!r}")
+        return cls(np.asarray(data["K"], dtype=np.float64), data["width"], data["height"], data.get("distortion"))
+
+    @classmethod
+    def from_bop_json(cls, path: str | Path, image_id: int | None = None) -> "Camera":
+        """Loads a BOP ``camera.json`` (fx, fy, cx, cy, width, height) or, with ``image_id``, a
+        ``scene_camera.json`` entry (``cam_K``; width/height from the sibling dataset's camera.json
+        when present, else inferred as ``2 * (cx, cy)``)."""
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text())
+        except FileNotFoundError as error:
+            raise ValueError(f"{path}: camera file not found") from error
+        except json.JSONDecodeError as error:
+            raise ValueError(f"{path}: invalid JSON ({error})") from error
+        if image_id is None:
+            try:
+                K = np.array([[data["fx"], 0.0, data["cx"]], [0.0, data["fy"], data["cy"]], [0.0, 0.0, 1.0]])
+                return cls(K, data["width"], data["height"])
+            except KeyError as error:
+                raise ValueError(f"{path}: missing field {error.args[0]!r} of a BOP camera.json") from error
+        entry = data.get(str(image_id))
+        if entry is None or "cam_K" not in entry:
+            raise ValueError(f"{path}: no 'cam_K' for image id {image_id}")
+        K = np.asarray(entry["cam_K"], dtype=np.float64).reshape(3, 3)
+        for candidate in (path.parent.parent.parent / "camera.json", path.parent.parent / "camera.json"):
+            if candidate.exists():
+                size = json.loads(candidate.read_text())
+                return cls(K, size["width"], size["height"])
+        return cls(K, round(2 * K[0, 2] + 1), round(2 * K[1, 2] + 1))

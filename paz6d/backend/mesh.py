@@ -1,0 +1,96 @@
+"""Mesh loading and geometry (PLY/OBJ/GLB/GLTF through trimesh), lengths in metres.
+
+BOP meshes are in millimetres: load them with ``scale=0.001``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from scipy.spatial import ConvexHull, QhullError
+
+from paz6d.backend.checks import as_points
+
+MESH_SUFFIXES = (".ply", ".obj", ".glb", ".gltf", ".off", ".stl")
+
+
+class MeshError(ValueError):
+    """A mesh file is missing, unreadable, empty or holds non-finite coordinates."""
+
+
+def load_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
+    """Loads one mesh (scene files are merged) and multiplies its vertices by ``scale``.
+
+    Keeps vertex colours and UV textures. Raises :class:`MeshError` naming the file when it is
+    missing, not a supported format, empty, or has NaN/inf vertices.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"{path}: mesh file not found")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise MeshError(f"{path}: unsupported mesh format {path.suffix!r}; expected one of {MESH_SUFFIXES}")
+    if not np.isfinite(scale) or scale <= 0:
+        raise MeshError(f"{path}: scale must be a positive finite number, got {scale}")
+    try:
+        loaded = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as error:  # trimesh raises many exception types for broken files
+        raise MeshError(f"{path}: could not read mesh ({type(error).__name__}: {error})") from error
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.vertices) == 0 or len(loaded.faces) == 0:
+        raise MeshError(f"{path}: mesh is empty (expected vertices and triangle faces)")
+    if not np.all(np.isfinite(loaded.vertices)):
+        raise MeshError(f"{path}: mesh has NaN or infinite vertex coordinates")
+    if scale != 1.0:
+        loaded.apply_scale(scale)
+    return loaded
+
+
+def diameter(points) -> float:
+    """Largest distance between two of the ``(N, 3)`` points (same unit as the points).
+
+    Exact: the farthest pair lies on the convex hull, so only hull vertices are compared
+    (falls back to all points for degenerate, e.g. planar, sets).
+    """
+    points = as_points(points, "points", min_count=1)
+    candidates = points
+    if len(points) > 4:
+        try:
+            candidates = points[ConvexHull(points).vertices]
+        except QhullError:
+            candidates = points
+    best = 0.0
+    for start in range(0, len(candidates), 2048):
+        block = candidates[start:start + 2048]
+        distances = np.sum((block[:, None, :] - candidates[None, :, :]) ** 2, axis=-1)
+        best = max(best, float(distances.max()))
+    return float(np.sqrt(best))
+
+
+def sample_points(mesh: trimesh.Trimesh, count: int, seed: int | np.random.Generator | None = None) -> np.ndarray:
+    """Samples ``count`` points uniformly on the surface (area-weighted), ``(count, 3)``."""
+    if count <= 0:
+        raise ValueError(f"count: expected a positive number of points, got {count}")
+    generator = np.random.default_rng(seed)
+    triangles = mesh.triangles
+    areas = mesh.area_faces
+    if areas.sum() <= 0:
+        raise MeshError("mesh: total surface area is zero, cannot sample points")
+    faces = generator.choice(len(triangles), size=count, p=areas / areas.sum())
+    u, v = generator.random((2, count))
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    chosen = triangles[faces]
+    return chosen[:, 0] + u[:, None] * (chosen[:, 1] - chosen[:, 0]) + v[:, None] * (chosen[:, 2] - chosen[:, 0])
+
+
+def bounding_box(points) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned ``(min_corner, max_corner)`` of ``(N, 3)`` points."""
+    points = as_points(points, "points")
+    return points.min(axis=0), points.max(axis=0)
+
+
+def bounding_box_corners(points) -> np.ndarray:
+    """The 8 corners ``(8, 3)`` of the axis-aligned box of ``points``."""
+    low, high = bounding_box(points)
+    return np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])])

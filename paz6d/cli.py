@@ -1,0 +1,55 @@
+"""The ``paz6d`` command: ``generate``, ``train``, ``evaluate`` and ``demo``.
+
+Each command lives in its own module exposing ``configure(parser)`` and ``run(args) -> int``;
+those modules import heavy libraries (TensorFlow, pyrender) only inside ``run``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMANDS = {
+    "generate": ("data_gen.cli", "render a synthetic BOP-format data set from meshes"),
+    "train": ({"aae": ("paz6d.training.aae", "Augmented Autoencoder (implicit 6D pose)"),
+               "keypointnet": ("paz6d.training.keypointnet", "KeypointNet keypoint discovery"),
+               "emotion": ("paz6d.training.emotion", "mini-Xception emotion classifier")},
+              "train a model"),
+    "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
+    "demo": ("paz6d.demo", "end-to-end demo: generate data, train, estimate poses, evaluate"),
+}
+
+
+def _add_module_command(subparsers, name: str, module_name: str, help_text: str) -> None:
+    module = importlib.import_module(module_name)
+    parser = subparsers.add_parser(name, help=help_text, description=help_text)
+    module.configure(parser)
+    parser.set_defaults(_run=module.run)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="paz6d", description="paz6d: 6D object pose and perception toolkit")
+    subparsers = parser.add_subparsers(dest="command", required=True)
+    for name, (target, help_text) in COMMANDS.items():
+        if isinstance(target, dict):
+            group = subparsers.add_parser(name, help=help_text, description=help_text)
+            inner = group.add_subparsers(dest="model", required=True)
+            for model_name, (module_name, model_help) in target.items():
+                _add_module_command(inner, model_name, module_name, model_help)
+        else:
+            _add_module_command(subparsers, name, target, help_text)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except ValueError as error:
+        print(f"paz6d {args.command}: error: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Trainers behind ``paz6d train``: a shared checkpoint/resume/logging loop and one module per model."""
