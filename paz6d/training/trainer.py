@@ -1,0 +1,342 @@
+"""Shared training loop behind every ``paz6d train <model>``: checkpoints, resume, logs, progress, samples.
+
+A :class:`Trainer` runs ``steps`` optimisation steps of a Keras 3 model (TensorFlow backend) and keeps
+everything it needs to continue in ``run_dir``::
+
+    run_dir/
+      checkpoints/step_00001000/   model.weights.h5, optimizer.npz, state.json (one folder per checkpoint)
+      checkpoint.json              {"step": 1000, "path": "checkpoints/step_00001000"} (latest, atomic)
+      log.csv                      step, wall time, data/step seconds, every metric
+      tensorboard/                 the same scalars as TensorBoard events (``tensorboard=True``)
+      samples/step_00001000.png    whatever ``sample_callback`` draws
+
+Re-running :meth:`Trainer.fit` with the same ``run_dir`` restores the weights and optimizer state of the
+latest checkpoint and continues from its step; log rows written after that checkpoint (by a run that was
+killed) are dropped so every step appears once. Ctrl-C saves a checkpoint before stopping.
+
+For a deterministic data stream across resumes pass ``data`` as a function of the step index
+(``data(step) -> batch``); an iterable is also accepted (it is simply continued).
+
+Example:
+    >>> trainer = Trainer(model, optimizer, loss_fn, data=lambda step: batches[step % len(batches)],
+    ...                   run_dir="runs/x", steps=1000, checkpoint_every=200)   # doctest: +SKIP
+    >>> summary = trainer.fit()                                                  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from paz6d.backend.tensorflow_guard import import_tensorflow
+
+CHECKPOINT_POINTER = "checkpoint.json"
+LOG_FILE = "log.csv"
+_FIXED_COLUMNS = ["step", "wall_seconds", "data_seconds", "step_seconds"]
+
+
+def _write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(json.dumps(data, indent=2))
+    os.replace(temporary, path)
+
+
+def _batch_size(batch: Any) -> int:
+    """Leading dimension of the first array found in ``batch`` (tuple/list/dict/array)."""
+    if isinstance(batch, Mapping):
+        batch = next(iter(batch.values()))
+    while isinstance(batch, (tuple, list)):
+        batch = batch[0]
+    return int(np.shape(batch)[0]) if np.ndim(batch) else 1
+
+
+def _write_scalars(writer, step: int, scalars: Mapping[str, float]) -> None:
+    """Writes scalars as TensorBoard "scalars"-plugin summaries (TF core only; the tensorboard package
+    is needed to view them, not to write them)."""
+    tf = import_tensorflow()
+    from tensorflow.core.framework import summary_pb2
+
+    metadata = summary_pb2.SummaryMetadata(plugin_data=summary_pb2.SummaryMetadata.PluginData(plugin_name="scalars"))
+    with writer.as_default(step=step):
+        for key, value in scalars.items():
+            tf.summary.write(key, tf.constant(value, dtype=tf.float32), metadata=metadata)
+    writer.flush()
+
+
+@dataclass
+class TrainingSummary:
+    """What :meth:`Trainer.fit` did.
+
+    Attributes:
+        start_step: step the run started from (0, or the resumed checkpoint's step).
+        final_step: step reached (``steps`` unless interrupted).
+        metrics: mean of each metric over the last ``log_every`` steps.
+        loader_samples_per_second: samples produced per second of time spent waiting for data.
+        model_samples_per_second: samples per second of time spent in the optimisation step.
+    """
+
+    start_step: int
+    final_step: int
+    metrics: dict[str, float]
+    loader_samples_per_second: float
+    model_samples_per_second: float
+
+
+class Trainer:
+    """Checkpointed, resumable training loop for a Keras 3 model.
+
+    Args:
+        model: a built ``keras.Model``.
+        optimizer: a ``keras.optimizers.Optimizer``.
+        loss_fn: ``loss_fn(model, batch) -> loss`` (scalar tensor) or a dict of scalar tensors with key
+            ``"loss"`` (the others are logged as metrics). Ignored when ``train_step`` is given.
+        data: ``data(step) -> batch`` (deterministic on resume) or an iterable of batches.
+        run_dir: folder for checkpoints, logs and samples (created).
+        steps: total number of optimisation steps (a resumed run stops at the same total).
+        checkpoint_every: steps between checkpoints (a final one is always written).
+        log_every: steps between log rows / TensorBoard scalars (means over the interval).
+        sample_every: steps between ``sample_callback`` calls; 0 disables.
+        sample_callback: ``sample_callback(model, step, png_path)`` draws a PNG (e.g. reconstructions).
+        train_step: optional ``train_step(batch) -> dict of scalars`` replacing the built-in gradient
+            step (it must update ``model``/``optimizer`` itself).
+        keep_checkpoints: how many checkpoint folders to keep (oldest deleted first).
+        tensorboard: also write TensorBoard scalars to ``run_dir/tensorboard``.
+        progress: show a tqdm bar.
+        compile_step: wrap the built-in step in ``tf.function``.
+    """
+
+    def __init__(self, model, optimizer, loss_fn: Callable | None, data: Callable[[int], Any] | Iterable,
+                 run_dir: str | Path, steps: int, checkpoint_every: int = 500, log_every: int = 10,
+                 sample_every: int = 0, sample_callback: Callable | None = None,
+                 train_step: Callable[[Any], Mapping[str, Any]] | None = None, keep_checkpoints: int = 2,
+                 tensorboard: bool = True, progress: bool = True, compile_step: bool = True):
+        if int(steps) <= 0:
+            raise ValueError(f"steps: expected a positive number of training steps, got {steps}")
+        for name, value in (("checkpoint_every", checkpoint_every), ("log_every", log_every),
+                            ("keep_checkpoints", keep_checkpoints)):
+            if int(value) <= 0:
+                raise ValueError(f"{name}: expected a positive integer, got {value}")
+        if int(sample_every) < 0:
+            raise ValueError(f"sample_every: expected >= 0, got {sample_every}")
+        if loss_fn is None and train_step is None:
+            raise ValueError("loss_fn/train_step: give a loss function or a custom train_step")
+        if not callable(data) and not isinstance(data, Iterable):
+            raise ValueError(f"data: expected a callable data(step) or an iterable of batches, "
+                             f"got {type(data).__name__}")
+        self.model = model
+        self.optimizer = optimizer
+        self.loss_fn = loss_fn
+        self.data = data
+        self.run_dir = Path(run_dir)
+        self.steps = int(steps)
+        self.checkpoint_every = int(checkpoint_every)
+        self.log_every = int(log_every)
+        self.sample_every = int(sample_every)
+        self.sample_callback = sample_callback
+        self.keep_checkpoints = int(keep_checkpoints)
+        self.tensorboard = tensorboard
+        self.progress = progress
+        self._custom_step = train_step
+        self._compile_step = compile_step
+        self._step_function = None
+
+    # ----------------------------------------------------------------------------------- checkpoints
+    @property
+    def checkpoint_dir(self) -> Path:
+        return self.run_dir / "checkpoints"
+
+    def latest_checkpoint(self) -> tuple[int, Path] | None:
+        """``(step, folder)`` of the newest complete checkpoint in ``run_dir``, or None."""
+        pointer = self.run_dir / CHECKPOINT_POINTER
+        if not pointer.exists():
+            return None
+        try:
+            data = json.loads(pointer.read_text())
+            step, folder = int(data["step"]), self.run_dir / data["path"]
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
+            raise ValueError(f"{pointer}: corrupt checkpoint pointer ({error}); delete it to start over") from error
+        if not (folder / "model.weights.h5").exists():
+            raise ValueError(f"{pointer}: points to {folder}, which has no model.weights.h5")
+        return step, folder
+
+    def _ensure_optimizer_built(self) -> None:
+        if not self.optimizer.built:
+            self.optimizer.build(self.model.trainable_variables)
+
+    def save_checkpoint(self, step: int, metrics: Mapping[str, float] | None = None) -> Path:
+        """Writes model weights + optimizer state for ``step`` (temp folder, then rename) and prunes old ones."""
+        self._ensure_optimizer_built()
+        self.checkpoint_dir.mkdir(parents=True, exist_ok=True)
+        name = f"step_{step:08d}"
+        final = self.checkpoint_dir / name
+        temporary = self.checkpoint_dir / (name + ".tmp")
+        shutil.rmtree(temporary, ignore_errors=True)
+        temporary.mkdir()
+        self.model.save_weights(temporary / "model.weights.h5")
+        store: dict[str, np.ndarray] = {}
+        self.optimizer.save_own_variables(store)
+        np.savez(temporary / "optimizer.npz", **{key: np.asarray(value) for key, value in store.items()})
+        (temporary / "state.json").write_text(json.dumps({"step": step, "metrics": dict(metrics or {})}))
+        shutil.rmtree(final, ignore_errors=True)
+        os.replace(temporary, final)
+        _write_json_atomic(self.run_dir / CHECKPOINT_POINTER, {"step": step, "path": f"checkpoints/{name}"})
+        folders = sorted(p for p in self.checkpoint_dir.glob("step_*") if not p.name.endswith(".tmp"))
+        for old in folders[:-self.keep_checkpoints]:
+            shutil.rmtree(old, ignore_errors=True)
+        return final
+
+    def restore(self) -> int:
+        """Loads the latest checkpoint into model/optimizer; returns its step (0 when there is none)."""
+        latest = self.latest_checkpoint()
+        if latest is None:
+            return 0
+        step, folder = latest
+        self.model.load_weights(folder / "model.weights.h5")
+        self._ensure_optimizer_built()
+        with np.load(folder / "optimizer.npz") as stored:
+            self.optimizer.load_own_variables({key: stored[key] for key in stored.files})
+        return step
+
+    # -------------------------------------------------------------------------------------- logging
+    def _prepare_log(self, start_step: int) -> list[dict[str, str]]:
+        """Keeps the log rows up to ``start_step`` (a killed run may have logged past its checkpoint)."""
+        path = self.run_dir / LOG_FILE
+        if not path.exists():
+            return []
+        with path.open(newline="") as handle:
+            rows = [row for row in csv.DictReader(handle) if int(row["step"]) <= start_step]
+        return rows
+
+    def _write_log(self, rows: list[dict[str, Any]]) -> None:
+        columns = list(_FIXED_COLUMNS)
+        for row in rows:
+            columns.extend(key for key in row if key not in columns)
+        path = self.run_dir / LOG_FILE
+        temporary = path.with_name(path.name + ".tmp")
+        with temporary.open("w", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=columns)
+            writer.writeheader()
+            writer.writerows(rows)
+        os.replace(temporary, path)
+
+    # ------------------------------------------------------------------------------------- stepping
+    def _build_step(self):
+        if self._custom_step is not None:
+            return self._custom_step
+        tf = import_tensorflow()
+        model, optimizer, loss_fn = self.model, self.optimizer, self.loss_fn
+
+        def step(batch):
+            with tf.GradientTape() as tape:
+                output = loss_fn(model, batch)
+                metrics = dict(output) if isinstance(output, Mapping) else {"loss": output}
+                if "loss" not in metrics:
+                    raise ValueError(f"loss_fn: returned a dict without a 'loss' key (keys {sorted(metrics)})")
+                loss = metrics["loss"]
+            variables = model.trainable_variables
+            gradients = tape.gradient(loss, variables)
+            optimizer.apply_gradients(zip(gradients, variables))
+            return metrics
+
+        return tf.function(step) if self._compile_step else step
+
+    def _next_batch(self, step: int, iterator):
+        if iterator is None:
+            return self.data(step)
+        return next(iterator)
+
+    def fit(self) -> TrainingSummary:
+        """Trains from the latest checkpoint (or from scratch) up to ``steps``; returns a summary."""
+        from tqdm.auto import tqdm
+
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        start_step = self.restore()
+        rows = self._prepare_log(start_step)
+        self._write_log(rows)
+        if self._step_function is None:
+            self._step_function = self._build_step()
+        writer = None
+        if self.tensorboard:
+            tf = import_tensorflow()
+            writer = tf.summary.create_file_writer(str(self.run_dir / "tensorboard"))
+        iterator = None if callable(self.data) else iter(self.data)
+        sums: dict[str, float] = {}
+        count = 0
+        data_seconds = step_seconds = 0.0
+        interval_data = interval_step = 0.0
+        samples = 0
+        last_metrics: dict[str, float] = {}
+        started = time.perf_counter()
+        step = start_step
+        bar = tqdm(total=self.steps, initial=start_step, desc=f"train {self.run_dir.name}",
+                   disable=not self.progress, dynamic_ncols=True)
+        try:
+            while step < self.steps:
+                tick = time.perf_counter()
+                try:
+                    batch = self._next_batch(step, iterator)
+                except StopIteration:
+                    break
+                tock = time.perf_counter()
+                metrics = self._step_function(batch)
+                values = {key: float(np.asarray(value)) for key, value in metrics.items()}
+                done = time.perf_counter()
+                if not all(np.isfinite(v) for v in values.values()):
+                    raise FloatingPointError(f"training diverged at step {step + 1}: {values}")
+                step += 1
+                samples += _batch_size(batch)
+                interval_data += tock - tick
+                interval_step += done - tock
+                data_seconds += tock - tick
+                step_seconds += done - tock
+                for key, value in values.items():
+                    sums[key] = sums.get(key, 0.0) + value
+                count += 1
+                bar.update(1)
+                if step % self.log_every == 0 or step == self.steps:
+                    last_metrics = {key: value / count for key, value in sums.items()}
+                    row = {"step": step, "wall_seconds": round(time.perf_counter() - started, 3),
+                           "data_seconds": round(interval_data, 4), "step_seconds": round(interval_step, 4),
+                           **last_metrics}
+                    rows.append(row)
+                    self._write_log(rows)
+                    if writer is not None:
+                        _write_scalars(writer, step, {**last_metrics, "data_seconds": interval_data,
+                                                      "step_seconds": interval_step})
+                    bar.set_postfix({key: f"{value:.4g}" for key, value in last_metrics.items()})
+                    sums, count, interval_data, interval_step = {}, 0, 0.0, 0.0
+                if self.sample_every and self.sample_callback is not None and step % self.sample_every == 0:
+                    self._draw_sample(step)
+                if step % self.checkpoint_every == 0 and step < self.steps:
+                    self.save_checkpoint(step, last_metrics)
+        except KeyboardInterrupt:
+            if step > start_step:
+                self.save_checkpoint(step, last_metrics)
+            raise
+        finally:
+            bar.close()
+            if writer is not None:
+                writer.close()
+        if count:
+            last_metrics = {key: value / count for key, value in sums.items()}
+        if step > start_step:
+            self.save_checkpoint(step, last_metrics)
+            if self.sample_callback is not None and self.sample_every and step % self.sample_every != 0:
+                self._draw_sample(step)
+        return TrainingSummary(start_step=start_step, final_step=step, metrics=last_metrics,
+                               loader_samples_per_second=samples / data_seconds if data_seconds > 0 else float("inf"),
+                               model_samples_per_second=samples / step_seconds if step_seconds > 0 else float("inf"))
+
+    def _draw_sample(self, step: int) -> None:
+        folder = self.run_dir / "samples"
+        folder.mkdir(parents=True, exist_ok=True)
+        self.sample_callback(self.model, step, folder / f"step_{step:08d}.png")

@@ -1,0 +1,161 @@
+"""Shared trainer: checkpoints, resume (bit-identical to an uninterrupted run), logs, samples, bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from paz6d.backend.tensorflow_guard import import_keras
+
+
+def _problem(seed: int = 0):
+    """A tiny linear regression y = x @ W_true: model, optimizer, loss_fn, data(step)."""
+    keras = import_keras()
+    keras.utils.set_random_seed(seed)
+    model = keras.Sequential([keras.Input((4,)), keras.layers.Dense(2)])
+    optimizer = keras.optimizers.Adam(0.05)
+    rng = np.random.default_rng(1)
+    W_true = rng.normal(size=(4, 2)).astype("float32")
+    inputs = rng.normal(size=(20, 8, 4)).astype("float32")
+
+    def data(step):
+        x = inputs[step % len(inputs)]
+        return x, x @ W_true
+
+    def loss_fn(model, batch):
+        x, y = batch
+        error = model(x, training=True) - y
+        return {"loss": keras.ops.mean(error ** 2), "max_error": keras.ops.max(keras.ops.abs(error))}
+
+    return model, optimizer, loss_fn, data
+
+
+def _trainer(run_dir, steps, data=None, **kwargs):
+    from paz6d.training.trainer import Trainer
+
+    model, optimizer, loss_fn, default_data = _problem()
+    options = dict(checkpoint_every=5, log_every=1, progress=False)
+    options.update(kwargs)
+    return Trainer(model, optimizer, loss_fn, data or default_data, run_dir, steps, **options)
+
+
+def _log_steps(run_dir):
+    with (run_dir / "log.csv").open() as handle:
+        return [int(row["step"]) for row in csv.DictReader(handle)]
+
+
+def test_fit_lowers_loss_and_writes_logs_checkpoints_samples(tmp_path):
+    drawn = []
+
+    def sample_callback(model, step, path):
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        figure = plt.figure(figsize=(1, 1))
+        plt.plot(np.asarray(model.layers[0].kernel).ravel())
+        figure.savefig(path)
+        plt.close(figure)
+        drawn.append(step)
+
+    trainer = _trainer(tmp_path, 30, sample_every=10, sample_callback=sample_callback)
+    summary = trainer.fit()
+    assert summary.start_step == 0 and summary.final_step == 30
+    assert _log_steps(tmp_path) == list(range(1, 31))
+    with (tmp_path / "log.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert {"loss", "max_error", "data_seconds", "step_seconds"} <= set(rows[0])
+    assert float(rows[-1]["loss"]) < 0.5 * float(rows[0]["loss"])
+    assert drawn == [10, 20, 30]
+    assert sorted(p.name for p in (tmp_path / "samples").iterdir()) == [
+        "step_00000010.png", "step_00000020.png", "step_00000030.png"]
+    events = list((tmp_path / "tensorboard").glob("events.out.tfevents.*"))
+    assert len(events) == 1
+    from tensorflow.python.summary.summary_iterator import summary_iterator
+    from tensorflow.python.framework import tensor_util
+
+    logged = {(event.step, value.tag): float(tensor_util.MakeNdarray(value.tensor))
+              for event in summary_iterator(str(events[0])) for value in event.summary.value}
+    assert logged[(30, "loss")] == pytest.approx(float(rows[-1]["loss"]), rel=1e-6)
+    assert (1, "max_error") in logged
+    pointer = json.loads((tmp_path / "checkpoint.json").read_text())
+    assert pointer["step"] == 30
+    assert len(list((tmp_path / "checkpoints").glob("step_*"))) == 2  # keep_checkpoints=2
+    assert summary.loader_samples_per_second > 0 and summary.model_samples_per_second > 0
+
+
+def test_resume_after_crash_matches_uninterrupted_run(tmp_path):
+    reference = _trainer(tmp_path / "reference", 20)
+    reference.fit()
+
+    model, optimizer, loss_fn, data = _problem()
+
+    def crashing_data(step):
+        if step == 13:
+            raise RuntimeError("simulated crash")
+        return data(step)
+
+    crashed = _trainer(tmp_path / "resumed", 20, data=crashing_data)
+    with pytest.raises(RuntimeError, match="simulated crash"):
+        crashed.fit()
+    assert json.loads((tmp_path / "resumed" / "checkpoint.json").read_text())["step"] == 10
+    assert _log_steps(tmp_path / "resumed")[-1] == 13
+
+    resumed = _trainer(tmp_path / "resumed", 20)
+    summary = resumed.fit()
+    assert summary.start_step == 10 and summary.final_step == 20
+    assert _log_steps(tmp_path / "resumed") == list(range(1, 21))  # rows 11..13 of the crashed run replaced
+    assert int(resumed.optimizer.iterations.numpy()) == 20
+    for got, want in zip(resumed.model.get_weights(), reference.model.get_weights()):
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)  # float32 arithmetic, same op order
+
+
+def test_keyboard_interrupt_saves_a_checkpoint(tmp_path):
+    model, optimizer, loss_fn, data = _problem()
+
+    def interrupting_data(step):
+        if step == 7:
+            raise KeyboardInterrupt
+        return data(step)
+
+    trainer = _trainer(tmp_path, 20, data=interrupting_data)
+    with pytest.raises(KeyboardInterrupt):
+        trainer.fit()
+    assert trainer.latest_checkpoint()[0] == 7
+    assert _trainer(tmp_path, 20).fit().start_step == 7
+
+
+def test_extending_a_finished_run_continues(tmp_path):
+    _trainer(tmp_path, 10).fit()
+    summary = _trainer(tmp_path, 15).fit()
+    assert (summary.start_step, summary.final_step) == (10, 15)
+    assert _trainer(tmp_path, 15).fit().final_step == 15  # nothing left to do
+
+
+def test_iterable_data_and_custom_train_step(tmp_path):
+    from paz6d.training.trainer import Trainer
+
+    model, optimizer, _, data = _problem()
+    seen = []
+
+    def train_step(batch):
+        seen.append(batch[0].shape)
+        return {"loss": float(np.mean(batch[1] ** 2))}
+
+    trainer = Trainer(model, optimizer, None, (data(i) for i in range(6)), tmp_path, 10,
+                      train_step=train_step, progress=False, tensorboard=False)
+    summary = trainer.fit()
+    assert summary.final_step == 6 and len(seen) == 6  # the iterable ran out first
+
+
+def test_bad_arguments_and_corrupt_pointer(tmp_path):
+    with pytest.raises(ValueError, match="steps"):
+        _trainer(tmp_path, 0)
+    with pytest.raises(ValueError, match="checkpoint_every"):
+        _trainer(tmp_path, 5, checkpoint_every=0)
+    (tmp_path / "checkpoint.json").write_text("{not json")
+    with pytest.raises(ValueError, match="checkpoint.json"):
+        _trainer(tmp_path, 5).fit()
