@@ -1,0 +1,350 @@
+"""KeypointNet: ordered 2D keypoints + depth from one object crop, and the paper's losses.
+
+Suwajanakorn et al., "Discovery of Latent 3D Keypoints via End-to-end Geometric Reasoning"
+(NeurIPS 2018). A fully convolutional network turns an RGB crop ``(S, S, 3)`` into ``N``
+probability maps ``g_i`` (spatial softmax) and ``N`` depth maps ``d_i``; keypoint ``i`` is the
+expectation ``[u_i, v_i] = sum g_i(u, v) [u, v]`` and ``z_i = sum g_i(u, v) d_i(u, v)``.
+
+Units: ``uv`` are pixels of the input crop (OpenCV pixel-centre convention: column ``j`` is at
+``u = j``). ``depth`` is a dimensionless code ``z_hat``; callers turn it into metres with
+:func:`depth_to_metres` (``z = z_hat * depth_scale``, ``depth_scale = diameter * fx_crop / S``,
+which makes ``z_hat`` about constant for box-centred crops of any size).
+
+Losses (batch-mean scalars; coordinates in any consistent unit, e.g. pixels/``S``):
+
+- :func:`consistency_loss` — multi-view consistency of 2D keypoints given the relative pose,
+- :func:`relative_pose_loss` — angle between the Procrustes rotation and the true one,
+- :func:`separation_loss` — hinge pushing 3D keypoints at least ``delta`` apart,
+- :func:`silhouette_loss` — probability mass inside the object mask,
+- :func:`variance_loss` — spread of each probability map about its keypoint,
+- :func:`heatmap_loss` / :func:`coordinate_loss` — the supervised alternative.
+
+Models save as ``.keras`` with only registered layers (no ``Lambda``), so loading runs with
+``safe_mode=True``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow
+
+tf = import_tensorflow()
+keras = import_keras()
+
+PACKAGE = "paz6d"
+OUTPUT_NAMES = ("uv", "depth", "probabilities")
+
+
+class KeypointNetError(ValueError):
+    """A KeypointNet model file or configuration is unusable."""
+
+
+def cell_centres(height: int, width: int, stride: int) -> np.ndarray:
+    """Pixel coordinates ``(height, width, 2)`` of the centres of a stride-``stride`` feature grid.
+
+    Feature cell ``(row, col)`` covers input pixels ``[col*stride, (col+1)*stride)``; with the
+    pixel-centre convention its centre is at ``u = col*stride + (stride - 1) / 2``.
+    """
+    if height <= 0 or width <= 0 or stride <= 0:
+        raise ValueError(f"height/width/stride: expected positive integers, got {height}, {width}, {stride}")
+    offset = (stride - 1) / 2.0
+    u = np.arange(width, dtype=np.float32) * stride + offset
+    v = np.arange(height, dtype=np.float32) * stride + offset
+    grid_u, grid_v = np.meshgrid(u, v)
+    return np.stack([grid_u, grid_v], axis=-1)
+
+
+@keras.saving.register_keras_serializable(package=PACKAGE)
+class SpatialExpectation(keras.layers.Layer):
+    """Spatial softmax + expectations: ``(logits, depth_maps)`` to ``(uv, depth, probabilities)``.
+
+    Inputs are ``(B, h, w, N)`` each; outputs ``uv (B, N, 2)`` in input pixels, ``depth (B, N)``
+    and ``probabilities (B, h, w, N)`` (each map sums to 1).
+
+    Args:
+        stride: input pixels per feature cell.
+    """
+
+    def __init__(self, stride: int = 1, **kwargs):
+        super().__init__(**kwargs)
+        self.stride = int(stride)
+
+    def call(self, inputs):
+        logits, depth_maps = inputs
+        shape = tf.shape(logits)
+        batch, height, width, count = shape[0], shape[1], shape[2], shape[3]
+        flat = tf.reshape(tf.transpose(logits, [0, 3, 1, 2]), [batch, count, height * width])
+        probabilities_flat = tf.nn.softmax(flat, axis=-1)
+        offset = (self.stride - 1) / 2.0
+        u = tf.cast(tf.range(width), logits.dtype) * self.stride + offset
+        v = tf.cast(tf.range(height), logits.dtype) * self.stride + offset
+        grid_u, grid_v = tf.meshgrid(u, v)
+        grid = tf.stack([tf.reshape(grid_u, [-1]), tf.reshape(grid_v, [-1])], axis=-1)
+        uv = tf.einsum("bnp,pc->bnc", probabilities_flat, grid)
+        depth_flat = tf.reshape(tf.transpose(depth_maps, [0, 3, 1, 2]), [batch, count, height * width])
+        depth = tf.reduce_sum(probabilities_flat * depth_flat, axis=-1)
+        probabilities = tf.transpose(tf.reshape(probabilities_flat, [batch, count, height, width]), [0, 2, 3, 1])
+        return uv, depth, probabilities
+
+    def compute_output_shape(self, input_shape):
+        batch, height, width, count = input_shape[0]
+        return (batch, count, 2), (batch, count), (batch, height, width, count)
+
+    def get_config(self):
+        return {**super().get_config(), "stride": self.stride}
+
+
+def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: int = 32,
+                      downsample: int = 4, dilations: tuple[int, ...] = (1, 2, 4, 8, 1, 2, 4),
+                      depth_prior: float = 1.3, name: str = "keypointnet"):
+    """Builds the KeypointNet Keras model.
+
+    Args:
+        num_keypoints: ``N`` ordered keypoints.
+        input_size: crop side ``S`` in pixels; inputs are ``(B, S, S, 3)`` RGB values 0..255.
+        filters: channels of every convolution.
+        downsample: stride of the stem (1, 2, 4 or 8); probability maps are ``S / downsample``
+            cells wide. Sub-cell precision comes from the expectation.
+        dilations: dilation rate of each 3×3 convolution of the dilated stack.
+        depth_prior: initial value of the depth code ``z_hat`` (about the crop margin factor).
+    Returns:
+        ``keras.Model`` with outputs ``{"uv": (B, N, 2), "depth": (B, N), "probabilities": (B, h, w, N)}``.
+    """
+    if num_keypoints < 1:
+        raise ValueError(f"num_keypoints: expected a positive integer, got {num_keypoints}")
+    if downsample not in (1, 2, 4, 8):
+        raise ValueError(f"downsample: expected 1, 2, 4 or 8, got {downsample}")
+    if input_size < 8 or input_size % downsample:
+        raise ValueError(f"input_size: expected a multiple of downsample={downsample} and >= 8, got {input_size}")
+    if filters < 1 or not dilations or any(int(rate) < 1 for rate in dilations):
+        raise ValueError(f"filters/dilations: expected filters >= 1 and positive dilation rates, "
+                         f"got {filters}, {dilations}")
+    layers = keras.layers
+    inputs = keras.Input((input_size, input_size, 3), name="image")
+    x = layers.Rescaling(1.0 / 127.5, offset=-1.0, name="scale")(inputs)
+    x = layers.Conv2D(filters, 3, padding="same", use_bias=False, name="stem_conv")(x)
+    x = layers.BatchNormalization(name="stem_bn")(x)
+    x = layers.ReLU(name="stem_relu")(x)
+    for level in range(int(math.log2(downsample))):
+        x = layers.Conv2D(filters, 3, strides=2, padding="same", use_bias=False, name=f"down{level}_conv")(x)
+        x = layers.BatchNormalization(name=f"down{level}_bn")(x)
+        x = layers.ReLU(name=f"down{level}_relu")(x)
+    for index, rate in enumerate(dilations):
+        y = layers.Conv2D(filters, 3, dilation_rate=int(rate), padding="same", use_bias=False,
+                          name=f"dilated{index}_conv")(x)
+        y = layers.BatchNormalization(name=f"dilated{index}_bn")(y)
+        y = layers.ReLU(name=f"dilated{index}_relu")(y)
+        x = layers.Add(name=f"dilated{index}_add")([x, y])
+    logits = layers.Conv2D(num_keypoints, 1, name="logits")(x)
+    depth_maps = layers.Conv2D(num_keypoints, 1, name="depth_maps", kernel_initializer="zeros",
+                               bias_initializer=keras.initializers.Constant(depth_prior))(x)
+    uv, depth, probabilities = SpatialExpectation(downsample, name="expectation")([logits, depth_maps])
+    outputs = {"uv": uv, "depth": depth, "probabilities": probabilities}
+    return keras.Model(inputs, outputs, name=name)
+
+
+def save_keypointnet(model, path: str | Path) -> Path:
+    """Saves ``model`` to a ``.keras`` file (written to a temporary file, then renamed)."""
+    path = Path(path)
+    if path.suffix != ".keras":
+        raise ValueError(f"path: expected a .keras file name, got {path}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(path.stem + ".tmp.keras")
+    model.save(temporary)
+    temporary.replace(path)
+    return path
+
+
+def load_keypointnet(path: str | Path):
+    """Loads a model saved by :func:`save_keypointnet` in Keras safe mode (no code execution).
+
+    Raises:
+        KeypointNetError: missing, corrupt or non-KeypointNet file (message names the file).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise KeypointNetError(f"{path}: KeypointNet model file not found")
+    try:
+        model = keras.saving.load_model(path, safe_mode=True, compile=False)
+    except Exception as error:  # Keras raises several types for damaged archives
+        raise KeypointNetError(f"{path}: not a readable .keras model ({type(error).__name__}: {error})") from error
+    names = set(model.output.keys()) if isinstance(model.output, dict) else set()
+    if names != set(OUTPUT_NAMES):
+        raise KeypointNetError(f"{path}: expected a KeypointNet with outputs {OUTPUT_NAMES}, got {sorted(names)}")
+    return model
+
+
+# --------------------------------------------------------------------------- geometry (batched TF)
+
+def depth_to_metres(depth_code, diameter: float, K, input_size: int):
+    """Depth code ``z_hat (B, N)`` to metres: ``z = z_hat * diameter * K[:, 0, 0] / input_size``.
+
+    ``K (B, 3, 3)`` are the crops' intrinsics (pixels of the ``input_size`` crop).
+    """
+    K = tf.convert_to_tensor(K, tf.float32)
+    return tf.convert_to_tensor(depth_code, tf.float32) * (diameter / input_size) * K[:, 0:1, 0]
+
+
+def unproject(uv, depth, K):
+    """Pixels ``(B, N, 2)`` at depths ``(B, N)`` through intrinsics ``(B, 3, 3)`` to camera points ``(B, N, 3)``."""
+    uv = tf.convert_to_tensor(uv, tf.float32)
+    depth = tf.convert_to_tensor(depth, tf.float32)
+    K = tf.convert_to_tensor(K, tf.float32)
+    fx, fy, cx, cy, skew = K[:, 0:1, 0], K[:, 1:2, 1], K[:, 0:1, 2], K[:, 1:2, 2], K[:, 0:1, 1]
+    y = (uv[..., 1] - cy) / fy
+    x = (uv[..., 0] - cx - skew * y) / fx
+    return tf.stack([x * depth, y * depth, depth], axis=-1)
+
+
+def project(points, K):
+    """Camera points ``(B, N, 3)`` through intrinsics ``(B, 3, 3)`` to pixels ``(B, N, 2)``.
+
+    Depths are clamped to at least 1e-6 so a bad prediction cannot divide by zero.
+    """
+    points = tf.convert_to_tensor(points, tf.float32)
+    K = tf.convert_to_tensor(K, tf.float32)
+    z = tf.maximum(points[..., 2], 1e-6)
+    x, y = points[..., 0] / z, points[..., 1] / z
+    u = K[:, 0:1, 0] * x + K[:, 0:1, 1] * y + K[:, 0:1, 2]
+    v = K[:, 1:2, 1] * y + K[:, 1:2, 2]
+    return tf.stack([u, v], axis=-1)
+
+
+def transform_points(T, points):
+    """Applies ``(B, 4, 4)`` rigid transforms to ``(B, N, 3)`` points."""
+    T = tf.convert_to_tensor(T, tf.float32)
+    points = tf.convert_to_tensor(points, tf.float32)
+    return tf.einsum("bij,bnj->bni", T[:, :3, :3], points) + T[:, None, :3, 3]
+
+
+def invert_transforms(T):
+    """Inverse of ``(B, 4, 4)`` rigid transforms."""
+    T = tf.convert_to_tensor(T, tf.float32)
+    rotation_t = tf.transpose(T[:, :3, :3], [0, 2, 1])
+    translation = -tf.einsum("bij,bj->bi", rotation_t, T[:, :3, 3])
+    top = tf.concat([rotation_t, translation[:, :, None]], axis=-1)
+    bottom = tf.tile(tf.constant([[[0.0, 0.0, 0.0, 1.0]]]), [tf.shape(T)[0], 1, 1])
+    return tf.concat([top, bottom], axis=1)
+
+
+def procrustes_rotation(points_a, points_b):
+    """Rotation ``(B, 3, 3)`` best aligning centred ``points_a (B, N, 3)`` onto centred ``points_b``.
+
+    Minimises ``sum_i ||R (a_i - mean a) - (b_i - mean b)||^2`` (Kabsch, reflection-corrected).
+    """
+    a = points_a - tf.reduce_mean(points_a, axis=1, keepdims=True)
+    b = points_b - tf.reduce_mean(points_b, axis=1, keepdims=True)
+    covariance = tf.einsum("bni,bnj->bij", a, b)
+    _, u, v = tf.linalg.svd(covariance)
+    sign = tf.sign(tf.linalg.det(tf.einsum("bij,bkj->bik", v, u)))
+    sign = tf.where(sign == 0, tf.ones_like(sign), sign)
+    correction = tf.linalg.diag(tf.stack([tf.ones_like(sign), tf.ones_like(sign), sign], axis=-1))
+    return tf.einsum("bij,bjk,blk->bil", v, correction, u)
+
+
+# --------------------------------------------------------------------------- discovery losses
+
+def consistency_loss(uv_a, depth_a, uv_b, depth_b, K_a, K_b, T_a2b):
+    """Multi-view consistency (paper eq. 1): mean over the batch of
+
+    ``1/(2N) sum_i ||pi_b(T_a2b pi_a^-1(uv_a_i, z_a_i)) - uv_b_i||^2 + ||pi_a(T_b2a pi_b^-1(...)) - uv_a_i||^2``.
+
+    Args:
+        uv_a, uv_b: ``(B, N, 2)`` keypoints in views A and B (pixels of each view's ``K``).
+        depth_a, depth_b: ``(B, N)`` keypoint depths (same length unit as ``T_a2b``).
+        K_a, K_b: ``(B, 3, 3)`` intrinsics; T_a2b: ``(B, 4, 4)`` maps camera A to camera B points.
+    """
+    T_b2a = invert_transforms(T_a2b)
+    a_in_b = project(transform_points(T_a2b, unproject(uv_a, depth_a, K_a)), K_b)
+    b_in_a = project(transform_points(T_b2a, unproject(uv_b, depth_b, K_b)), K_a)
+    squared = (tf.reduce_sum(tf.square(a_in_b - uv_b), axis=-1) +
+               tf.reduce_sum(tf.square(b_in_a - uv_a), axis=-1))
+    return tf.reduce_mean(tf.reduce_sum(squared, axis=-1) / (2.0 * tf.cast(tf.shape(squared)[-1], tf.float32)))
+
+
+def relative_pose_loss(points_a, points_b, R_a2b):
+    """Relative pose loss (paper eq. 2): mean of ``2 arcsin(||R_hat - R||_F / (2 sqrt 2))``, i.e. the
+    angle (radians) between the Procrustes estimate ``R_hat`` from ``(B, N, 3)`` keypoints seen in
+    cameras A and B and the true rotation ``R_a2b (B, 3, 3)``."""
+    R_hat = procrustes_rotation(tf.convert_to_tensor(points_a, tf.float32), tf.convert_to_tensor(points_b, tf.float32))
+    frobenius = tf.sqrt(tf.reduce_sum(tf.square(R_hat - tf.convert_to_tensor(R_a2b, tf.float32)), axis=[1, 2]) + 1e-12)
+    return tf.reduce_mean(2.0 * tf.asin(tf.clip_by_value(frobenius / (2.0 * math.sqrt(2.0)), 0.0, 1.0 - 1e-6)))
+
+
+def separation_loss(points, delta: float):
+    """Separation loss (paper eq. 3): mean over the batch of
+    ``1/N^2 sum_{i != j} max(0, delta^2 - ||X_i - X_j||^2)`` for ``(B, N, 3)`` points."""
+    points = tf.convert_to_tensor(points, tf.float32)
+    difference = points[:, :, None, :] - points[:, None, :, :]
+    squared = tf.reduce_sum(tf.square(difference), axis=-1)
+    count = tf.shape(points)[1]
+    off_diagonal = 1.0 - tf.eye(count, dtype=tf.float32)
+    hinge = tf.maximum(0.0, delta ** 2 - squared) * off_diagonal
+    return tf.reduce_mean(tf.reduce_sum(hinge, axis=[1, 2]) / tf.cast(count * count, tf.float32))
+
+
+def silhouette_loss(probabilities, mask):
+    """Silhouette loss (paper eq. 4): mean over the batch of ``1/N sum_i -log sum_uv b(u,v) g_i(u,v)``.
+
+    Args:
+        probabilities: ``(B, h, w, N)`` maps summing to 1.
+        mask: ``(B, h, w)`` object occupancy in [0, 1] at the maps' resolution.
+    """
+    probabilities = tf.convert_to_tensor(probabilities, tf.float32)
+    mask = tf.convert_to_tensor(mask, tf.float32)
+    inside = tf.reduce_sum(probabilities * mask[..., None], axis=[1, 2])
+    return tf.reduce_mean(-tf.math.log(inside + 1e-8))
+
+
+def variance_loss(probabilities, uv, grid):
+    """Variance loss (paper eq. 5): mean over batch and keypoints of ``sum_uv g_i ||[u, v] - uv_i||^2``.
+
+    Args:
+        probabilities: ``(B, h, w, N)``; uv: ``(B, N, 2)``; grid: ``(h, w, 2)`` cell centres in the
+            unit of ``uv`` (see :func:`cell_centres`).
+    """
+    probabilities = tf.convert_to_tensor(probabilities, tf.float32)
+    grid = tf.convert_to_tensor(grid, tf.float32)
+    uv = tf.convert_to_tensor(uv, tf.float32)
+    squared = tf.reduce_sum(tf.square(grid[None, :, :, None, :] - uv[:, None, None, :, :]), axis=-1)
+    return tf.reduce_mean(tf.reduce_sum(probabilities * squared, axis=[1, 2]))
+
+
+# --------------------------------------------------------------------------- supervised losses
+
+def gaussian_heatmaps(uv, grid, sigma: float):
+    """Normalised Gaussian targets ``(B, h, w, N)`` centred at ``uv (B, N, 2)`` on ``grid (h, w, 2)``.
+
+    ``sigma`` is in the unit of ``uv``; each map sums to 1 (keypoints outside the grid still get a
+    normalised map peaked at the nearest border cells).
+    """
+    uv = tf.convert_to_tensor(uv, tf.float32)
+    grid = tf.convert_to_tensor(grid, tf.float32)
+    squared = tf.reduce_sum(tf.square(grid[None, :, :, None, :] - uv[:, None, None, :, :]), axis=-1)
+    logits = -squared / (2.0 * sigma ** 2)
+    shape = tf.shape(logits)
+    flat = tf.reshape(tf.transpose(logits, [0, 3, 1, 2]), [shape[0], shape[3], -1])
+    maps = tf.reshape(tf.nn.softmax(flat, axis=-1), [shape[0], shape[3], shape[1], shape[2]])
+    return tf.transpose(maps, [0, 2, 3, 1])
+
+
+def heatmap_loss(probabilities, targets):
+    """Cross-entropy ``-sum_uv t log g`` between target maps and predicted maps, both ``(B, h, w, N)``,
+    averaged over batch and keypoints."""
+    probabilities = tf.convert_to_tensor(probabilities, tf.float32)
+    targets = tf.convert_to_tensor(targets, tf.float32)
+    return tf.reduce_mean(-tf.reduce_sum(targets * tf.math.log(probabilities + 1e-8), axis=[1, 2]))
+
+
+def coordinate_loss(uv, target_uv, weights=None):
+    """Mean Euclidean distance between ``(B, N, 2)`` keypoints and targets, optionally weighted ``(B, N)``."""
+    distance = tf.sqrt(tf.reduce_sum(tf.square(tf.convert_to_tensor(uv, tf.float32) -
+                                               tf.convert_to_tensor(target_uv, tf.float32)), axis=-1) + 1e-12)
+    if weights is None:
+        return tf.reduce_mean(distance)
+    weights = tf.convert_to_tensor(weights, tf.float32)
+    return tf.reduce_sum(distance * weights) / tf.maximum(tf.reduce_sum(weights), 1e-8)
