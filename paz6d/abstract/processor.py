@@ -16,6 +16,8 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Any
 
+import numpy as np
+
 
 class Processor:
     """Base class of a processing step: subclasses implement :meth:`call`.
@@ -43,6 +45,58 @@ class Processor:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"
+
+
+class RandomProcessor(Processor):
+    """A processor that draws random numbers from its own ``numpy.random.Generator``.
+
+    Args:
+        seed: an int, a ``SeedSequence``, a ``Generator`` (used as is) or None (fresh entropy).
+        name: display name.
+    """
+
+    def __init__(self, seed: int | np.random.SeedSequence | np.random.Generator | None = None,
+                 name: str | None = None):
+        super().__init__(name)
+        self.generator = np.random.default_rng(seed)
+
+    def reseed(self, seed: int | np.random.SeedSequence | np.random.Generator | None) -> None:
+        """Replaces the generator (e.g. one per sample, so results do not depend on worker order)."""
+        self.generator = np.random.default_rng(seed)
+
+
+def random_processors(processor: Callable) -> list[RandomProcessor]:
+    """All :class:`RandomProcessor` objects reachable from ``processor`` (itself, the steps of
+    sequences and processors held in attributes, lists, tuples or dicts), in a fixed depth-first
+    order, each once."""
+    found: list[RandomProcessor] = []
+    seen: set[int] = set()
+
+    def visit(value: Any) -> None:
+        if isinstance(value, (list, tuple)):
+            for item in value:
+                visit(item)
+        elif isinstance(value, dict):
+            for item in value.values():
+                visit(item)
+        elif isinstance(value, Processor) and id(value) not in seen:
+            seen.add(id(value))
+            if isinstance(value, RandomProcessor):
+                found.append(value)
+            for attribute in vars(value).values():
+                visit(attribute)
+
+    visit(processor)
+    return found
+
+
+def reseed(processor: Callable, seed: int | Iterable[int] | np.random.SeedSequence) -> None:
+    """Gives every random processor inside ``processor`` an independent generator derived from
+    ``seed`` (spawned from one ``SeedSequence`` in :func:`random_processors` order)."""
+    sequence = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    targets = random_processors(processor)
+    for target, child in zip(targets, sequence.spawn(len(targets))):
+        target.reseed(child)
 
 
 def _step_name(step: Callable) -> str:
