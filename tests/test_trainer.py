@@ -113,6 +113,23 @@ def test_resume_after_crash_matches_uninterrupted_run(tmp_path):
         np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)  # float32 arithmetic, same op order
 
 
+def test_prefetching_gives_the_same_result(tmp_path):
+    plain = _trainer(tmp_path / "plain", 12)
+    plain.fit()
+    calls = []
+    model, optimizer, loss_fn, data = _problem()
+
+    def counted(step):
+        calls.append(step)
+        return data(step)
+
+    prefetched = _trainer(tmp_path / "prefetched", 12, data=counted, prefetch=3, prefetch_workers=2)
+    prefetched.fit()
+    assert sorted(calls) == list(range(12))  # every batch made once, none past the end
+    for got, want in zip(prefetched.model.get_weights(), plain.model.get_weights()):
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
+
+
 def test_keyboard_interrupt_saves_a_checkpoint(tmp_path):
     model, optimizer, loss_fn, data = _problem()
 

@@ -31,6 +31,7 @@ import os
 import shutil
 import time
 from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -80,7 +81,8 @@ class TrainingSummary:
         start_step: step the run started from (0, or the resumed checkpoint's step).
         final_step: step reached (``steps`` unless interrupted).
         metrics: mean of each metric over the last ``log_every`` steps.
-        loader_samples_per_second: samples produced per second of time spent waiting for data.
+        loader_samples_per_second: samples per second of time the loop waited for data (with prefetching
+            this is the wait, not the loader's own speed: large means the data path keeps up).
         model_samples_per_second: samples per second of time spent in the optimisation step.
     """
 
@@ -112,19 +114,24 @@ class Trainer:
         tensorboard: also write TensorBoard scalars to ``run_dir/tensorboard``.
         progress: show a tqdm bar.
         compile_step: wrap the built-in step in ``tf.function``.
+        prefetch: with a callable ``data``, batches computed ahead in background threads (0 = none).
+        prefetch_workers: threads computing batches (numpy/OpenCV release the GIL).
     """
 
     def __init__(self, model, optimizer, loss_fn: Callable | None, data: Callable[[int], Any] | Iterable,
                  run_dir: str | Path, steps: int, checkpoint_every: int = 500, log_every: int = 10,
                  sample_every: int = 0, sample_callback: Callable | None = None,
                  train_step: Callable[[Any], Mapping[str, Any]] | None = None, keep_checkpoints: int = 2,
-                 tensorboard: bool = True, progress: bool = True, compile_step: bool = True):
+                 tensorboard: bool = True, progress: bool = True, compile_step: bool = True, prefetch: int = 0,
+                 prefetch_workers: int = 1):
         if int(steps) <= 0:
             raise ValueError(f"steps: expected a positive number of training steps, got {steps}")
         for name, value in (("checkpoint_every", checkpoint_every), ("log_every", log_every),
                             ("keep_checkpoints", keep_checkpoints)):
             if int(value) <= 0:
                 raise ValueError(f"{name}: expected a positive integer, got {value}")
+        if int(prefetch) < 0 or int(prefetch_workers) < 1:
+            raise ValueError(f"prefetch/prefetch_workers: expected >= 0 and >= 1, got {prefetch}, {prefetch_workers}")
         if int(sample_every) < 0:
             raise ValueError(f"sample_every: expected >= 0, got {sample_every}")
         if loss_fn is None and train_step is None:
@@ -148,6 +155,8 @@ class Trainer:
         self._custom_step = train_step
         self._compile_step = compile_step
         self._step_function = None
+        self.prefetch = int(prefetch)
+        self.prefetch_workers = int(prefetch_workers)
 
     # ----------------------------------------------------------------------------------- checkpoints
     @property
@@ -249,10 +258,16 @@ class Trainer:
 
         return tf.function(step) if self._compile_step else step
 
-    def _next_batch(self, step: int, iterator):
-        if iterator is None:
+    def _next_batch(self, step: int, iterator, pending: dict | None, executor):
+        if iterator is not None:
+            return next(iterator)
+        if pending is None:
             return self.data(step)
-        return next(iterator)
+        ahead = step + self.prefetch
+        if ahead < self.steps and ahead not in pending:
+            pending[ahead] = executor.submit(self.data, ahead)
+        future = pending.pop(step, None)
+        return future.result() if future is not None else self.data(step)
 
     def fit(self) -> TrainingSummary:
         """Trains from the latest checkpoint (or from scratch) up to ``steps``; returns a summary."""
@@ -269,6 +284,11 @@ class Trainer:
             tf = import_tensorflow()
             writer = tf.summary.create_file_writer(str(self.run_dir / "tensorboard"))
         iterator = None if callable(self.data) else iter(self.data)
+        executor, pending = None, None
+        if iterator is None and self.prefetch:
+            executor = ThreadPoolExecutor(max_workers=self.prefetch_workers, thread_name_prefix="prefetch")
+            pending = {ahead: executor.submit(self.data, ahead)
+                       for ahead in range(start_step, min(start_step + self.prefetch, self.steps))}
         sums: dict[str, float] = {}
         count = 0
         data_seconds = step_seconds = 0.0
@@ -283,7 +303,7 @@ class Trainer:
             while step < self.steps:
                 tick = time.perf_counter()
                 try:
-                    batch = self._next_batch(step, iterator)
+                    batch = self._next_batch(step, iterator, pending, executor)
                 except StopIteration:
                     break
                 tock = time.perf_counter()
@@ -324,6 +344,10 @@ class Trainer:
             raise
         finally:
             bar.close()
+            if executor is not None:
+                for future in pending.values():
+                    future.cancel()
+                executor.shutdown(wait=True)
             if writer is not None:
                 writer.close()
         if count:
