@@ -86,7 +86,7 @@ class Box2D:
                    data.get("score", 1.0), data.get("class_name"))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Pose6D:
     """Rigid pose of an object in the camera frame (``x_cam = R @ x_model + t``).
 
@@ -155,6 +155,13 @@ class Pose6D:
         values = as_array(values, "values", (7,)).reshape(7)
         return cls(values[:4], values[4:], class_name, score)
 
+    def __eq__(self, other: object) -> bool:
+        """Exact equality of all fields (quaternions are stored canonical, so ``q`` equals ``-q``)."""
+        if not isinstance(other, Pose6D):
+            return NotImplemented
+        return (np.array_equal(self.quaternion, other.quaternion) and np.array_equal(self.translation, other.translation)
+                and self.class_name == other.class_name and self.score == other.score)
+
     def to_dict(self) -> dict[str, Any]:
         return {"quaternion": self.quaternion.tolist(), "translation": self.translation.tolist(),
                 "class_name": self.class_name, "score": self.score}
@@ -165,7 +172,7 @@ class Pose6D:
         return cls(data["quaternion"], data["translation"], data.get("class_name"), data.get("score", 1.0))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _Keypoints:
     """``(N, dimension)`` keypoints with optional ``(N,)`` scores; subclasses set ``dimension``."""
 
@@ -187,6 +194,14 @@ class _Keypoints:
     def __len__(self) -> int:
         return len(self.points)
 
+    def __eq__(self, other: object) -> bool:
+        """Exact equality of points, scores and class name (same keypoint type only)."""
+        if type(other) is not type(self):
+            return NotImplemented
+        scores_equal = (self.scores is None and other.scores is None) or (
+            self.scores is not None and other.scores is not None and np.array_equal(self.scores, other.scores))
+        return np.array_equal(self.points, other.points) and scores_equal and self.class_name == other.class_name
+
     def to_array(self) -> np.ndarray:
         """Writable copy of ``points``."""
         return np.array(self.points)
@@ -203,14 +218,14 @@ class _Keypoints:
         return cls(points, data.get("scores"), data.get("class_name"))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Keypoints2D(_Keypoints):
     """``(N, 2)`` pixel keypoints, optional ``(N,)`` scores."""
 
     dimension: ClassVar[int] = 2
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Keypoints3D(_Keypoints):
     """``(N, 3)`` keypoints in metres (frame given by the producer, usually the camera frame)."""
 

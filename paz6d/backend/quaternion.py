@@ -16,6 +16,7 @@ import numpy as np
 from paz6d.backend.checks import as_array, as_rotation_matrix, as_unit_quaternion
 
 _AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+_GIMBAL_LOCK_TOLERANCE = 1e-12  # rad; a larger one would cost round-trip accuracy of that size
 
 
 def normalize(q) -> np.ndarray:
@@ -28,10 +29,12 @@ def normalize(q) -> np.ndarray:
 
 
 def canonical(q) -> np.ndarray:
-    """Returns the representative of ``±q`` with ``w >= 0`` (ties broken on x, y, z)."""
+    """Returns the representative of ``±q`` with ``w >= 0``; when ``w == 0`` the first non-zero
+    of ``x, y, z`` is made positive."""
     q = as_unit_quaternion(q, "q")
-    sign = np.where(q[..., 3:4] < 0, -1.0, 1.0)
-    return q * sign
+    ordered = q[..., [3, 0, 1, 2]]
+    leading = np.take_along_axis(ordered, np.argmax(ordered != 0, axis=-1)[..., None], axis=-1)
+    return np.where(leading < 0, -q, q)
 
 
 def identity(shape: tuple[int, ...] = ()) -> np.ndarray:
@@ -152,41 +155,45 @@ def from_euler(angles, axes: str = "xyz") -> np.ndarray:
 def to_euler(q, axes: str = "xyz") -> np.ndarray:
     """Quaternions to Euler angles ``(..., 3)`` in radians (same ``axes`` convention as ``from_euler``).
 
-    Angles lie in ``(-π, π]`` for the first/third and ``[-π/2, π/2]`` (Tait-Bryan) or ``[0, π]``
-    (proper Euler) for the second; at gimbal lock the third angle is set to 0.
+    First and third angles lie in ``[-π, π)``, the second in ``[-π/2, π/2]`` (Tait-Bryan) or
+    ``[0, π]`` (proper Euler). At gimbal lock (second angle within 1e-12 rad of a singularity)
+    the third angle is set to 0. Computed from the quaternion directly (Bernardes & Viollet,
+    PLOS ONE 2022), which stays accurate next to the singularities where matrix-based
+    formulas lose half of the digits.
     """
     order, intrinsic = _check_axes(axes)
-    matrix = to_rotation_matrix(q)
-    if not intrinsic:
-        # extrinsic abc == intrinsic cba with reversed angle order.
-        return _intrinsic_euler_from_matrix(matrix, order[::-1])[..., ::-1]
-    return _intrinsic_euler_from_matrix(matrix, order)
-
-
-def _intrinsic_euler_from_matrix(matrix: np.ndarray, order: str) -> np.ndarray:
-    i, j, k = (_AXIS_INDEX[a] for a in order)
+    q = as_unit_quaternion(q, "q")
+    # An intrinsic sequence equals the reversed extrinsic one with the angles reversed.
+    i, j, k = (_AXIS_INDEX[axis] for axis in (order[::-1] if intrinsic else order))
     proper = i == k
     if proper:
         k = 3 - i - j
-    parity = 1.0 if (j - i) % 3 == 1 else -1.0
-    angles = np.empty(matrix.shape[:-2] + (3,))
+    sign = 1.0 if (j - i) % 3 == 1 else -1.0  # parity of the permutation (i, j, k)
+    w = q[..., 3]
     if proper:
-        second = np.arccos(np.clip(matrix[..., i, i], -1.0, 1.0))
-        locked = np.abs(np.sin(second)) < 1e-9
-        first = np.arctan2(matrix[..., j, i], -parity * matrix[..., k, i])
-        third = np.arctan2(matrix[..., i, j], parity * matrix[..., i, k])
-        lock_first = np.arctan2(parity * -matrix[..., j, k], matrix[..., j, j])
-        first = np.where(locked, np.where(matrix[..., i, i] > 0, lock_first, -lock_first), first)
-        third = np.where(locked, 0.0, third)
+        a, b, c, d = w, q[..., i], q[..., j], sign * q[..., k]
+    else:  # rotate the problem onto a proper sequence
+        a, b, c, d = w - q[..., j], q[..., i] + sign * q[..., k], q[..., j] + w, sign * q[..., k] - q[..., i]
+    second = 2.0 * np.arctan2(np.hypot(c, d), np.hypot(a, b))
+    half_sum, half_difference = np.arctan2(b, a), np.arctan2(d, c)
+    first, third = half_sum - half_difference, half_sum + half_difference
+    near_zero = second <= _GIMBAL_LOCK_TOLERANCE
+    locked = near_zero | (second >= np.pi - _GIMBAL_LOCK_TOLERANCE)
+    # At lock only first + third (second = 0) or third - first (second = pi) is defined; the
+    # angle that comes last in the caller's order is set to 0.
+    if intrinsic:
+        third = np.where(locked, np.where(near_zero, 2.0 * half_sum, 2.0 * half_difference), third)
+        first = np.where(locked, 0.0, first)
     else:
-        second = np.arcsin(np.clip(parity * matrix[..., i, k], -1.0, 1.0))
-        locked = np.abs(np.cos(second)) < 1e-9
-        first = np.arctan2(-parity * matrix[..., j, k], matrix[..., k, k])
-        third = np.arctan2(-parity * matrix[..., i, j], matrix[..., i, i])
-        lock_first = np.arctan2(parity * matrix[..., k, j], matrix[..., j, j])
-        first = np.where(locked, lock_first, first)
+        first = np.where(locked, np.where(near_zero, 2.0 * half_sum, -2.0 * half_difference), first)
         third = np.where(locked, 0.0, third)
-    angles[..., 0], angles[..., 1], angles[..., 2] = first, second, third
+    if not proper:
+        third = sign * third
+        second = second - np.pi / 2
+    angles = np.stack([first, second, third], axis=-1)
+    if intrinsic:
+        angles = angles[..., ::-1]
+    angles[..., 0::2] = np.mod(angles[..., 0::2] + np.pi, 2 * np.pi) - np.pi
     return angles
 
 

@@ -1,0 +1,108 @@
+"""paz6d.backend.pnp: pose recovery on the LM-O meshes and errors for degenerate input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from paz6d.abstract import Pose6D
+from paz6d.backend import camera, pnp
+from paz6d.backend.mesh import load_mesh
+
+K = np.array([[572.4114, 0.0, 325.2611], [0.0, 573.57043, 242.04899], [0.0, 0.0, 1.0]])
+METHODS = ["sqpnp", "epnp", "iterative"]
+
+
+@pytest.fixture(scope="module")
+def lmo_vertices(shared_data) -> dict[str, np.ndarray]:
+    """Vertices (metres) of every LM-O model."""
+    paths = sorted((shared_data / "bop_lmo" / "models").glob("obj_*.ply"))
+    assert len(paths) == 8
+    return {path.stem: np.asarray(load_mesh(path, scale=0.001).vertices) for path in paths}
+
+
+def known_pose(seed: int) -> np.ndarray:
+    generator = np.random.default_rng(seed)
+    T = np.eye(4)
+    T[:3, :3] = Rotation.random(random_state=generator).as_matrix()
+    T[:3, 3] = [generator.uniform(-0.1, 0.1), generator.uniform(-0.08, 0.08), generator.uniform(0.6, 1.2)]
+    return T
+
+
+def rotation_error_deg(pose: Pose6D, T: np.ndarray) -> float:
+    return float(np.degrees((Rotation.from_matrix(T[:3, :3]).inv() * Rotation.from_quat(pose.quaternion)).magnitude()))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_exact_projections_of_lmo_vertices_recover_the_pose(lmo_vertices, method):
+    for index, (name, vertices) in enumerate(lmo_vertices.items()):
+        T = known_pose(index)
+        pixels = camera.transform_and_project(vertices, T, K)
+        pose = pnp.solve_pnp(vertices, pixels, K, method=method)
+        assert isinstance(pose, Pose6D)
+        assert np.linalg.norm(pose.translation - T[:3, 3]) <= 1e-6, name
+        # Every model point lands within 1 micrometre of where it should.
+        moved = vertices @ pose.rotation_matrix.T + pose.translation
+        assert np.abs(moved - (vertices @ T[:3, :3].T + T[:3, 3])).max() <= 1e-6, name
+        assert pnp.reprojection_errors(vertices, pixels, pose, K).max() < 1e-6
+        assert pose.score == 1.0
+
+
+@pytest.mark.parametrize("method", ["sqpnp", "epnp"])
+def test_ransac_with_noise_and_outliers_recovers_pose_within_1deg_1cm(lmo_vertices, method):
+    generator = np.random.default_rng(5)
+    for index, (name, vertices) in enumerate(lmo_vertices.items()):
+        T = known_pose(100 + index)
+        chosen = vertices[generator.choice(len(vertices), 400, replace=False)]
+        pixels = camera.transform_and_project(chosen, T, K) + generator.normal(0.0, 1.0, (400, 2))
+        outliers = generator.choice(400, 120, replace=False)
+        pixels[outliers] = generator.uniform([0, 0], [640, 480], (120, 2))
+        pose = pnp.solve_pnp(chosen, pixels, K, method=method, ransac=True, reprojection_threshold=4.0, seed=1,
+                             class_name=name)
+        assert rotation_error_deg(pose, T) < 1.0, name
+        assert np.linalg.norm(pose.translation - T[:3, 3]) < 0.01, name
+        assert 0.6 <= pose.score <= 0.75 and pose.class_name == name
+
+
+def test_ransac_is_reproducible_with_a_seed():
+    generator = np.random.default_rng(0)
+    points = generator.uniform(-0.05, 0.05, (60, 3))
+    T = known_pose(3)
+    pixels = camera.transform_and_project(points, T, K)
+    pixels[:15] = generator.uniform(0, 480, (15, 2))
+    first = pnp.solve_pnp(points, pixels, K, ransac=True, seed=4, refine=False)
+    second = pnp.solve_pnp(points, pixels, K, ransac=True, seed=4, refine=False)
+    np.testing.assert_array_equal(first.quaternion, second.quaternion)
+
+
+def test_planar_points_and_distortion():
+    square = np.array([[-0.05, -0.05, 0], [0.05, -0.05, 0], [0.05, 0.05, 0], [-0.05, 0.05, 0], [0.0, 0.02, 0]])
+    T = known_pose(8)
+    distortion = np.array([-0.2, 0.05, 0.0, 0.0, 0.0])
+    pixels = camera.transform_and_project(square, T, K, distortion)
+    pose = pnp.solve_pnp(square, pixels, K, distortion=distortion)
+    np.testing.assert_allclose(pose.to_matrix(), T, atol=1e-7)
+
+
+def test_degenerate_input_raises_value_error_naming_the_argument():
+    points = np.random.default_rng(1).uniform(-0.1, 0.1, (6, 3))
+    pixels = camera.transform_and_project(points, known_pose(1), K)
+    with pytest.raises(ValueError, match=r"points3d: expected at least 4 correspondences of shape \(N, 3\), got 3"):
+        pnp.solve_pnp(points[:3], pixels[:3], K)
+    line = np.outer(np.linspace(0, 1, 6), [0.1, 0.2, 0.3])
+    with pytest.raises(ValueError, match=r"points3d: points are collinear"):
+        pnp.solve_pnp(line, pixels, K)
+    with pytest.raises(ValueError, match=r"points3d: points are collinear"):
+        pnp.solve_pnp(np.zeros((5, 3)), pixels[:5], K)
+    with pytest.raises(ValueError, match=r"points3d/points2d: expected the same number of points, got 6 and 5"):
+        pnp.solve_pnp(points, pixels[:5], K)
+    with pytest.raises(ValueError, match=r"points3d: expected at least 1 points of shape \(N, 3\), got 0"):
+        pnp.solve_pnp(np.zeros((0, 3)), np.zeros((0, 2)), K)
+    with pytest.raises(ValueError, match=r"points2d: expected shape \(\.\.\., 2\), got \(6, 3\)"):
+        pnp.solve_pnp(points, points, K)
+    with pytest.raises(ValueError, match=r"points3d: contains NaN"):
+        pnp.solve_pnp(np.where(np.arange(18).reshape(6, 3) == 4, np.nan, points), pixels, K)
+    with pytest.raises(ValueError, match=r"method: expected one of \['epnp', 'iterative', 'sqpnp'\], got 'p3p'"):
+        pnp.solve_pnp(points, pixels, K, method="p3p")
+    assert issubclass(pnp.PnPError, ValueError)
