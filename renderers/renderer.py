@@ -1,0 +1,334 @@
+"""Offscreen renderer (pyrender on EGL or OSMesa) taking OpenCV cameras and poses.
+
+Per frame it makes at most three kinds of pass on one reused GL context:
+
+1. a lit, anti-aliased colour pass (``rgb`` and its coverage ``alpha``);
+2. a flat, single-sample instance pass that gives exact pixel-centre depth and the visible masks
+   (the colour pass' depth is resolved from one MSAA sample, up to half a pixel off-centre);
+3. one instance pass per object whose projected bounding box overlaps another object's, for its
+   full (unoccluded) mask; an object that overlaps nothing has full mask == visible mask.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import trimesh
+
+from paz6d.backend.checks import as_camera_matrix
+from paz6d.backend.transform import as_pose_matrix
+from renderers import conventions
+from renderers.lights import Lighting
+from renderers.platform import select_platform
+
+
+@dataclass
+class RenderOutput:
+    """What :meth:`Renderer.render` returns for ``N`` objects on an ``H×W`` image.
+
+    Attributes:
+        rgb: ``(H, W, 3)`` uint8, background colour where no object is (``None`` when skipped).
+        alpha: ``(H, W)`` uint8 anti-aliased coverage of the colour pass, 255 = object
+            (``None`` when the colour pass was skipped); use it to composite over a background.
+        depth: ``(H, W)`` float32 z in metres at pixel centres, 0 = background.
+        masks: ``(N, H, W)`` bool, each object rendered alone (``None`` when skipped).
+        visible_masks: ``(N, H, W)`` bool, the pixels where each object is the front surface
+            (``None`` when skipped).
+    """
+
+    rgb: np.ndarray | None
+    alpha: np.ndarray | None
+    depth: np.ndarray
+    masks: np.ndarray | None
+    visible_masks: np.ndarray | None
+
+
+def _as_mesh(mesh, index: int) -> trimesh.Trimesh:
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise ValueError(f"objects[{index}]: expected a trimesh.Trimesh, got {type(mesh).__name__}")
+    if len(mesh.faces) == 0:
+        raise ValueError(f"objects[{index}]: mesh has no faces")
+    return mesh
+
+
+def _instance_color(index: int) -> np.ndarray:
+    """Unique 24-bit RGB code of instance ``index`` (0-based); black stays background."""
+    code = index + 1
+    return np.array([(code >> 16) & 255, (code >> 8) & 255, code & 255], dtype=np.float64)
+
+
+def _decode_instances(color: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`_instance_color` for an ``(H, W, 3)`` uint8 image: ``(H, W)`` int, -1 = none."""
+    color = color.astype(np.int32)
+    return (color[..., 0] << 16 | color[..., 1] << 8 | color[..., 2]) - 1
+
+
+def _gamma_to_linear(color: np.ndarray) -> np.ndarray:
+    """Gamma-2.2 encoded values in [0, 1] to linear light (pyrender encodes its output with 1/2.2)."""
+    return color ** 2.2
+
+
+def _to_pyrender_mesh(pyrender, mesh: trimesh.Trimesh):
+    """pyrender mesh of ``mesh``; vertex colours are linearized (gamma 2.2, the inverse of
+    pyrender's output encoding) so a vertex colour renders as itself under unit white ambient."""
+    gpu_mesh = pyrender.Mesh.from_trimesh(mesh)
+    for primitive in gpu_mesh.primitives:
+        if primitive.color_0 is not None:
+            colors = np.array(primitive.color_0, dtype=np.float64)
+            colors[:, :3] = _gamma_to_linear(colors[:, :3])
+            primitive.color_0 = colors.astype(np.float32)
+    return gpu_mesh
+
+
+def _destroy_only_own_egl_context(platform) -> None:
+    """Makes closing one renderer leave the others working.
+
+    pyrender's EGL platform calls ``eglTerminate`` on close, which invalidates every context on
+    the (per-process) EGL display; this replaces that with destroying only its own context.
+    """
+    from OpenGL import EGL
+
+    def delete_context() -> None:
+        if platform._egl_context is not None:
+            EGL.eglMakeCurrent(platform._egl_display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+            EGL.eglDestroyContext(platform._egl_display, platform._egl_context)
+            platform._egl_context = None
+        platform._egl_display = None
+
+    platform.delete_context = delete_context
+
+
+class Renderer:
+    """Renders meshes posed in the OpenCV camera frame; one GL context reused for every frame.
+
+    Args:
+        width: image width in pixels.
+        height: image height in pixels.
+        platform: ``"egl"``, ``"osmesa"`` or ``None`` (auto: env ``PAZ6D_GL_PLATFORM``, else
+            EGL if it works, else OSMesa); see :func:`renderers.platform.select_platform`.
+        znear: near clipping distance in metres.
+        zfar: far clipping distance in metres.
+        max_cached_meshes: GPU copies kept for this many distinct meshes (least recently used
+            ones are freed).
+        background: RGB uint8 colour of pixels with no object in ``rgb``.
+
+    Example:
+        >>> with Renderer(640, 480) as renderer:                                  # doctest: +SKIP
+        ...     out = renderer.render(K, [(mesh, T_model2cam)])
+    """
+
+    def __init__(self, width: int, height: int, platform: str | None = None, znear: float = 0.01,
+                 zfar: float = 100.0, max_cached_meshes: int = 64, background=(0, 0, 0)):
+        if int(width) != width or int(height) != height or width <= 0 or height <= 0:
+            raise ValueError(f"width/height: expected positive integer pixel sizes, got {width}x{height}")
+        if not 0 < znear < zfar:
+            raise ValueError(f"znear/zfar: expected 0 < znear < zfar (metres), got {znear}, {zfar}")
+        if max_cached_meshes < 1:
+            raise ValueError(f"max_cached_meshes: expected >= 1, got {max_cached_meshes}")
+        background = np.asarray(background, dtype=np.float64)
+        if background.shape != (3,) or np.any(background < 0) or np.any(background > 255):
+            raise ValueError(f"background: expected 3 values in [0, 255], got {background.tolist()}")
+        self.width, self.height = int(width), int(height)
+        self.znear, self.zfar = float(znear), float(zfar)
+        self.platform = select_platform(platform)
+        import pyrender  # only after the platform is chosen
+
+        self._pyrender = pyrender
+        self._max_cached_meshes = int(max_cached_meshes)
+        self._scene = pyrender.Scene(bg_color=np.append(background / 255.0, 0.0), ambient_light=np.zeros(3))
+        self._camera = _projection_camera_class()(self.width, self.height, self.znear, self.zfar)
+        self._scene.add(self._camera, pose=np.eye(4))
+        self._meshes: OrderedDict[int, tuple[trimesh.Trimesh, object, list]] = OrderedDict()
+        self._light_nodes: list = []
+        self._lighting: Lighting | None = None
+        self._offscreen = pyrender.OffscreenRenderer(self.width, self.height)
+        if self.platform == "egl":
+            _destroy_only_own_egl_context(self._offscreen._platform)
+
+    # -- lifetime -------------------------------------------------------------------------
+    def close(self) -> None:
+        """Frees the GL context and every GPU buffer (idempotent)."""
+        if getattr(self, "_offscreen", None) is not None:
+            self._offscreen.delete()
+            self._offscreen = None
+            self._meshes.clear()
+
+    def __enter__(self) -> "Renderer":
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # interpreter shutdown: GL may already be gone
+            pass
+
+    # -- scene management -----------------------------------------------------------------
+    def _gpu_mesh(self, mesh: trimesh.Trimesh):
+        """Cached pyrender mesh and node pool for ``mesh`` (LRU, keyed by object identity)."""
+        key = id(mesh)
+        entry = self._meshes.get(key)
+        if entry is None or entry[0] is not mesh:
+            entry = (mesh, _to_pyrender_mesh(self._pyrender, mesh), [])
+            self._meshes[key] = entry
+            while len(self._meshes) > self._max_cached_meshes:
+                _, (_, _, nodes) = self._meshes.popitem(last=False)
+                for node in nodes:  # pyrender frees GPU buffers of meshes that leave the scene
+                    self._scene.remove_node(node)
+        self._meshes.move_to_end(key)
+        return entry
+
+    def _place_objects(self, objects, tints) -> list:
+        """Poses one scene node per object; hides cached meshes not in this frame."""
+        used: dict[int, int] = {}
+        nodes = []
+        for (mesh, T_model2cam), tint in zip(objects, tints):
+            mesh_key = id(mesh)
+            _, gpu_mesh, pool = self._gpu_mesh(mesh)
+            slot = used.get(mesh_key, 0)
+            used[mesh_key] = slot + 1
+            pose = conventions.model_pose_to_opengl(T_model2cam)
+            if slot < len(pool):
+                self._scene.set_pose(pool[slot], pose)
+            else:
+                pool.append(self._scene.add(gpu_mesh, pose=pose))
+            nodes.append(pool[slot])
+            gpu_mesh.is_visible = True
+            for primitive in gpu_mesh.primitives:
+                base = getattr(primitive, "_paz6d_base_color", None)
+                if base is None:
+                    base = np.array(primitive.material.baseColorFactor, dtype=np.float64)
+                    primitive._paz6d_base_color = base
+                factor = base.copy()
+                factor[:3] *= tint
+                primitive.material.baseColorFactor = factor
+        for key, (_, gpu_mesh, pool) in self._meshes.items():
+            count = used.get(key, 0)
+            # Keep one node per cached mesh in the scene so pyrender keeps its GPU buffers.
+            while len(pool) > max(count, 1):
+                self._scene.remove_node(pool.pop())
+            if count == 0:
+                gpu_mesh.is_visible = False
+        return nodes
+
+    def _set_lighting(self, lighting: Lighting) -> None:
+        if lighting == self._lighting:
+            return
+        for node in self._light_nodes:
+            self._scene.remove_node(node)
+        self._light_nodes = []
+        self._scene.ambient_light = np.asarray(lighting.ambient, dtype=np.float64)
+        for light in lighting.lights:
+            if light.kind == "directional":
+                gl_light = self._pyrender.DirectionalLight(color=light.color, intensity=light.intensity)
+            else:
+                gl_light = self._pyrender.PointLight(color=light.color, intensity=light.intensity)
+            pose = conventions.emitter_pose_to_opengl(light.pose())
+            self._light_nodes.append(self._scene.add(gl_light, pose=pose))
+        self._lighting = lighting
+
+    # -- rendering ------------------------------------------------------------------------
+    def _instance_pass(self, nodes, indices) -> tuple[np.ndarray, np.ndarray]:
+        """Flat single-sample pass of ``nodes[indices]``: ``(H, W)`` instance ids and depth."""
+        flags = self._pyrender.RenderFlags.SEG
+        node_map = {nodes[index]: _instance_color(index) for index in indices}
+        color, depth = self._offscreen.render(self._scene, flags=flags, seg_node_map=node_map)
+        return _decode_instances(color), depth
+
+    def _overlapping(self, K, objects) -> np.ndarray:
+        """``(N,)`` bool: the projected 3D box of the object meets another object's (conservative)."""
+        count = len(objects)
+        boxes = np.empty((count, 4))
+        unbounded = np.zeros(count, dtype=bool)
+        for index, (mesh, T) in enumerate(objects):
+            corners = trimesh.bounds.corners(mesh.bounds) @ T[:3, :3].T + T[:3, 3]
+            if np.any(corners[:, 2] <= self.znear):
+                unbounded[index] = True
+                continue
+            pixels = corners[:, :2] / corners[:, 2:3] @ K[:2, :2].T + K[:2, 2]
+            boxes[index] = [*(pixels.min(axis=0) - 1), *(pixels.max(axis=0) + 1)]
+        overlapping = unbounded.copy()
+        for i in range(count):
+            for j in range(i + 1, count):
+                if unbounded[i] or unbounded[j] or (
+                        boxes[i, 0] < boxes[j, 2] and boxes[j, 0] < boxes[i, 2]
+                        and boxes[i, 1] < boxes[j, 3] and boxes[j, 1] < boxes[i, 3]):
+                    overlapping[i] = overlapping[j] = True
+        return overlapping
+
+    def render(self, K, objects: Sequence[tuple[trimesh.Trimesh, np.ndarray]], lighting: Lighting | None = None,
+               tints=None, rgb: bool = True, masks: bool = True) -> RenderOutput:
+        """Renders ``objects`` seen by a pinhole camera ``K``.
+
+        Args:
+            K: ``(3, 3)`` OpenCV intrinsics for this renderer's ``width×height``.
+            objects: ``(mesh, T_model2cam)`` pairs, mesh vertices in metres, ``T_model2cam``
+                ``(4, 4)`` in the OpenCV camera frame (metres).
+            lighting: ambient + lights for this frame (default :class:`Lighting()`).
+            tints: ``(N, 3)`` multiplicative RGB factors on each object's base colour (default 1).
+            rgb: make the colour pass (``False``: depth and masks only).
+            masks: compute ``masks`` and ``visible_masks``.
+
+        Returns:
+            :class:`RenderOutput`.
+        """
+        if getattr(self, "_offscreen", None) is None:
+            raise ValueError("renderer: already closed")
+        K = as_camera_matrix(K)
+        objects = [(_as_mesh(mesh, index), as_pose_matrix(T, f"objects[{index}] T_model2cam"))
+                   for index, (mesh, T) in enumerate(objects)]
+        count = len(objects)
+        tints = np.ones((count, 3)) if tints is None else np.asarray(tints, dtype=np.float64)
+        if tints.shape != (count, 3) or not np.all(np.isfinite(tints)) or np.any(tints < 0):
+            raise ValueError(f"tints: expected ({count}, 3) non-negative finite factors, got shape {tints.shape}")
+        self._camera.set_intrinsics(K)
+        nodes = self._place_objects(objects, tints)
+        self._set_lighting(lighting if lighting is not None else Lighting())
+
+        color_image = alpha = None
+        if rgb:
+            flags = self._pyrender.RenderFlags.RGBA
+            color, _ = self._offscreen.render(self._scene, flags=flags)
+            color_image = np.ascontiguousarray(color[..., :3])
+            if color.shape[-1] == 4:
+                alpha = np.ascontiguousarray(color[..., 3])
+        instances, depth = self._instance_pass(nodes, range(count))
+        if rgb and alpha is None:  # OSMesa reads back RGB only; it has no MSAA, so coverage is binary
+            alpha = np.where(instances >= 0, 255, 0).astype(np.uint8)
+        full_masks = visible_masks = None
+        if masks:
+            visible_masks = instances[None] == np.arange(count)[:, None, None]
+            full_masks = visible_masks.copy()
+            for index in np.flatnonzero(self._overlapping(K, objects)):
+                alone, _ = self._instance_pass(nodes, [index])
+                full_masks[index] = alone == index
+        return RenderOutput(color_image, alpha, depth.astype(np.float32, copy=False), full_masks, visible_masks)
+
+
+@functools.cache
+def _projection_camera_class():
+    """pyrender camera class taking an OpenCV ``K`` (built lazily: pyrender is imported only
+    after the platform is chosen)."""
+    import pyrender
+
+    class ProjectionCamera(pyrender.camera.Camera):
+        """pyrender camera whose projection comes from an OpenCV ``K`` (skew supported)."""
+
+        def __init__(self, width: int, height: int, znear: float, zfar: float):
+            super().__init__(znear=znear, zfar=zfar)
+            self._size = (width, height)
+            self._projection = None
+
+        def set_intrinsics(self, K: np.ndarray) -> None:
+            self._projection = conventions.projection_matrix(K, *self._size, self.znear, self.zfar)
+
+        def get_projection_matrix(self, width=None, height=None):
+            return self._projection
+
+    return ProjectionCamera
