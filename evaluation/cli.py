@@ -1,0 +1,157 @@
+"""``paz6d evaluate {coco,voc,bop}``: score detections or poses, print a table, write JSON (+ PNG plots).
+
+Examples:
+    paz6d evaluate coco --gt instances.json --results detections.json --iou-type segm --out coco.json
+    paz6d evaluate voc --annotations Annotations/ --detections results/ --iou 0.5 --method 11point \
+        --out voc.json --plots plots/
+
+The JSON is written atomically (temporary file, then ``os.replace``). The heavy modules are
+imported in :func:`run`, so building the parser stays cheap.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import json
+import math
+import os
+from pathlib import Path
+
+_BOP_MODULE = "evaluation.bop_cli"
+
+
+def _bop_module():
+    """``evaluation.bop_cli`` when it exists (the BOP/pose part is written separately)."""
+    if importlib.util.find_spec(_BOP_MODULE) is None:
+        return None
+    return importlib.import_module(_BOP_MODULE)
+
+
+def _iou_threshold(text: str) -> float:
+    value = float(text)
+    if not (0.0 < value <= 1.0):
+        raise argparse.ArgumentTypeError(f"expected an IoU threshold in (0, 1], got {text}")
+    return value
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Adds the ``coco``, ``voc`` (and ``bop`` when available) subcommands to ``parser``."""
+    subparsers = parser.add_subparsers(dest="evaluate_command", required=True)
+
+    coco = subparsers.add_parser("coco", help="COCO mAP (bbox or segm), same numbers as pycocotools",
+                                 description="COCO detection/segmentation mAP with the 12-number summary.")
+    coco.add_argument("--gt", required=True, type=Path, help="COCO ground-truth JSON (instances_*.json)")
+    coco.add_argument("--results", required=True, type=Path, help="COCO results JSON (list of detections)")
+    coco.add_argument("--iou-type", choices=("bbox", "segm"), default="bbox", help="box or mask IoU")
+    coco.add_argument("--out", required=True, type=Path, help="output JSON (stats + per-class AP)")
+    coco.add_argument("--plots", type=Path, help="directory for PNG precision-recall and per-class AP plots")
+
+    voc = subparsers.add_parser("voc", help="PASCAL VOC AP (11-point or all-point)",
+                                description="PASCAL VOC AP per class and mAP from XML/text annotations.")
+    voc.add_argument("--annotations", required=True, type=Path,
+                     help="directory of VOC XML files or text files '<class> <4 box numbers>' (one per image)")
+    voc.add_argument("--detections", required=True, type=Path,
+                     help="directory of per-image '<class> <score> <box>' files or devkit "
+                          "comp<N>_det_<set>_<class>.txt files")
+    voc.add_argument("--iou", type=_iou_threshold, default=0.5, help="IoU threshold for a true positive")
+    voc.add_argument("--method", choices=("11point", "allpoint"), default="allpoint",
+                     help="11point = VOC2007, allpoint = VOC2010+")
+    voc.add_argument("--box-format", choices=("xyxy", "xywh"), default="xyxy", help="box format of text files")
+    voc.add_argument("--no-plus-one", action="store_true",
+                     help="continuous-coordinate areas (x2 - x1) instead of the VOC '+1 pixel' convention")
+    voc.add_argument("--class-names", type=Path, help="file with one class name per line to map integer class ids")
+    voc.add_argument("--layout", choices=("auto", "per_image", "per_class"), default="auto",
+                     help="detection file layout (auto-detected from file names by default)")
+    voc.add_argument("--out", required=True, type=Path, help="output JSON (per-class AP + mAP)")
+    voc.add_argument("--plots", type=Path, help="directory for PNG precision-recall plots")
+
+    bop_cli = _bop_module()
+    if bop_cli is not None:
+        bop = subparsers.add_parser("bop", help="BOP 6D pose evaluation")
+        bop_cli.configure(bop)
+
+
+def _json_value(value):
+    if isinstance(value, float) and math.isnan(value):
+        return None
+    return value
+
+
+def write_json_atomic(data: dict, path: Path) -> None:
+    """Writes ``data`` as JSON to ``path`` via a temporary file and ``os.replace``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(temporary, "w", encoding="utf-8") as file:
+        json.dump(data, file, indent=2)
+        file.write("\n")
+    os.replace(temporary, path)
+
+
+def _run_coco(args: argparse.Namespace) -> int:
+    from evaluation import coco
+
+    evaluation = coco.evaluate_files(args.gt, args.results, args.iou_type)
+    per_class = evaluation.per_category_ap()
+    print(f"COCO {args.iou_type} evaluation of {args.results} against {args.gt}")
+    for name, value in zip(coco.STAT_NAMES, evaluation.stats):
+        print(f"  {name:<10s} {value:7.3f}")
+    print(f"  {'class':<24s} {'AP':>7s}")
+    for name, value in per_class.items():
+        print(f"  {name:<24s} {'-' if value is None else f'{value:.3f}':>7s}")
+    write_json_atomic({"iou_type": args.iou_type, "ground_truth": str(args.gt), "results": str(args.results),
+                       "stat_names": list(coco.STAT_NAMES), "stats": [float(v) for v in evaluation.stats],
+                       "per_class_ap": per_class}, args.out)
+    print(f"wrote {args.out}")
+    if args.plots is not None:
+        from evaluation import detection_plots
+
+        for path in detection_plots.plot_coco(evaluation, args.plots):
+            print(f"wrote {path}")
+    return 0
+
+
+def _run_voc(args: argparse.Namespace) -> int:
+    from evaluation import voc
+
+    names = voc.read_class_names(args.class_names) if args.class_names is not None else None
+    evaluation = voc.evaluate_directories(args.annotations, args.detections, args.iou, args.method, args.box_format,
+                                          not args.no_plus_one, names, args.layout)
+    print(f"VOC AP ({args.method}, IoU >= {args.iou:g}, {'+1 pixel' if not args.no_plus_one else 'continuous'} areas)")
+    print(f"  {'class':<20s} {'AP':>8s} {'GT':>6s} {'dets':>6s} {'TP':>6s} {'FP':>6s}")
+    per_class = {}
+    for name, result in evaluation.per_class.items():
+        ap = _json_value(result.average_precision)
+        print(f"  {name:<20s} {'-' if ap is None else f'{ap:.4f}':>8s} {result.ground_truth_count:6d} "
+              f"{result.detection_count:6d} {result.true_positives:6d} {result.false_positives:6d}")
+        per_class[name] = {"ap": ap, "ground_truth": result.ground_truth_count,
+                           "detections": result.detection_count, "true_positives": result.true_positives,
+                           "false_positives": result.false_positives}
+    mean = _json_value(evaluation.mean_average_precision)
+    print(f"  {'mAP':<20s} {'-' if mean is None else f'{mean:.4f}':>8s}")
+    write_json_atomic({"annotations": str(args.annotations), "detections": str(args.detections),
+                       "iou_threshold": args.iou, "method": args.method, "box_format": args.box_format,
+                       "plus_one": not args.no_plus_one, "per_class": per_class, "mAP": mean}, args.out)
+    print(f"wrote {args.out}")
+    if args.plots is not None:
+        from evaluation import detection_plots
+
+        for path in detection_plots.plot_voc(evaluation, args.plots):
+            print(f"wrote {path}")
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    """Runs the subcommand chosen in ``args`` (from a parser set up by :func:`configure`).
+
+    Raises:
+        ValueError: for malformed input files, naming the file (and line or entry).
+    """
+    if args.evaluate_command == "coco":
+        return _run_coco(args)
+    if args.evaluate_command == "voc":
+        return _run_voc(args)
+    if args.evaluate_command == "bop":
+        return _bop_module().run(args)
+    raise ValueError(f"evaluate: unknown subcommand {args.evaluate_command!r}")
