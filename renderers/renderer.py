@@ -102,6 +102,26 @@ def _destroy_only_own_egl_context(platform) -> None:
     platform.delete_context = delete_context
 
 
+def _single_sample_framebuffer(offscreen, scene) -> None:
+    """Turns pyrender's 4× multisampled offscreen framebuffer into a single-sample one.
+
+    pyrender allocates it (with 4 samples, not configurable) on the first render; respecifying
+    the two renderbuffers' storage with 0 samples keeps the framebuffer and its blits valid.
+    """
+    import pyrender
+    from OpenGL import GL
+
+    offscreen.render(scene, flags=pyrender.RenderFlags.DEPTH_ONLY)  # allocates the framebuffer
+    renderer = offscreen._renderer
+    offscreen._platform.make_current()
+    buffers = ((renderer._main_cb_ms, GL.GL_RGBA), (renderer._main_db_ms, GL.GL_DEPTH_COMPONENT24))
+    for renderbuffer, storage in buffers:
+        GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, renderbuffer)
+        GL.glRenderbufferStorageMultisample(GL.GL_RENDERBUFFER, 0, storage, offscreen.viewport_width,
+                                            offscreen.viewport_height)
+    GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, 0)
+
+
 class Renderer:
     """Renders meshes posed in the OpenCV camera frame; one GL context reused for every frame.
 
@@ -115,6 +135,9 @@ class Renderer:
         max_cached_meshes: GPU copies kept for this many distinct meshes (least recently used
             ones are freed).
         background: RGB uint8 colour of pixels with no object in ``rgb``.
+        antialias: 4× multisampled colour pass (EGL only; OSMesa never multisamples). Without
+            it, one pass gives colour, exact depth and, when no two objects' boxes overlap,
+            the masks: about twice as fast for scenes without overlaps.
 
     Example:
         >>> with Renderer(640, 480) as renderer:                                  # doctest: +SKIP
@@ -122,7 +145,8 @@ class Renderer:
     """
 
     def __init__(self, width: int, height: int, platform: str | None = None, znear: float = 0.01,
-                 zfar: float = 100.0, max_cached_meshes: int = 64, background=(0, 0, 0)):
+                 zfar: float = 100.0, max_cached_meshes: int = 64, background=(0, 0, 0),
+                 antialias: bool = True):
         if int(width) != width or int(height) != height or width <= 0 or height <= 0:
             raise ValueError(f"width/height: expected positive integer pixel sizes, got {width}x{height}")
         if not 0 < znear < zfar:
@@ -146,8 +170,11 @@ class Renderer:
         self._light_nodes: list = []
         self._lighting: Lighting | None = None
         self._offscreen = pyrender.OffscreenRenderer(self.width, self.height)
+        self._multisampled = self.platform == "egl" and bool(antialias)
         if self.platform == "egl":
             _destroy_only_own_egl_context(self._offscreen._platform)
+            if not antialias:
+                _single_sample_framebuffer(self._offscreen, self._scene)
 
     # -- lifetime -------------------------------------------------------------------------
     def close(self) -> None:
@@ -241,19 +268,23 @@ class Renderer:
         color, depth = self._offscreen.render(self._scene, flags=flags, seg_node_map=node_map)
         return _decode_instances(color), depth
 
-    def _overlapping(self, K, objects) -> np.ndarray:
-        """``(N,)`` bool: the projected 3D box of the object meets another object's (conservative)."""
-        count = len(objects)
-        boxes = np.empty((count, 4))
-        unbounded = np.zeros(count, dtype=bool)
+    def _projected_boxes(self, K, objects) -> np.ndarray:
+        """``(N, 4)`` conservative pixel boxes ``(u_min, v_min, u_max, v_max)`` of each object's
+        projected 3D bounding box (1 px margin); NaN rows for objects reaching the near plane."""
+        boxes = np.full((len(objects), 4), np.nan)
         for index, (mesh, T) in enumerate(objects):
             corners = trimesh.bounds.corners(mesh.bounds) @ T[:3, :3].T + T[:3, 3]
-            if np.any(corners[:, 2] <= self.znear):
-                unbounded[index] = True
-                continue
-            pixels = corners[:, :2] / corners[:, 2:3] @ K[:2, :2].T + K[:2, 2]
-            boxes[index] = [*(pixels.min(axis=0) - 1), *(pixels.max(axis=0) + 1)]
-        overlapping = unbounded.copy()
+            if np.all(corners[:, 2] > self.znear):
+                pixels = corners[:, :2] / corners[:, 2:3] @ K[:2, :2].T + K[:2, 2]
+                boxes[index] = [*(pixels.min(axis=0) - 1), *(pixels.max(axis=0) + 1)]
+        return boxes
+
+    @staticmethod
+    def _overlapping(boxes: np.ndarray) -> np.ndarray:
+        """``(N,)`` bool: the box meets another object's box (NaN boxes meet everything)."""
+        count = len(boxes)
+        unbounded = np.isnan(boxes).any(axis=1)
+        overlapping = unbounded & (count > 1)
         for i in range(count):
             for j in range(i + 1, count):
                 if unbounded[i] or unbounded[j] or (
@@ -261,6 +292,19 @@ class Renderer:
                         and boxes[i, 1] < boxes[j, 3] and boxes[j, 1] < boxes[i, 3]):
                     overlapping[i] = overlapping[j] = True
         return overlapping
+
+    def _masks_from_depth(self, depth: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        """Visible masks when no two boxes overlap: each foreground pixel lies in one box only."""
+        masks = np.zeros((len(boxes),) + depth.shape, dtype=bool)
+        foreground = depth > 0
+        for index, box in enumerate(boxes):
+            if np.isnan(box).any():  # only possible for a single object: it owns every pixel
+                masks[index] = foreground
+                continue
+            u_min, v_min = max(int(np.floor(box[0])), 0), max(int(np.floor(box[1])), 0)
+            u_max, v_max = int(np.ceil(box[2])) + 1, int(np.ceil(box[3])) + 1
+            masks[index, v_min:v_max, u_min:u_max] = foreground[v_min:v_max, u_min:u_max]
+        return masks
 
     def render(self, K, objects: Sequence[tuple[trimesh.Trimesh, np.ndarray]], lighting: Lighting | None = None,
                tints=None, rgb: bool = True, masks: bool = True) -> RenderOutput:
@@ -291,21 +335,29 @@ class Renderer:
         nodes = self._place_objects(objects, tints)
         self._set_lighting(lighting if lighting is not None else Lighting())
 
-        color_image = alpha = None
+        color_image = alpha = depth = instances = None
         if rgb:
-            flags = self._pyrender.RenderFlags.RGBA
-            color, _ = self._offscreen.render(self._scene, flags=flags)
+            color, color_depth = self._offscreen.render(self._scene, flags=self._pyrender.RenderFlags.RGBA)
             color_image = np.ascontiguousarray(color[..., :3])
             if color.shape[-1] == 4:
                 alpha = np.ascontiguousarray(color[..., 3])
-        instances, depth = self._instance_pass(nodes, range(count))
+            if not self._multisampled:  # single-sample depth is taken at pixel centres: exact
+                depth = color_depth
+        boxes = self._projected_boxes(K, objects) if masks else None
+        overlapping = self._overlapping(boxes) if masks else np.zeros(count, dtype=bool)
+        if depth is None or overlapping.any():
+            instances, instance_depth = self._instance_pass(nodes, range(count))
+            depth = instance_depth if depth is None else depth
         if rgb and alpha is None:  # OSMesa reads back RGB only; it has no MSAA, so coverage is binary
-            alpha = np.where(instances >= 0, 255, 0).astype(np.uint8)
+            alpha = np.where(depth > 0, 255, 0).astype(np.uint8)
         full_masks = visible_masks = None
         if masks:
-            visible_masks = instances[None] == np.arange(count)[:, None, None]
+            if instances is None:
+                visible_masks = self._masks_from_depth(depth, boxes)
+            else:
+                visible_masks = instances[None] == np.arange(count)[:, None, None]
             full_masks = visible_masks.copy()
-            for index in np.flatnonzero(self._overlapping(K, objects)):
+            for index in np.flatnonzero(overlapping):
                 alone, _ = self._instance_pass(nodes, [index])
                 full_masks[index] = alone == index
         return RenderOutput(color_image, alpha, depth.astype(np.float32, copy=False), full_masks, visible_masks)
@@ -323,7 +375,7 @@ def _projection_camera_class():
         def __init__(self, width: int, height: int, znear: float, zfar: float):
             super().__init__(znear=znear, zfar=zfar)
             self._size = (width, height)
-            self._projection = None
+            self.set_intrinsics(np.array([[width, 0.0, width / 2], [0.0, width, height / 2], [0.0, 0.0, 1.0]]))
 
         def set_intrinsics(self, K: np.ndarray) -> None:
             self._projection = conventions.projection_matrix(K, *self._size, self.znear, self.zfar)

@@ -337,3 +337,22 @@ def test_osmesa_and_egl_agree(shared_data, tmp_path, renderer, ape):
             assert (a & b).sum() / (a | b).sum() >= 0.99
     both = (here.depth > 0) & (there["depth"] > 0)
     assert np.median(np.abs(here.depth[both] - there["depth"][both])) < 1e-4
+
+
+@pytest.mark.parametrize("layout", ["single", "apart", "overlapping"])
+def test_single_sample_mode_gives_the_same_depth_and_masks(renderer, ape, layout):
+    T_left, T_right = pose([0.3, 0.2, 1.0], [-0.045, 0.0, 0.45]), pose([-1.0, 0.5, 0.2], [0.045, 0.01, 0.5])
+    T_behind = pose([-1.0, 0.5, 0.2], [-0.03, 0.0, 0.55])
+    objects = {"single": [(ape, T_left)], "apart": [(ape, T_left), (ape, T_right)],
+               "overlapping": [(ape, T_left), (ape, T_behind)]}[layout]
+    reference = renderer.render(K_128, objects)
+    with Renderer(128, 128, antialias=False) as single_sample:
+        out = single_sample.render(K_128, objects)
+    np.testing.assert_array_equal(out.masks, reference.masks)
+    np.testing.assert_array_equal(out.visible_masks, reference.visible_masks)
+    np.testing.assert_allclose(out.depth, reference.depth, atol=5e-5)  # colour vs flat shader rounding
+    assert set(np.unique(out.alpha)) <= {0, 255}
+    if renderer.platform == "egl":
+        assert ((reference.alpha > 0) & (reference.alpha < 255)).any()
+    if layout == "overlapping":
+        assert (out.visible_masks[1] != out.masks[1]).any()
