@@ -1,0 +1,85 @@
+"""The demo object: an asymmetric, procedurally coloured composite of boxes and a cylinder.
+
+Built in code (no binary asset to ship): a body box with a cylindrical handle on one side, a
+small block on top near one corner and a wedge-like fin at the back, so no rotation maps the
+object onto itself. Every side of every part has its own colour and the body carries darker stripes,
+which gives the texture cues the Augmented Autoencoder needs to tell near-symmetric views apart.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from paz6d.backend.mesh import diameter
+
+OBJECT_ID = 1
+#: RGB per side (-x, +x, -y, +y, -z, +z) of each part: every side of the body differs.
+_PALETTES = {
+    "body": np.array([[200, 40, 40], [40, 160, 60], [230, 200, 40], [40, 80, 200], [240, 240, 235], [150, 60, 170]]),
+    "handle": np.array([[60, 200, 220]] * 6),
+    "block": np.array([[250, 140, 20], [250, 140, 20], [90, 50, 30], [90, 50, 30], [250, 140, 20], [30, 30, 30]]),
+    "fin": np.array([[120, 120, 120], [120, 120, 120], [240, 90, 160], [20, 110, 110], [240, 90, 160], [240, 90, 160]]),
+}
+
+
+def _coloured_part(mesh: trimesh.Trimesh, palette: np.ndarray, cell: float) -> trimesh.Trimesh:
+    """Subdivides ``mesh`` to edges <= ``cell`` metres and colours each face by the side it faces
+    (``palette`` row per side: -x, +x, -y, +y, -z, +z) with a band of darker stripes along x;
+    faces are unmerged so colours stay per face."""
+    vertices, faces = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=cell)
+    part = trimesh.Trimesh(vertices, faces, process=False)
+    normals = part.face_normals
+    axis = np.argmax(np.abs(normals), axis=1)
+    side = axis * 2 + (normals[np.arange(len(normals)), axis] > 0)
+    stripe = (np.floor(part.triangles_center[:, 0] / cell).astype(int) % 3 == 0) & (axis != 0)
+    rgb = palette[side] * np.where(stripe, 0.55, 1.0)[:, None]
+    face_colors = np.concatenate([np.round(rgb), np.full((len(rgb), 1), 255)], axis=1).astype(np.uint8)
+    part = trimesh.Trimesh(part.vertices[part.faces].reshape(-1, 3), np.arange(3 * len(part.faces)).reshape(-1, 3),
+                           process=False)
+    part.visual.vertex_colors = np.repeat(face_colors, 3, axis=0)
+    return part
+
+
+def make_demo_mesh() -> trimesh.Trimesh:
+    """The demo object in metres (about 0.12 m diameter), origin near its centre, vertex coloured."""
+    body = trimesh.creation.box(extents=(0.08, 0.05, 0.04))
+    handle = trimesh.creation.cylinder(radius=0.011, height=0.05, sections=16)
+    handle.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
+    handle.apply_translation((0.05, 0.0, -0.005))
+    block = trimesh.creation.box(extents=(0.025, 0.02, 0.025))
+    block.apply_translation((-0.022, 0.012, 0.032))
+    fin = trimesh.creation.box(extents=(0.05, 0.006, 0.02))
+    fin.apply_transform(trimesh.transformations.rotation_matrix(0.5, (0, 1, 0)))
+    fin.apply_translation((-0.01, -0.028, 0.01))
+    parts = [_coloured_part(mesh, _PALETTES[name], 0.012) for mesh, name in
+             ((body, "body"), (handle, "handle"), (block, "block"), (fin, "fin"))]
+    merged = trimesh.util.concatenate(parts)
+    merged.apply_translation(-merged.bounds.mean(axis=0))
+    return merged
+
+
+def write_demo_object(directory: str | Path) -> Path:
+    """Writes ``obj_000001.ply`` (millimetres, BOP convention) and ``models_info.json`` into
+    ``directory``; returns the PLY path. Files are written to temp names, then renamed."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    mesh = make_demo_mesh()
+    millimetres = mesh.copy()
+    millimetres.apply_scale(1000.0)
+    path = directory / f"obj_{OBJECT_ID:06d}.ply"
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_bytes(millimetres.export(file_type="ply", encoding="binary"))
+    os.replace(temporary, path)
+    low, high = millimetres.bounds
+    info = {str(OBJECT_ID): {"diameter": diameter(millimetres.vertices),
+                             "min_x": low[0], "min_y": low[1], "min_z": low[2],
+                             "size_x": high[0] - low[0], "size_y": high[1] - low[1], "size_z": high[2] - low[2]}}
+    info_path = directory / "models_info.json"
+    info_path.with_name("models_info.json.tmp").write_text(json.dumps(info, indent=2))
+    os.replace(info_path.with_name("models_info.json.tmp"), info_path)
+    return path

@@ -1,0 +1,209 @@
+"""Augmented Autoencoder (Sundermeyer et al., ECCV 2018): convolutional encoder-decoder for implicit 3D orientation.
+
+The encoder maps an object crop ``(S, S, 3)`` (float32 RGB in [0, 1]) to a latent code; the decoder
+reconstructs the clean rendering of the object from it. Trained to undo augmentations (background,
+occluders, colour/light jitter, crop shift), the code depends on the object's orientation only and
+indexes a codebook of orientations (:mod:`paz6d.models.codebook`).
+
+Crops are squares of side ``padding * max(box width, box height)`` centred on the object's 2D box
+(:func:`crop_object`); the same function makes training, codebook and test crops.
+
+Models are saved in the native ``.keras`` format and loaded with ``safe_mode=True``: only standard Keras
+layers are used, so loading never executes arbitrary code. TensorFlow is imported through
+:func:`paz6d.backend.tensorflow_guard.import_keras` when a function here first needs it.
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from paz6d.backend.tensorflow_guard import import_keras
+
+ENCODER_NAME = "encoder"
+DECODER_NAME = "decoder"
+
+
+def _check_architecture(input_size: int, latent_size: int, filters: Sequence[int], kernel_size: int) -> None:
+    if not filters or any(int(f) <= 0 for f in filters):
+        raise ValueError(f"filters: expected a non-empty list of positive channel counts, got {list(filters)}")
+    stride_product = 2 ** len(filters)
+    if int(input_size) <= 0 or input_size % stride_product:
+        raise ValueError(f"input_size: expected a positive multiple of 2**len(filters) = {stride_product}, "
+                         f"got {input_size}")
+    if int(latent_size) <= 0:
+        raise ValueError(f"latent_size: expected a positive integer, got {latent_size}")
+    if int(kernel_size) <= 0:
+        raise ValueError(f"kernel_size: expected a positive integer, got {kernel_size}")
+
+
+def build_encoder(input_size: int = 64, latent_size: int = 64, filters: Sequence[int] = (32, 64, 64, 128),
+                  kernel_size: int = 5):
+    """Encoder ``(B, S, S, 3) -> (B, latent_size)``: strided 5×5 convolutions (ReLU), then a linear dense layer.
+
+    The paper's architecture is ``input_size=128, latent_size=128, filters=(128, 256, 256, 512)``.
+    """
+    _check_architecture(input_size, latent_size, filters, kernel_size)
+    keras = import_keras()
+    inputs = keras.Input((input_size, input_size, 3), name="crop")
+    x = inputs
+    for index, channels in enumerate(filters):
+        x = keras.layers.Conv2D(int(channels), kernel_size, strides=2, padding="same", activation="relu",
+                                name=f"encoder_conv{index}")(x)
+    x = keras.layers.Flatten(name="encoder_flatten")(x)
+    code = keras.layers.Dense(int(latent_size), name="latent")(x)
+    return keras.Model(inputs, code, name=ENCODER_NAME)
+
+
+def build_decoder(input_size: int = 64, latent_size: int = 64, filters: Sequence[int] = (32, 64, 64, 128),
+                  kernel_size: int = 5):
+    """Decoder ``(B, latent_size) -> (B, S, S, 3)`` in [0, 1]: dense layer, then strided transposed
+    convolutions mirroring the encoder, sigmoid output."""
+    _check_architecture(input_size, latent_size, filters, kernel_size)
+    keras = import_keras()
+    side = input_size // 2 ** len(filters)
+    code = keras.Input((int(latent_size),), name="code")
+    x = keras.layers.Dense(side * side * int(filters[-1]), activation="relu", name="decoder_dense")(code)
+    x = keras.layers.Reshape((side, side, int(filters[-1])), name="decoder_reshape")(x)
+    for index, channels in enumerate(list(filters[:-1])[::-1]):
+        x = keras.layers.Conv2DTranspose(int(channels), kernel_size, strides=2, padding="same", activation="relu",
+                                         name=f"decoder_deconv{index}")(x)
+    image = keras.layers.Conv2DTranspose(3, kernel_size, strides=2, padding="same", activation="sigmoid",
+                                         name="reconstruction")(x)
+    return keras.Model(code, image, name=DECODER_NAME)
+
+
+def build_autoencoder(input_size: int = 64, latent_size: int = 64, filters: Sequence[int] = (32, 64, 64, 128),
+                      kernel_size: int = 5):
+    """Autoencoder ``(B, S, S, 3) -> (B, S, S, 3)`` made of the nested models ``encoder`` and ``decoder``
+    (reach them with :func:`encoder_of` / ``model.get_layer("decoder")``)."""
+    keras = import_keras()
+    encoder = build_encoder(input_size, latent_size, filters, kernel_size)
+    decoder = build_decoder(input_size, latent_size, filters, kernel_size)
+    inputs = keras.Input((input_size, input_size, 3), name="augmented_crop")
+    return keras.Model(inputs, decoder(encoder(inputs)), name="augmented_autoencoder")
+
+
+def encoder_of(autoencoder):
+    """The nested encoder model of an autoencoder built by :func:`build_autoencoder`."""
+    try:
+        return autoencoder.get_layer(ENCODER_NAME)
+    except ValueError as error:
+        raise ValueError(f"autoencoder: has no nested model named {ENCODER_NAME!r}") from error
+
+
+def reconstruction_loss(target, prediction, bootstrap_fraction: float = 1.0):
+    """Per-batch mean squared error; with ``bootstrap_fraction < 1`` the paper's bootstrapped L2:
+    per image, only the largest ``bootstrap_fraction`` of the pixel errors count (paper: 1/4).
+
+    Args:
+        target: ``(B, S, S, 3)`` clean crops in [0, 1].
+        prediction: ``(B, S, S, 3)`` reconstructions.
+        bootstrap_fraction: fraction of pixels (0, 1] kept per image.
+
+    Returns:
+        Scalar tensor.
+    """
+    if not 0.0 < bootstrap_fraction <= 1.0:
+        raise ValueError(f"bootstrap_fraction: expected a value in (0, 1], got {bootstrap_fraction}")
+    keras = import_keras()
+    ops = keras.ops
+    pixel_errors = ops.sum(ops.square(target - prediction), axis=-1)  # (B, S, S)
+    if bootstrap_fraction >= 1.0:
+        return ops.mean(pixel_errors)
+    pixels = int(np.prod(pixel_errors.shape[1:]))
+    flat = ops.reshape(pixel_errors, (-1, pixels))
+    keep = max(1, int(round(bootstrap_fraction * pixels)))
+    largest, _ = ops.top_k(flat, k=keep, sorted=False)
+    return ops.mean(largest)
+
+
+def to_model_input(crops) -> np.ndarray:
+    """``uint8`` crops ``(B, S, S, 3)`` (or one ``(S, S, 3)``) to float32 in [0, 1] with a batch axis."""
+    crops = np.asarray(crops)
+    if crops.dtype != np.uint8:
+        raise ValueError(f"crops: expected uint8 RGB crops, got dtype {crops.dtype}")
+    if crops.ndim == 3:
+        crops = crops[None]
+    if crops.ndim != 4 or crops.shape[-1] != 3:
+        raise ValueError(f"crops: expected shape (B, S, S, 3) RGB, got {crops.shape}")
+    return crops.astype(np.float32) / 255.0
+
+
+def save_model(model, path: str | Path) -> Path:
+    """Saves ``model`` in the native ``.keras`` format (temp file, then atomic rename)."""
+    path = Path(path)
+    if path.suffix != ".keras":
+        raise ValueError(f"path: expected a file name ending in .keras, got {path}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(path.stem + ".tmp.keras")
+    model.save(temporary)
+    os.replace(temporary, path)
+    return path
+
+
+def load_model(path: str | Path):
+    """Loads a ``.keras`` autoencoder with ``safe_mode=True`` (no Lambda layers, no pickled code).
+
+    Raises:
+        ValueError: the file is missing, not a ``.keras`` archive, or not a model Keras can rebuild.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: model file not found")
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"{path}: not a .keras model archive (corrupt or wrong file)")
+    keras = import_keras()
+    try:
+        return keras.models.load_model(path, compile=False, safe_mode=True)
+    except Exception as error:  # keras raises many types for broken archives
+        raise ValueError(f"{path}: could not load the .keras model ({type(error).__name__}: {error})") from error
+
+
+def crop_box(box, padding: float) -> tuple[float, float, float]:
+    """Square crop region of an object box ``(x_min, y_min, x_max, y_max)`` (pixels, box convention):
+    returns ``(centre_x, centre_y, side)`` with ``side = padding * max(width, height)``."""
+    x_min, y_min, x_max, y_max = (float(v) for v in box)
+    side = padding * max(x_max - x_min, y_max - y_min)
+    return 0.5 * (x_min + x_max), 0.5 * (y_min + y_max), side
+
+
+def crop_object(image: np.ndarray, box, size: int, padding: float = 1.2) -> np.ndarray:
+    """Square crop around ``box`` resized to ``(size, size, C)``, zero outside the image.
+
+    Sub-pixel accurate (one affine resampling); when shrinking by more than 1.3× the region is
+    smoothed first (Gaussian, sigma ~ 0.4 × shrink factor) to avoid aliasing.
+
+    Args:
+        image: ``(H, W, C)`` uint8 (RGB, or RGB + alpha).
+        box: ``(x_min, y_min, x_max, y_max)`` pixels, box convention (pixel ``i`` covers ``[i, i+1)``).
+        size: output side in pixels.
+        padding: crop side / longest box side.
+    """
+    centre_x, centre_y, side = crop_box(box, padding)
+    if side <= 0:
+        raise ValueError(f"box: expected a box with positive width or height, got {list(box)}")
+    scale = size / side
+    x0, y0 = centre_x - 0.5 * side, centre_y - 0.5 * side  # box-convention corner of the square
+    shrink = 1.0 / scale
+    if shrink > 1.3:
+        margin = int(np.ceil(3 * 0.4 * shrink)) + 1
+        left, top = max(int(np.floor(x0)) - margin, 0), max(int(np.floor(y0)) - margin, 0)
+        right = min(int(np.ceil(x0 + side)) + margin, image.shape[1])
+        bottom = min(int(np.ceil(y0 + side)) + margin, image.shape[0])
+        if right <= left or bottom <= top:
+            return np.zeros((size, size) + image.shape[2:], image.dtype)
+        region = cv2.GaussianBlur(image[top:bottom, left:right], (0, 0), 0.4 * shrink)
+        x0, y0 = x0 - left, y0 - top
+        image = region
+    # crop pixel j (centre j + 0.5 in box units) samples box coordinate x0 + (j + 0.5) / scale,
+    # i.e. array coordinate x0 + (j + 0.5) / scale - 0.5.
+    matrix = np.array([[scale, 0.0, (0.5 - x0) * scale - 0.5],
+                       [0.0, scale, (0.5 - y0) * scale - 0.5]])
+    return cv2.warpAffine(image, matrix, (size, size), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                          borderValue=0)

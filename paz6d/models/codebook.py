@@ -1,0 +1,185 @@
+"""Orientation codebook of the Augmented Autoencoder: latent codes of clean views at known rotations.
+
+Rotations are sampled as in the paper: ``num_views`` camera directions spread uniformly over the
+view sphere (a Fibonacci lattice; the paper uses the 2,562 vertices of a subdivided icosahedron)
+times ``in_plane`` rotations about the camera axis (paper: 36), i.e. ``R = R_z(angle) @ R_view``.
+Each codebook entry renders the object at ``T = (R, [0, 0, render_distance])`` (on the optical axis)
+with ``render_K``; ``render_boxes`` are the silhouette boxes of those renderings, used to recover
+translation from a test box (see :mod:`paz6d.pipelines.implicit_pose`).
+
+Lookup is one batched matrix product of L2-normalised codes (cosine similarity) plus a top-k
+selection.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from paz6d.backend.checks import as_array, as_camera_matrix
+
+CODEBOOK_FORMAT = 1
+
+
+def fibonacci_sphere(count: int) -> np.ndarray:
+    """``(count, 3)`` unit vectors spread near-uniformly over the sphere (golden-angle spiral)."""
+    if int(count) <= 0:
+        raise ValueError(f"count: expected a positive number of view directions, got {count}")
+    index = np.arange(count) + 0.5
+    z = 1.0 - 2.0 * index / count
+    radius = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
+    azimuth = np.pi * (1.0 + np.sqrt(5.0)) * index
+    return np.stack([radius * np.cos(azimuth), radius * np.sin(azimuth), z], axis=-1)
+
+
+def look_at_rotations(directions) -> np.ndarray:
+    """``(N, 3, 3)`` rotations ``R_model2cam`` of cameras placed along ``directions`` (model frame,
+    from the object towards the camera) looking at the model origin (OpenCV: camera z towards the
+    object). The in-plane angle is fixed by keeping camera x horizontal in the model's xy plane."""
+    directions = as_array(directions, "directions", (3,))
+    directions = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+    z_axis = -directions
+    helper = np.where(np.abs(z_axis[:, 2:3]) < 0.999, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    x_axis = np.cross(helper, z_axis)
+    x_axis /= np.linalg.norm(x_axis, axis=-1, keepdims=True)
+    y_axis = np.cross(z_axis, x_axis)
+    return np.stack([x_axis, y_axis, z_axis], axis=-2)  # rows: camera axes in model coordinates
+
+
+def in_plane_rotations(angles) -> np.ndarray:
+    """``(N, 3, 3)`` rotations about the camera z axis by ``angles`` (radians); in the image (x right,
+    y down) a positive angle turns the x axis towards the y axis."""
+    angles = np.asarray(angles, dtype=np.float64).reshape(-1)
+    cos, sin = np.cos(angles), np.sin(angles)
+    rotations = np.zeros((len(angles), 3, 3))
+    rotations[:, 0, 0], rotations[:, 0, 1] = cos, -sin
+    rotations[:, 1, 0], rotations[:, 1, 1] = sin, cos
+    rotations[:, 2, 2] = 1.0
+    return rotations
+
+
+def codebook_angles(in_plane: int) -> np.ndarray:
+    """The ``in_plane`` equally spaced in-plane angles (radians) of the codebook, starting at 0."""
+    if int(in_plane) <= 0:
+        raise ValueError(f"in_plane: expected a positive number of in-plane rotations, got {in_plane}")
+    return 2.0 * np.pi * np.arange(in_plane) / in_plane
+
+
+def codebook_rotations(view_rotations, in_plane: int) -> np.ndarray:
+    """``(V * in_plane, 3, 3)`` rotations ``R_z(angle_k) @ R_view_v`` ordered view-major (index ``v * in_plane + k``)."""
+    view_rotations = as_array(view_rotations, "view_rotations", (3, 3))
+    planes = in_plane_rotations(codebook_angles(in_plane))
+    return np.einsum("kij,vjl->vkil", planes, view_rotations).reshape(-1, 3, 3)
+
+
+def normalize_codes(codes) -> np.ndarray:
+    """Rows scaled to unit L2 norm, float32 ``(N, L)``; a zero row raises ``ValueError``."""
+    codes = np.asarray(codes, dtype=np.float32)
+    if codes.ndim != 2:
+        raise ValueError(f"codes: expected shape (N, latent_size), got {codes.shape}")
+    if not np.all(np.isfinite(codes)):
+        raise ValueError("codes: contain NaN or infinite values")
+    norms = np.linalg.norm(codes, axis=1, keepdims=True)
+    if np.any(norms == 0):
+        raise ValueError("codes: a latent code is all zeros, its direction (cosine similarity) is undefined")
+    return codes / norms
+
+
+@dataclass(frozen=True)
+class Codebook:
+    """Latent codes of clean on-axis views and the geometry needed to turn a match into a pose.
+
+    Attributes:
+        codes: ``(N, L)`` float32 unit-norm latent codes.
+        rotations: ``(N, 3, 3)`` ``R_model2cam`` of each view (object on the optical axis).
+        render_boxes: ``(N, 4)`` silhouette box of each view rendered at ``render_distance`` with
+            ``render_K`` (pixels, box convention).
+        render_K: ``(3, 3)`` intrinsics of those renderings.
+        render_distance: metres from the camera to the model origin in those renderings.
+    """
+
+    codes: np.ndarray
+    rotations: np.ndarray
+    render_boxes: np.ndarray
+    render_K: np.ndarray
+    render_distance: float
+
+    def __post_init__(self):
+        codes = normalize_codes(self.codes)
+        rotations = as_array(self.rotations, "rotations", (3, 3))
+        boxes = as_array(self.render_boxes, "render_boxes", (4,))
+        if rotations.shape != (len(codes), 3, 3) or boxes.shape != (len(codes), 4):
+            raise ValueError(f"Codebook: codes {codes.shape}, rotations {rotations.shape} and render_boxes "
+                             f"{boxes.shape} must describe the same number of entries")
+        if not np.isfinite(self.render_distance) or self.render_distance <= 0:
+            raise ValueError(f"render_distance: expected a positive distance in metres, got {self.render_distance}")
+        object.__setattr__(self, "codes", codes)
+        object.__setattr__(self, "rotations", rotations)
+        object.__setattr__(self, "render_boxes", boxes)
+        object.__setattr__(self, "render_K", as_camera_matrix(self.render_K))
+        object.__setattr__(self, "render_distance", float(self.render_distance))
+
+    def __len__(self) -> int:
+        return len(self.codes)
+
+    @property
+    def latent_size(self) -> int:
+        return self.codes.shape[1]
+
+    def nearest(self, codes, top_k: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """Most similar entries (cosine similarity) of each query code.
+
+        Args:
+            codes: ``(B, L)`` (or one ``(L,)``) latent codes, any norm.
+            top_k: number of entries per query, best first.
+
+        Returns:
+            ``indices (B, top_k)`` int and ``similarities (B, top_k)`` float32 in [-1, 1].
+        """
+        queries = np.asarray(codes, dtype=np.float32)
+        if queries.ndim == 1:
+            queries = queries[None]
+        if queries.ndim != 2 or queries.shape[1] != self.latent_size:
+            raise ValueError(f"codes: expected shape (B, {self.latent_size}), got {np.shape(codes)}")
+        if not 1 <= int(top_k) <= len(self):
+            raise ValueError(f"top_k: expected 1..{len(self)}, got {top_k}")
+        similarities = normalize_codes(queries) @ self.codes.T  # (B, N): the one batched product
+        if top_k == 1:
+            indices = np.argmax(similarities, axis=1)[:, None]
+        else:
+            indices = np.argpartition(-similarities, top_k - 1, axis=1)[:, :top_k]
+            order = np.argsort(-np.take_along_axis(similarities, indices, axis=1), axis=1, kind="stable")
+            indices = np.take_along_axis(indices, order, axis=1)
+        return indices, np.take_along_axis(similarities, indices, axis=1)
+
+    def save(self, path: str | Path) -> Path:
+        """Writes an ``.npz`` (temp file, then atomic rename)."""
+        path = Path(path)
+        temporary = path.with_name(path.stem + ".tmp.npz")
+        np.savez(temporary, format=CODEBOOK_FORMAT, codes=self.codes, rotations=self.rotations,
+                 render_boxes=self.render_boxes, render_K=self.render_K, render_distance=self.render_distance)
+        os.replace(temporary, path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Codebook":
+        """Reads a codebook written by :meth:`save`; ``ValueError`` naming the file when it is unusable."""
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"{path}: codebook file not found")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                fields = {key: data[key] for key in data.files}
+        except (OSError, ValueError) as error:
+            raise ValueError(f"{path}: not a readable .npz codebook ({error})") from error
+        missing = {"codes", "rotations", "render_boxes", "render_K", "render_distance"} - set(fields)
+        if missing:
+            raise ValueError(f"{path}: codebook is missing field(s) {sorted(missing)}")
+        try:
+            return cls(fields["codes"], fields["rotations"], fields["render_boxes"], fields["render_K"],
+                       float(fields["render_distance"]))
+        except ValueError as error:
+            raise ValueError(f"{path}: {error}") from error

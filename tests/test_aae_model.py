@@ -1,0 +1,94 @@
+"""AAE model builder, loss, crops and safe .keras round trips."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from paz6d.models import aae
+
+TINY = dict(input_size=16, latent_size=8, filters=(4, 8), kernel_size=3)
+
+
+def test_shapes_and_nested_encoder():
+    model = aae.build_autoencoder(**TINY)
+    assert model.input.shape[1:] == (16, 16, 3) and model.output.shape[1:] == (16, 16, 3)
+    encoder = aae.encoder_of(model)
+    assert encoder.output.shape[-1] == 8
+    x = np.random.default_rng(0).random((2, 16, 16, 3), dtype=np.float32)
+    output = np.asarray(model(x))
+    assert np.all((output >= 0) & (output <= 1))  # sigmoid reconstruction
+
+
+def test_save_load_round_trip_gives_identical_outputs(tmp_path):
+    model = aae.build_autoencoder(**TINY)
+    path = aae.save_model(model, tmp_path / "model.keras")
+    assert not list(tmp_path.glob("*.tmp.keras"))
+    loaded = aae.load_model(path)
+    x = np.random.default_rng(1).random((3, 16, 16, 3), dtype=np.float32)
+    np.testing.assert_array_equal(np.asarray(loaded(x)), np.asarray(model(x)))
+    np.testing.assert_array_equal(np.asarray(aae.encoder_of(loaded)(x)), np.asarray(aae.encoder_of(model)(x)))
+
+
+def test_corrupt_and_missing_model_files_raise_value_error(tmp_path):
+    with pytest.raises(ValueError, match="not found"):
+        aae.load_model(tmp_path / "missing.keras")
+    garbage = tmp_path / "garbage.keras"
+    garbage.write_bytes(b"this is not a zip archive")
+    with pytest.raises(ValueError, match="not a .keras model archive"):
+        aae.load_model(garbage)
+    truncated = tmp_path / "truncated.keras"
+    data = aae.save_model(aae.build_autoencoder(**TINY), tmp_path / "good.keras").read_bytes()
+    truncated.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match="truncated.keras"):
+        aae.load_model(truncated)
+    with pytest.raises(ValueError, match=".keras"):
+        aae.save_model(aae.build_autoencoder(**TINY), tmp_path / "model.h5")
+
+
+def test_bad_architectures():
+    with pytest.raises(ValueError, match="input_size"):
+        aae.build_encoder(input_size=20, filters=(4, 8, 8))  # 20 is not a multiple of 8
+    with pytest.raises(ValueError, match="filters"):
+        aae.build_encoder(filters=())
+    with pytest.raises(ValueError, match="latent_size"):
+        aae.build_decoder(latent_size=0)
+
+
+def test_bootstrapped_loss_matches_numpy():
+    rng = np.random.default_rng(2)
+    target = rng.random((2, 8, 8, 3), dtype=np.float32)
+    prediction = rng.random((2, 8, 8, 3), dtype=np.float32)
+    errors = ((target - prediction) ** 2).sum(-1).reshape(2, -1)
+    plain = float(aae.reconstruction_loss(target, prediction))
+    assert plain == pytest.approx(errors.mean(), rel=1e-6)
+    top = np.sort(errors, axis=1)[:, -16:]  # 25% of 64 pixels per image
+    assert float(aae.reconstruction_loss(target, prediction, 0.25)) == pytest.approx(top.mean(), rel=1e-6)
+    with pytest.raises(ValueError, match="bootstrap_fraction"):
+        aae.reconstruction_loss(target, prediction, 0.0)
+
+
+def test_crop_object_identity_and_border():
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 256, (60, 80, 3), dtype=np.uint8)
+    # a square box, padding 1, output the same size: the crop is exactly the pixels of the box
+    np.testing.assert_array_equal(aae.crop_object(image, (10, 20, 30, 40), 20, padding=1.0), image[20:40, 10:30])
+    # a 20x10 box is cropped as its 20x20 square around the centre
+    np.testing.assert_array_equal(aae.crop_object(image, (10, 25, 30, 35), 20, padding=1.0), image[20:40, 10:30])
+    # half outside the image: zeros there
+    crop = aae.crop_object(image, (-10, 0, 10, 20), 20, padding=1.0)
+    assert np.all(crop[:, :10] == 0)
+    np.testing.assert_array_equal(crop[:, 10:], image[0:20, 0:10])
+    # shrinking (anti-aliased path) keeps the mean colour of a flat image
+    flat = np.full((200, 200, 3), 77, np.uint8)
+    assert np.all(aae.crop_object(flat, (20, 20, 180, 180), 16, padding=1.0) == 77)
+    # RGBA crops keep their 4 channels
+    assert aae.crop_object(np.dstack([image, image[..., 0]]), (10, 20, 30, 40), 8).shape == (8, 8, 4)
+
+
+def test_model_input_checks():
+    assert aae.to_model_input(np.full((4, 4, 3), 255, np.uint8)).shape == (1, 4, 4, 3)
+    with pytest.raises(ValueError, match="uint8"):
+        aae.to_model_input(np.zeros((1, 4, 4, 3), np.float32))
+    with pytest.raises(ValueError, match="RGB"):
+        aae.to_model_input(np.zeros((1, 4, 4, 4), np.uint8))
