@@ -5,7 +5,7 @@ Three front ends share one deterministic core, :class:`BatchDispatcher`:
 * ``BatchDispatcher`` itself (numpy only), e.g. for custom loops;
 * ``ProcessingSequence``, a ``keras.utils.PyDataset`` (``workers`` / ``use_multiprocessing``
   are handed to Keras, which runs ``__getitem__`` in threads or forked processes);
-* :func:`to_tf_dataset`, a ``tf.data.Dataset`` whose parallel ``map`` runs the processor.
+* :func:`to_tf_dataset`, a ``tf.data.Dataset`` whose parallel ``map`` builds the batches.
 
 Determinism: epoch ``e``'s sample order is a permutation drawn from ``(seed, e)`` and sample
 ``i`` of epoch ``e`` is processed with every :class:`~paz6d.abstract.processor.RandomProcessor`
@@ -123,10 +123,6 @@ class BatchDispatcher:
             return np.arange(len(self.samples))
         return np.random.default_rng([self.seed, _ORDER_STREAM, int(epoch)]).permutation(len(self.samples))
 
-    def epoch_indices(self, epoch: int) -> np.ndarray:
-        """The sample indices that ``epoch``'s batches cover, in order (remainder dropped if asked)."""
-        return self.order(epoch)[:len(self) * self.batch_size]
-
     def _thread_processor(self) -> Callable:
         if not self._randomized:
             return self.processor
@@ -164,7 +160,7 @@ def _build_processing_sequence() -> type:
             samples, processor, batch_size, seed, shuffle, drop_remainder: see :class:`BatchDispatcher`.
             workers, use_multiprocessing, max_queue_size: handed to ``PyDataset`` (Keras runs
                 ``__getitem__`` in that many threads, or forked processes).
-            epoch: epoch of the first pass; :meth:`on_epoch_end` advances it.
+            epoch: epoch of the first pass; the end of each pass advances it.
         """
 
         def __init__(self, samples: Sequence, processor: Callable, batch_size: int, seed: int | None = None,
@@ -173,6 +169,7 @@ def _build_processing_sequence() -> type:
             super().__init__(workers=workers, use_multiprocessing=use_multiprocessing, max_queue_size=max_queue_size)
             self.dispatcher = BatchDispatcher(samples, processor, batch_size, seed, shuffle, drop_remainder)
             self.epoch = int(epoch)
+            self._in_epoch = False
 
         def __len__(self) -> int:
             return len(self.dispatcher)
@@ -180,8 +177,17 @@ def _build_processing_sequence() -> type:
         def __getitem__(self, index: int) -> Any:
             return self.dispatcher.batch(index, self.epoch)
 
+        def on_epoch_begin(self) -> None:
+            self._in_epoch = True
+
         def on_epoch_end(self) -> None:
-            self.epoch += 1
+            # Keras also calls on_epoch_end when it resets its iterator before the first epoch;
+            # only the end of an epoch that began advances the counter. Advancing here (not at
+            # the next begin) matters because Keras forks its worker processes before calling
+            # on_epoch_begin.
+            if self._in_epoch:
+                self.epoch += 1
+            self._in_epoch = False
 
     ProcessingSequence.__module__ = __name__
     return ProcessingSequence
@@ -197,45 +203,51 @@ def __getattr__(name: str) -> Any:
 
 def to_tf_dataset(samples: Sequence, processor: Callable, batch_size: int, seed: int | None = None,
                   shuffle: bool = True, drop_remainder: bool = False, num_parallel_calls: int | None = None,
-                  first_epoch: int = 0):
-    """A ``tf.data.Dataset`` of processed, batched samples (same batches as :class:`BatchDispatcher`).
+                  epochs: int | None = None, first_epoch: int = 0):
+    """A ``tf.data.Dataset`` of processed batches, identical to :meth:`BatchDispatcher.batch`.
 
-    Each full iteration over the dataset is one epoch: the first uses ``first_epoch``, the next
-    ``first_epoch + 1`` and so on, so ``model.fit(dataset, epochs=n)`` sees a new order and new
-    augmentations every epoch. The processor runs in ``tf.numpy_function`` inside a parallel,
-    order-preserving ``map`` (``num_parallel_calls``; None = ``tf.data.AUTOTUNE``).
+    The dataset is the stream of epochs ``first_epoch, first_epoch + 1, ...`` (``epochs`` of
+    them, endless when None), each epoch's batches in order; iterating it again starts over at
+    ``first_epoch``. Train with ``model.fit(dataset, epochs=n, steps_per_epoch=len(dispatcher))``
+    so Keras keeps one iterator across epochs. Batches are built by ``tf.numpy_function`` in an
+    order-preserving parallel ``map`` (``num_parallel_calls`` batches at once; None =
+    ``tf.data.AUTOTUNE``).
 
     Returns:
         ``tf.data.Dataset`` whose elements have the processor output's structure with a leading
-        batch dimension; shapes and dtypes come from processing the first sample.
+        batch dimension (``None`` unless ``drop_remainder``); dtypes and per-sample shapes come
+        from processing the first sample.
     """
     from paz6d.backend.tensorflow_guard import import_tensorflow
 
     tf = import_tensorflow()
+    if epochs is not None and int(epochs) < 1:
+        raise ValueError(f"epochs: expected a positive number of epochs or None, got {epochs}")
     dispatcher = BatchDispatcher(samples, processor, batch_size, seed, shuffle, drop_remainder)
     example = dispatcher.process(int(dispatcher.order(first_epoch)[0]), first_epoch)
     flat_example = [np.asarray(leaf) for leaf in tf.nest.flatten(example)]
     dtypes = [tf.as_dtype(leaf.dtype) for leaf in flat_example]
-    shapes = [leaf.shape for leaf in flat_example]
-    epochs = itertools.count(int(first_epoch))
+    leading = dispatcher.batch_size if drop_remainder else None
+    shapes = [(leading,) + leaf.shape for leaf in flat_example]
 
-    def epoch_indices():
-        epoch = next(epochs)
-        for sample_index in dispatcher.epoch_indices(epoch):
-            yield epoch, int(sample_index)
+    def batch_keys():
+        epoch_numbers = itertools.count(first_epoch) if epochs is None else range(first_epoch, first_epoch + epochs)
+        for epoch in epoch_numbers:
+            for index in range(len(dispatcher)):
+                yield epoch, index
 
-    def process(epoch, sample_index) -> list[np.ndarray]:
-        leaves = tf.nest.flatten(dispatcher.process(int(sample_index), int(epoch)))
+    def make_batch(epoch, index) -> list[np.ndarray]:
+        leaves = tf.nest.flatten(dispatcher.batch(int(index), int(epoch)))
         return [np.asarray(leaf, dtype=dtype.as_numpy_dtype) for leaf, dtype in zip(leaves, dtypes)]
 
-    def process_tensor(epoch, sample_index):
-        leaves = tf.numpy_function(process, [epoch, sample_index], dtypes, stateful=False)
+    def make_batch_tensors(epoch, index):
+        leaves = tf.numpy_function(make_batch, [epoch, index], dtypes, stateful=False)
         for leaf, shape in zip(leaves, shapes):
             leaf.set_shape(shape)
         return tf.nest.pack_sequence_as(example, leaves)
 
     scalar = tf.TensorSpec((), tf.int64)
-    dataset = tf.data.Dataset.from_generator(epoch_indices, output_signature=(scalar, scalar))
-    dataset = dataset.map(process_tensor, deterministic=True,
+    dataset = tf.data.Dataset.from_generator(batch_keys, output_signature=(scalar, scalar))
+    dataset = dataset.map(make_batch_tensors, deterministic=True,
                           num_parallel_calls=tf.data.AUTOTUNE if num_parallel_calls is None else num_parallel_calls)
-    return dataset.batch(dispatcher.batch_size, drop_remainder=drop_remainder).prefetch(tf.data.AUTOTUNE)
+    return dataset.prefetch(tf.data.AUTOTUNE)

@@ -59,11 +59,17 @@ def diameter(points) -> float:
             candidates = points[ConvexHull(points).vertices]
         except QhullError:
             candidates = points
+    # Squared distances via |a|^2 + |b|^2 - 2 a.b (one matrix product per block), then the
+    # near-maximal pairs are re-measured directly so round-off in that identity cannot matter.
+    candidates = candidates - candidates.mean(axis=0)
+    squared_norms = np.einsum("ij,ij->i", candidates, candidates)
     best = 0.0
-    for start in range(0, len(candidates), 2048):
-        block = candidates[start:start + 2048]
-        distances = np.sum((block[:, None, :] - candidates[None, :, :]) ** 2, axis=-1)
-        best = max(best, float(distances.max()))
+    for start in range(0, len(candidates), 1024):
+        block = candidates[start:start + 1024]
+        squared = squared_norms[start:start + 1024, None] + squared_norms[None, :] - 2.0 * block @ candidates.T
+        rows, columns = np.nonzero(squared >= squared.max() * (1.0 - 1e-9) - 1e-300)
+        exact = np.sum((block[rows] - candidates[columns]) ** 2, axis=-1)
+        best = max(best, float(exact.max()))
     return float(np.sqrt(best))
 
 
