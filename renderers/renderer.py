@@ -35,8 +35,9 @@ class RenderOutput:
         alpha: ``(H, W)`` uint8 anti-aliased coverage of the colour pass, 255 = object
             (``None`` when the colour pass was skipped); use it to composite over a background.
         depth: ``(H, W)`` float32 z in metres at pixel centres, 0 = background.
-        masks: ``(N, H, W)`` bool, each object rendered alone (``None`` when skipped).
-        visible_masks: ``(N, H, W)`` bool, the pixels where each object is the front surface
+        masks: ``(M, H, W)`` bool, each object rendered alone (``None`` when skipped); ``M = N``
+            unless ``masked_objects`` asked for fewer.
+        visible_masks: ``(M, H, W)`` bool, the pixels where each object is the front surface
             (``None`` when skipped).
     """
 
@@ -307,7 +308,7 @@ class Renderer:
         return masks
 
     def render(self, K, objects: Sequence[tuple[trimesh.Trimesh, np.ndarray]], lighting: Lighting | None = None,
-               tints=None, rgb: bool = True, masks: bool = True) -> RenderOutput:
+               tints=None, rgb: bool = True, masks: bool = True, masked_objects: int | None = None) -> RenderOutput:
         """Renders ``objects`` seen by a pinhole camera ``K``.
 
         Args:
@@ -318,6 +319,8 @@ class Renderer:
             tints: ``(N, 3)`` multiplicative RGB factors on each object's base colour (default 1).
             rgb: make the colour pass (``False``: depth and masks only).
             masks: compute ``masks`` and ``visible_masks``.
+            masked_objects: masks only for ``objects[:masked_objects]`` (default: all); the
+                other objects (distractors, occluders) still occlude them.
 
         Returns:
             :class:`RenderOutput`.
@@ -328,6 +331,9 @@ class Renderer:
         objects = [(_as_mesh(mesh, index), as_pose_matrix(T, f"objects[{index}] T_model2cam"))
                    for index, (mesh, T) in enumerate(objects)]
         count = len(objects)
+        masked = count if masked_objects is None else int(masked_objects)
+        if not 0 <= masked <= count:
+            raise ValueError(f"masked_objects: expected 0..{count}, got {masked_objects}")
         tints = np.ones((count, 3)) if tints is None else np.asarray(tints, dtype=np.float64)
         if tints.shape != (count, 3) or not np.all(np.isfinite(tints)) or np.any(tints < 0):
             raise ValueError(f"tints: expected ({count}, 3) non-negative finite factors, got shape {tints.shape}")
@@ -344,7 +350,7 @@ class Renderer:
             if not self._multisampled:  # single-sample depth is taken at pixel centres: exact
                 depth = color_depth
         boxes = self._projected_boxes(K, objects) if masks else None
-        overlapping = self._overlapping(boxes) if masks else np.zeros(count, dtype=bool)
+        overlapping = self._overlapping(boxes)[:masked] if masks else np.zeros(0, dtype=bool)
         if depth is None or overlapping.any():
             instances, instance_depth = self._instance_pass(nodes, range(count))
             depth = instance_depth if depth is None else depth
@@ -353,9 +359,9 @@ class Renderer:
         full_masks = visible_masks = None
         if masks:
             if instances is None:
-                visible_masks = self._masks_from_depth(depth, boxes)
+                visible_masks = self._masks_from_depth(depth, boxes[:masked])
             else:
-                visible_masks = instances[None] == np.arange(count)[:, None, None]
+                visible_masks = instances[None] == np.arange(masked)[:, None, None]
             full_masks = visible_masks.copy()
             for index in np.flatnonzero(overlapping):
                 alone, _ = self._instance_pass(nodes, [index])
