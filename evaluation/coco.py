@@ -246,7 +246,11 @@ class CocoDetections:
         """
         if not isinstance(results, list):
             raise ValueError(f"{source}: expected a list of detections")
-        first = results[0] if results and isinstance(results[0], dict) else {}
+        if not results:
+            empty = np.zeros(0, dtype=np.int64)
+            return cls(source=source, image_index=empty, category_ids=empty, scores=np.zeros(0),
+                       boxes=np.zeros((0, 4)), segmentations=[])
+        first = results[0] if isinstance(results[0], dict) else {}
         has_boxes, has_masks = "bbox" in first, "segmentation" in first
         n = len(results)
         try:
