@@ -1,0 +1,313 @@
+"""``paz6d train aae``: train an Augmented Autoencoder for one object and build its orientation codebook.
+
+Stages, each resumable from what is already in the run directory::
+
+    RUN_DIR/config.json       settings (a re-run reuses them; --steps may extend training)
+    RUN_DIR/object.npz        hull vertices, surface points and diameter of the object (metres)
+    RUN_DIR/views.npz         clean on-axis renderings on the view sphere (rendered in worker processes)
+    RUN_DIR/checkpoints/ ...  Trainer checkpoints, log.csv, tensorboard/, samples/*.png
+    RUN_DIR/model.keras       the trained autoencoder (native Keras format, safe to load)
+    RUN_DIR/codebook.npz      latent codes of every view x in-plane rotation
+    RUN_DIR/summary.json      loss, throughput (loader vs model samples/s), timings
+
+``paz6d.pipelines.implicit_pose.ImplicitPose6D(RUN_DIR, camera)`` loads the result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from paz6d.training.aae_augment import Augmentation
+
+CONFIG_FILE = "config.json"
+OBJECT_FILE = "object.npz"
+VIEWS_FILE = "views.npz"
+MODEL_FILE = "model.keras"
+CODEBOOK_FILE = "codebook.npz"
+SUMMARY_FILE = "summary.json"
+
+
+@dataclass(frozen=True)
+class AAEConfig:
+    """Model, data and schedule of an AAE training run.
+
+    Attributes:
+        crop_size: side of the square model input (pixels).
+        latent_size: length of the latent code.
+        filters: encoder channels per strided convolution (the decoder mirrors them).
+        kernel_size: convolution kernel size.
+        padding: crop side / longest side of the object box.
+        render_size: side of the on-axis renderings the crops are cut from.
+        views: view-sphere directions rendered (training views and codebook share them).
+        in_plane: in-plane rotations per view in the codebook (codebook size = views * in_plane).
+        steps: optimisation steps.
+        batch_size: samples per step.
+        learning_rate: Adam learning rate.
+        bootstrap_fraction: fraction of largest pixel errors in the loss (1 = plain L2; paper 0.25).
+        augmentation: input augmentation strengths.
+        checkpoint_every / sample_every / log_every: Trainer intervals in steps.
+    """
+
+    crop_size: int = 64
+    latent_size: int = 64
+    filters: tuple[int, ...] = (32, 64, 64, 128)
+    kernel_size: int = 5
+    padding: float = 1.2
+    render_size: int = 96
+    views: int = 1000
+    in_plane: int = 36
+    steps: int = 3000
+    batch_size: int = 32
+    learning_rate: float = 2e-4
+    bootstrap_fraction: float = 1.0
+    augmentation: Augmentation = field(default_factory=Augmentation)
+    checkpoint_every: int = 500
+    sample_every: int = 500
+    log_every: int = 25
+
+    def to_dict(self) -> dict:
+        data = asdict(self)
+        data["filters"] = list(self.filters)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "AAEConfig":
+        data = dict(data)
+        unknown = set(data) - {f for f in cls.__dataclass_fields__}
+        if unknown:
+            raise ValueError(f"AAE config: unknown field(s) {sorted(unknown)}")
+        augmentation = data.pop("augmentation", {})
+        for key in ("occluder_size", "scale", "contrast", "saturation"):
+            if key in augmentation:
+                augmentation[key] = tuple(augmentation[key])
+        return cls(filters=tuple(data.pop("filters", cls.filters)), augmentation=Augmentation(**augmentation), **data)
+
+    @property
+    def codebook_size(self) -> int:
+        return self.views * self.in_plane
+
+
+#: Sized for a 2-core CPU (the demo): 64x64 crops, 36,000-entry codebook, a few minutes of training.
+QUICK = AAEConfig()
+#: The paper's setting: 128x128 crops, latent 128, 30k iterations of 64, 2,562 x 36 = 92,232 codebook views.
+FULL = AAEConfig(crop_size=128, latent_size=128, filters=(128, 256, 256, 512), render_size=192, views=2562,
+                 in_plane=36, steps=30000, batch_size=64, bootstrap_fraction=0.25, checkpoint_every=1000,
+                 sample_every=2000, log_every=50)
+CONFIGS = {"quick": QUICK, "full": FULL}
+
+
+def _write_json(path: Path, data: dict) -> None:
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(json.dumps(data, indent=2))
+    os.replace(temporary, path)
+
+
+def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, seed: int) -> tuple[AAEConfig, int]:
+    """Writes ``config.json`` for a new run, or reads the stored one (only ``steps`` may change)."""
+    path = run_dir / CONFIG_FILE
+    if path.exists():
+        try:
+            stored = json.loads(path.read_text())
+            stored_config = AAEConfig.from_dict(stored["config"])
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
+            raise ValueError(f"{path}: unreadable AAE run configuration ({error})") from error
+        if Path(stored["mesh"]).resolve() != mesh_path.resolve() or stored["mesh_scale"] != mesh_scale:
+            raise ValueError(f"{path}: this run directory was trained on {stored['mesh']} (scale "
+                             f"{stored['mesh_scale']}); use another --out for {mesh_path}")
+        config, seed = replace(stored_config, steps=config.steps), int(stored["seed"])
+    run_dir.mkdir(parents=True, exist_ok=True)
+    _write_json(path, {"config": config.to_dict(), "mesh": str(mesh_path.resolve()), "mesh_scale": mesh_scale,
+                       "seed": seed})
+    return config, seed
+
+
+def _object_geometry(run_dir: Path, mesh_path: Path, mesh_scale: float, seed: int) -> dict:
+    path = run_dir / OBJECT_FILE
+    if not path.exists():
+        from paz6d.backend.mesh import diameter, load_mesh, sample_points
+
+        mesh = load_mesh(mesh_path, mesh_scale)
+        hull = np.asarray(mesh.convex_hull.vertices)
+        temporary = path.with_name(path.stem + ".tmp.npz")
+        np.savez(temporary, hull_points=hull, surface_points=sample_points(mesh, 2000, seed),
+                 diameter=diameter(hull), vertices=np.asarray(mesh.vertices))
+        os.replace(temporary, path)
+    with np.load(path) as data:
+        return {key: data[key] for key in data.files}
+
+
+def _views(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, geometry, workers: int,
+           platform: str | None, progress: bool) -> dict:
+    from paz6d.models.codebook import fibonacci_sphere, look_at_rotations
+    from paz6d.training.aae_views import render_views
+
+    path = run_dir / VIEWS_FILE
+    rotations = look_at_rotations(fibonacci_sphere(config.views))
+    if path.exists():
+        with np.load(path) as data:
+            if data["rgb"].shape[:2] == (config.views, config.render_size) and np.allclose(data["rotations"], rotations):
+                return {key: data[key] for key in data.files}
+    rgb, alpha = render_views(mesh_path, mesh_scale, rotations, geometry, workers=workers, platform=platform,
+                              progress=progress)
+    temporary = path.with_name(path.stem + ".tmp.npz")
+    np.savez(temporary, rgb=rgb, alpha=alpha, rotations=rotations, K=geometry.K, distance=geometry.distance)
+    os.replace(temporary, path)
+    return {"rgb": rgb, "alpha": alpha, "rotations": rotations, "K": geometry.K, "distance": geometry.distance}
+
+
+def _sample_callback(sampler, count: int = 8):
+    """Draws ``count`` fixed validation samples: augmented input / reconstruction / clean target rows."""
+    from paz6d.models.aae import to_model_input
+
+    rng = np.random.default_rng(123456)
+    pairs = [sampler.sample(rng) for _ in range(count)]
+    inputs = np.stack([pair[0] for pair in pairs])
+    targets = np.stack([pair[1] for pair in pairs])
+
+    def draw(model, step: int, path: Path) -> None:
+        from paz6d.backend.image import save_image
+
+        reconstructions = np.asarray(model(to_model_input(inputs), training=False))
+        reconstructions = np.clip(np.rint(reconstructions * 255), 0, 255).astype(np.uint8)
+        rows = [np.concatenate(list(images), axis=1) for images in (inputs, reconstructions, targets)]
+        save_image(path, np.concatenate(rows, axis=0))
+
+    return draw
+
+
+def measure_loader(sampler, batch_size: int, batches: int = 4) -> float:
+    """Samples per second of one thread making training batches (seeds unused by training)."""
+    started = time.perf_counter()
+    for index in range(batches):
+        sampler.batch(10**12 + index, batch_size)
+    return batches * batch_size / (time.perf_counter() - started)
+
+
+def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QUICK, mesh_scale: float = 1.0,
+              seed: int = 0, workers: int = 2, platform: str | None = None, progress: bool = True) -> dict:
+    """Trains an AAE on renderings of ``mesh_path`` and writes a run directory ``ImplicitPose6D`` loads.
+
+    Args:
+        mesh_path: the object's mesh.
+        run_dir: output folder (re-running resumes it).
+        config: :data:`QUICK`, :data:`FULL` or a custom :class:`AAEConfig`.
+        mesh_scale: factor from mesh units to metres (0.001 for BOP meshes in millimetres).
+        seed: seed of the model initialisation and of the data stream.
+        workers: rendering processes.
+        platform: OpenGL platform of the renderers (``"egl"``, ``"osmesa"`` or None = auto).
+
+    Returns:
+        The summary written to ``summary.json``.
+    """
+    from paz6d.backend.tensorflow_guard import import_keras
+
+    keras = import_keras()
+    from paz6d.models.aae import build_autoencoder, encoder_of, load_model, reconstruction_loss, save_model
+    from paz6d.training.aae_augment import ViewSampler
+    from paz6d.training.aae_codebook import build_codebook
+    from paz6d.training.aae_views import ViewGeometry
+    from paz6d.training.trainer import Trainer
+
+    timings = {}
+    started = time.perf_counter()
+    mesh_path, run_dir = Path(mesh_path), Path(run_dir)
+    if not mesh_path.is_file():
+        raise ValueError(f"--mesh: {mesh_path}: mesh file not found")
+    config, seed = _prepare_run(run_dir, mesh_path, mesh_scale, config, seed)
+    geometry_data = _object_geometry(run_dir, mesh_path, mesh_scale, seed)
+    geometry = ViewGeometry.for_points(geometry_data["vertices"], config.render_size)
+    views = _views(run_dir, mesh_path, mesh_scale, config, geometry, workers, platform, progress)
+    timings["views_seconds"] = time.perf_counter() - started
+
+    sampler = ViewSampler(views["rgb"], views["alpha"], geometry.K, config.crop_size, config.padding,
+                          config.augmentation, seed=seed)
+    loader_speed = measure_loader(sampler, config.batch_size)
+    keras.utils.set_random_seed(seed)
+    model = build_autoencoder(config.crop_size, config.latent_size, config.filters, config.kernel_size)
+    optimizer = keras.optimizers.Adam(config.learning_rate)
+
+    def loss_fn(model, batch):
+        inputs, targets = batch
+        return reconstruction_loss(targets, model(inputs, training=True), config.bootstrap_fraction)
+
+    trainer = Trainer(model, optimizer, loss_fn, lambda step: sampler.batch(step, config.batch_size), run_dir,
+                      config.steps, checkpoint_every=config.checkpoint_every, log_every=config.log_every,
+                      sample_every=config.sample_every, sample_callback=_sample_callback(sampler), progress=progress,
+                      prefetch=4, prefetch_workers=1)
+    tick = time.perf_counter()
+    training = trainer.fit()
+    timings["training_seconds"] = time.perf_counter() - tick
+    model_path = run_dir / MODEL_FILE
+    save_model(model, model_path)
+
+    tick = time.perf_counter()
+    encoder = encoder_of(load_model(model_path))  # the codebook is made by exactly what users load
+    codebook = build_codebook(encoder, views["rgb"], views["alpha"], views["rotations"], geometry,
+                              geometry_data["hull_points"], config.in_plane, config.crop_size, config.padding,
+                              progress=progress)
+    codebook.save(run_dir / CODEBOOK_FILE)
+    timings["codebook_seconds"] = time.perf_counter() - tick
+    timings["total_seconds"] = time.perf_counter() - started
+    summary = {"steps": training.final_step, "resumed_from_step": training.start_step,
+               "final_metrics": training.metrics, "loader_samples_per_second_one_thread": loader_speed,
+               "model_samples_per_second": training.model_samples_per_second,
+               "codebook_size": len(codebook), **timings}
+    _write_json(run_dir / SUMMARY_FILE, summary)
+    return summary
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Adds the ``paz6d train aae`` arguments."""
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--mesh", type=Path, help="mesh of the object (PLY/OBJ/GLB)")
+    source.add_argument("--dataset", type=Path, help="BOP data set written by `paz6d generate`; its "
+                        "models/obj_XXXXXX.ply (millimetres) is the object")
+    parser.add_argument("--object-id", type=int, default=None, help="object of --dataset (default: the only one)")
+    parser.add_argument("--out", type=Path, required=True, help="run directory (re-run to resume)")
+    parser.add_argument("--config", choices=sorted(CONFIGS), default="quick",
+                        help="quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
+                        "92,232-view codebook (hours on a CPU)")
+    parser.add_argument("--steps", type=int, default=None, help="training steps (default: the config's)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--scale", type=float, default=1.0, help="mesh units to metres (0.001 for millimetres)")
+    parser.add_argument("--workers", type=int, default=2, help="rendering processes")
+    parser.add_argument("--platform", choices=("egl", "osmesa"), default=None, help="OpenGL platform")
+
+
+def _dataset_mesh(dataset: Path, object_id: int | None) -> Path:
+    models = sorted((dataset / "models").glob("obj_*.ply"))
+    if not models:
+        raise ValueError(f"--dataset: {dataset / 'models'} holds no obj_XXXXXX.ply meshes")
+    if object_id is None:
+        if len(models) > 1:
+            raise ValueError(f"--dataset: {len(models)} objects in {dataset / 'models'}; choose one with --object-id")
+        return models[0]
+    path = dataset / "models" / f"obj_{object_id:06d}.ply"
+    if not path.exists():
+        raise ValueError(f"--object-id: {path} does not exist")
+    return path
+
+
+def run(args: argparse.Namespace) -> int:
+    """Runs ``paz6d train aae``."""
+    config = CONFIGS[args.config]
+    if args.steps is not None:
+        if args.steps <= 0:
+            raise ValueError(f"--steps: expected a positive number of steps, got {args.steps}")
+        config = replace(config, steps=args.steps)
+    if args.dataset is not None:
+        mesh, scale = _dataset_mesh(args.dataset, args.object_id), 0.001
+    else:
+        mesh, scale = args.mesh, args.scale
+    if not np.isfinite(scale) or scale <= 0:
+        raise ValueError(f"--scale: expected a positive factor to metres, got {scale}")
+    summary = train_aae(mesh, args.out, config, scale, args.seed, args.workers, args.platform)
+    print(json.dumps(summary, indent=2))
+    return 0

@@ -1,0 +1,169 @@
+"""Clean on-axis views of one object for Augmented Autoencoder training and codebooks.
+
+Every view renders the object at ``T = (R, [0, 0, distance])`` in a square ``render_size`` image whose
+focal length makes the object's bounding sphere (about the model origin) project to a circle of radius
+``render_size / 3``, so an image rotation about the principal point (an in-plane rotation of the
+camera, :func:`rotate_view`) never cuts the object. Rendering runs in ``spawn`` worker processes that
+never import TensorFlow (Mesa llvmpipe and TensorFlow's LLVM cannot share a process unguarded).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from paz6d.backend.checks import as_array
+
+#: The bounding sphere projects to a circle of radius render_size / SPHERE_FRACTION.
+SPHERE_FRACTION = 3.0
+
+
+@dataclass(frozen=True)
+class ViewGeometry:
+    """Camera of the on-axis views: ``render_size`` px square image, intrinsics ``K``, object origin at
+    ``distance`` metres on the optical axis."""
+
+    render_size: int
+    K: np.ndarray
+    distance: float
+
+    @classmethod
+    def for_points(cls, points, render_size: int, distance: float = 1.0) -> "ViewGeometry":
+        """Geometry for an object with model ``points`` ``(N, 3)`` (metres)."""
+        points = as_array(points, "points", (3,))
+        radius = float(np.max(np.linalg.norm(points, axis=1)))
+        if radius <= 0:
+            raise ValueError("points: the object has zero extent")
+        if int(render_size) < 8:
+            raise ValueError(f"render_size: expected at least 8 pixels, got {render_size}")
+        distance = max(float(distance), 3.0 * radius)
+        half_angle = np.arcsin(radius / distance)
+        focal = (render_size / SPHERE_FRACTION) / np.tan(half_angle)
+        centre = (render_size - 1) / 2.0
+        K = np.array([[focal, 0.0, centre], [0.0, focal, centre], [0.0, 0.0, 1.0]])
+        return cls(int(render_size), K, distance)
+
+
+def silhouette_boxes(points, rotations, K, translation) -> np.ndarray:
+    """Exact silhouette boxes ``(N, 4)`` (box convention: ``+0.5`` from pixel-centre coordinates) of the
+    object posed at ``(rotations[i], translation)``; ``points`` should be the convex-hull vertices
+    (the extremes of a projected convex set are at its vertices)."""
+    points = as_array(points, "points", (3,))
+    rotations = as_array(rotations, "rotations", (3, 3)).reshape(-1, 3, 3)
+    camera = np.einsum("nij,pj->npi", rotations, points) + np.asarray(translation, dtype=np.float64)
+    u = K[0, 0] * camera[..., 0] / camera[..., 2] + K[0, 1] * camera[..., 1] / camera[..., 2] + K[0, 2]
+    v = K[1, 1] * camera[..., 1] / camera[..., 2] + K[1, 2]
+    return np.stack([u.min(1), v.min(1), u.max(1), v.max(1)], axis=1) + 0.5
+
+
+def mask_box(alpha: np.ndarray, threshold: int = 128) -> np.ndarray | None:
+    """Box ``(4,)`` (box convention, pixel ``i`` covers ``[i, i+1)``) of pixels with ``alpha >= threshold``;
+    None when there are none."""
+    rows = np.flatnonzero(np.any(alpha >= threshold, axis=1))
+    if len(rows) == 0:
+        return None
+    cols = np.flatnonzero(np.any(alpha >= threshold, axis=0))
+    return np.array([cols[0], rows[0], cols[-1] + 1, rows[-1] + 1], dtype=np.float64)
+
+
+def rotation_about_principal_point(angle: float, K) -> np.ndarray:
+    """``(2, 3)`` affine map of pixel coordinates for an in-plane camera rotation by ``angle`` (radians,
+    :func:`paz6d.models.codebook.in_plane_rotations` convention) about ``K``'s principal point (fx = fy)."""
+    cos, sin = np.cos(angle), np.sin(angle)
+    cx, cy = K[0, 2], K[1, 2]
+    return np.array([[cos, -sin, cx - cos * cx + sin * cy], [sin, cos, cy - sin * cx - cos * cy]])
+
+
+def rotate_view(rgb: np.ndarray, alpha: np.ndarray, angle: float, K) -> tuple[np.ndarray, np.ndarray]:
+    """The view of the object rotated in-plane by ``angle`` (radians): image warp about the principal point.
+
+    Exact up to resampling for an object on the optical axis (``R -> R_z(angle) @ R``).
+    """
+    if angle == 0.0:
+        return rgb, alpha
+    matrix = rotation_about_principal_point(angle, K)
+    size = (rgb.shape[1], rgb.shape[0])
+    return (cv2.warpAffine(rgb, matrix, size, flags=cv2.INTER_LINEAR),
+            cv2.warpAffine(alpha, matrix, size, flags=cv2.INTER_LINEAR))
+
+
+# ------------------------------------------------------------------------------------ rendering
+_WORKER: dict = {}
+
+
+def _start_worker(mesh_path: str, mesh_scale: float, render_size: int, platform: str | None) -> None:
+    """Process initializer: loads the mesh and opens one renderer (never imports TensorFlow)."""
+    from paz6d.backend.mesh import load_mesh
+    from renderers import Renderer
+
+    _WORKER["mesh"] = load_mesh(mesh_path, mesh_scale)
+    _WORKER["renderer"] = Renderer(render_size, render_size, platform=platform)
+
+
+def _render_chunk(rotations: np.ndarray, K: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+    renderer, mesh = _WORKER["renderer"], _WORKER["mesh"]
+    size = renderer.width
+    rgb = np.empty((len(rotations), size, size, 3), np.uint8)
+    alpha = np.empty((len(rotations), size, size), np.uint8)
+    for index, rotation in enumerate(rotations):
+        T = np.eye(4)
+        T[:3, :3] = rotation
+        T[2, 3] = distance
+        output = renderer.render(K, [(mesh, T)], masks=False)
+        rgb[index], alpha[index] = output.rgb, output.alpha
+    return rgb, alpha
+
+
+def render_views(mesh_path: str | Path, mesh_scale: float, rotations, geometry: ViewGeometry, workers: int = 2,
+                 platform: str | None = None, chunk: int = 32, progress: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Renders the object at each rotation on the optical axis.
+
+    Args:
+        mesh_path: mesh file (PLY/OBJ/GLB...).
+        mesh_scale: factor to metres (0.001 for BOP millimetre meshes).
+        rotations: ``(V, 3, 3)`` ``R_model2cam``.
+        geometry: camera and distance (:class:`ViewGeometry`).
+        workers: rendering processes (``spawn``); 0 renders in this process, after loading TensorFlow
+            through the RTLD_LOCAL guard so that the two can share it.
+        platform: ``"egl"``, ``"osmesa"`` or None (auto).
+        chunk: views per task.
+
+    Returns:
+        ``rgb (V, S, S, 3)`` uint8 on black and ``alpha (V, S, S)`` uint8 coverage (255 = object).
+    """
+    from tqdm.auto import tqdm
+
+    rotations = as_array(rotations, "rotations", (3, 3)).reshape(-1, 3, 3)
+    if int(workers) < 0:
+        raise ValueError(f"workers: expected 0 (this process) or more rendering processes, got {workers}")
+    mesh_path = str(Path(mesh_path).resolve())
+    if int(workers) == 0:
+        from paz6d.backend.tensorflow_guard import import_tensorflow
+
+        import_tensorflow()
+        _start_worker(mesh_path, float(mesh_scale), geometry.render_size, platform)
+        try:
+            return _render_chunk(rotations, geometry.K, geometry.distance)
+        finally:
+            _WORKER.pop("renderer").close()
+            _WORKER.clear()
+    chunks = [rotations[start:start + chunk] for start in range(0, len(rotations), chunk)]
+    results: list = [None] * len(chunks)
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(int(workers), len(chunks)), mp_context=context,
+                             initializer=_start_worker,
+                             initargs=(mesh_path, float(mesh_scale), geometry.render_size, platform)) as pool:
+        futures = {pool.submit(_render_chunk, part, geometry.K, geometry.distance): index
+                   for index, part in enumerate(chunks)}
+        with tqdm(total=len(rotations), desc="render views", unit="view", disable=not progress,
+                  dynamic_ncols=True) as bar:
+            for future in as_completed(futures):
+                index = futures[future]
+                results[index] = future.result()
+                bar.update(len(chunks[index]))
+    return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
