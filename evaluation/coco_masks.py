@@ -88,15 +88,6 @@ class MaskIntervals:
         boxes[present] = np.stack([x_min, y_min, x_max - x_min + 1, y_max - y_min + 1], axis=1)
         return boxes
 
-    def select(self, indices: np.ndarray) -> MaskIntervals:
-        """Returns the masks ``indices`` (any order, repeats allowed) as a new set."""
-        indices = np.asarray(indices, dtype=np.int64)
-        counts = self.offsets[indices + 1] - self.offsets[indices]
-        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        runs = concatenated_ranges(self.offsets[indices], counts)
-        return MaskIntervals(self.heights[indices], self.widths[indices], self.starts[runs],
-                             self.ends[runs], offsets)
-
 
 def concatenated_ranges(firsts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """Concatenation of ``arange(f, f + c)`` for every pair, vectorized."""

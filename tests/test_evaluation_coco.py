@@ -125,7 +125,7 @@ def synthetic_dataset(seed: int, with_masks: bool) -> tuple[dict, list]:
         for _ in range(rng.integers(0, 4)):  # false positives anywhere
             w, h = rng.uniform(5, 90, 2)
             box = [rng.uniform(0, size + 20 - w), rng.uniform(0, size - h), w, h]
-            results.append(_detection(rng, image, int(rng.choice([1, 3, 4, 9])), box, with_masks))
+            results.append(_detection(rng, image, int(rng.choice([1, 3, 4, 9, 42])), box, with_masks))  # 42: unknown
     # one image/category with more than 100 detections exercises the maxDets cut
     crowded = images[5]
     for _ in range(105):
