@@ -66,10 +66,30 @@ def _image_entries(path: Path) -> dict[int, object]:
     return dict(sorted(entries.items()))
 
 
-def pose_from_bop(R_values, t_millimetres) -> np.ndarray:
-    """``T_model2cam`` ``(4, 4)`` in metres from BOP ``cam_R_m2c`` (9, row-major) and ``cam_t_m2c`` (mm)."""
+#: Real BOP ground truth is not exactly orthonormal (LM-O: max |R^T R - I| up to ~2e-3).
+ROTATION_ROUNDING_TOLERANCE = 1e-2
+
+
+def nearest_rotation(matrix: np.ndarray, where: str = "rotation") -> np.ndarray:
+    """Returns ``matrix`` ``(3, 3)`` unchanged when orthonormal to 1e-9, else its nearest rotation
+    (SVD) when it is a rounded rotation; raises ``ValueError`` when it is no rotation at all."""
+    deviation = np.abs(matrix.T @ matrix - np.eye(3)).max()
+    if deviation <= 1e-9 and np.linalg.det(matrix) > 0:
+        return matrix
+    if deviation > ROTATION_ROUNDING_TOLERANCE or np.linalg.det(matrix) <= 0:
+        raise ValueError(f"{where}: not a rotation matrix (max |R^T R - I| = {deviation:.3g}, "
+                         f"det = {np.linalg.det(matrix):.3g})")
+    left, _, right = np.linalg.svd(matrix)
+    return left @ right
+
+
+def pose_from_bop(R_values, t_millimetres, where: str = "cam_R_m2c") -> np.ndarray:
+    """``T_model2cam`` ``(4, 4)`` in metres from BOP ``cam_R_m2c`` (9, row-major) and ``cam_t_m2c`` (mm).
+
+    Rotations rounded in the file are snapped to the nearest rotation (see :func:`nearest_rotation`).
+    """
     T = np.eye(4)
-    T[:3, :3] = np.asarray(R_values, dtype=np.float64).reshape(3, 3)
+    T[:3, :3] = nearest_rotation(np.asarray(R_values, dtype=np.float64).reshape(3, 3), where)
     T[:3, 3] = np.asarray(t_millimetres, dtype=np.float64).reshape(3) * MILLIMETRES_TO_METRES
     return T
 
@@ -94,7 +114,7 @@ def load_scene_gt(path: str | Path) -> dict[int, list[GroundTruthPose]]:
             where = f"{path}: image {im_id}, instance {index}"
             R = _field(entry, "cam_R_m2c", where, 9)
             t = _field(entry, "cam_t_m2c", where, 3)
-            poses.append(GroundTruthPose(int(_field(entry, "obj_id", where)), pose_from_bop(R, t)))
+            poses.append(GroundTruthPose(int(_field(entry, "obj_id", where)), pose_from_bop(R, t, where)))
         result[im_id] = poses
     return result
 
@@ -121,7 +141,8 @@ def load_scene_camera(path: str | Path) -> dict[int, SceneCamera]:
             raise ValueError(f"{where}: field 'depth_scale' must be positive, got {depth_scale}")
         T_world2cam = None
         if "cam_R_w2c" in entry:
-            T_world2cam = pose_from_bop(_field(entry, "cam_R_w2c", where, 9), _field(entry, "cam_t_w2c", where, 3))
+            T_world2cam = pose_from_bop(_field(entry, "cam_R_w2c", where, 9), _field(entry, "cam_t_w2c", where, 3),
+                                        where)
         result[im_id] = SceneCamera(K, None if depth_scale is None else float(depth_scale), T_world2cam)
     return result
 
