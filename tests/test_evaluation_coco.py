@@ -316,3 +316,23 @@ def test_cli_reports_malformed_results_file(tmp_path):
         run_cli(["coco", "--gt", str(tmp_path / "gt.json"), "--results", str(tmp_path / "dt.json"),
                  "--out", str(tmp_path / "out.json")])
     assert not (tmp_path / "out.json").exists()
+
+
+def test_cli_registers_and_dispatches_bop_when_its_module_exists(monkeypatch):
+    import argparse
+    import types
+
+    from evaluation import cli
+
+    calls = []
+    fake = types.SimpleNamespace(configure=lambda parser: parser.add_argument("--results-csv", required=True),
+                                 run=lambda args: calls.append(args.results_csv) or 7)
+    monkeypatch.setattr(cli, "_bop_module", lambda: fake)
+    parser = argparse.ArgumentParser()
+    cli.configure(parser)
+    assert cli.run(parser.parse_args(["bop", "--results-csv", "r.csv"])) == 7 and calls == ["r.csv"]
+    monkeypatch.setattr(cli, "_bop_module", lambda: None)
+    parser = argparse.ArgumentParser()
+    cli.configure(parser)
+    with pytest.raises(SystemExit):  # no bop subcommand without evaluation.bop_cli
+        parser.parse_args(["bop", "--results-csv", "r.csv"])
