@@ -16,6 +16,7 @@ from scipy import stats
 from scipy.spatial.transform import Rotation, Slerp
 
 from paz6d.backend import quaternion
+from paz6d.backend.checks import BLOCK_ROWS
 
 PROPERTY = settings(max_examples=60, deadline=None)
 
@@ -275,3 +276,38 @@ def test_other_bad_inputs_name_their_argument():
         quaternion.slerp([0, 0, 0, 1.0], [0, 0, 0, 2.0], 0.5)
     with pytest.raises(ValueError, match=r"angles: contains NaN"):
         quaternion.from_euler([0.0, np.nan, 0.0], "xyz")
+
+
+def test_large_batches_span_several_blocks():
+    count = 3 * BLOCK_ROWS + 17  # the conversions run block by block
+    q = Rotation.random(count, random_state=4).as_quat()
+    matrices = Rotation.from_quat(q).as_matrix()
+    np.testing.assert_allclose(quaternion.to_rotation_matrix(q), matrices, atol=1e-12)
+    assert_same_rotation(quaternion.from_rotation_matrix(matrices), q)
+    vectors = np.random.default_rng(4).normal(size=(count, 3))
+    np.testing.assert_allclose(quaternion.rotate(q, vectors), Rotation.from_quat(q).apply(vectors), atol=1e-12)
+    broken = matrices.copy()
+    broken[-1, 0, 0] = 1.5
+    with pytest.raises(ValueError, match=r"matrix: expected orthonormal rotation matrices with det \+1"):
+        quaternion.from_rotation_matrix(broken)
+    broken[-1, 0, 0] = np.nan
+    with pytest.raises(ValueError, match=r"matrix: contains NaN"):
+        quaternion.from_rotation_matrix(broken)
+    reflected = matrices.copy()
+    reflected[BLOCK_ROWS + 1] *= -1
+    with pytest.raises(ValueError, match=r"min det = -1"):
+        quaternion.from_rotation_matrix(reflected)
+    q[-1] *= 1.01
+    with pytest.raises(ValueError, match=r"q: expected unit quaternions \(x, y, z, w\), found norm 1\.01"):
+        quaternion.to_rotation_matrix(q)
+
+
+def test_rotate_broadcasts_rotations_against_point_sets():
+    q = Rotation.random(2, random_state=5).as_quat()
+    vectors = np.random.default_rng(5).normal(size=(3, 3))
+    result = quaternion.rotate(q[:, None, :], vectors)
+    assert result.shape == (2, 3, 3)
+    for index in range(2):
+        np.testing.assert_allclose(result[index], Rotation.from_quat(q[index]).apply(vectors), atol=1e-12)
+    np.testing.assert_allclose(quaternion.rotate(q, vectors[0]), Rotation.from_quat(q).apply(vectors[0]), atol=1e-12)
+    assert quaternion.rotate(q[0], vectors[0]).shape == (3,)

@@ -11,15 +11,11 @@ import numpy as np
 UNIT_NORM_TOLERANCE = 1e-6
 
 
-def as_array(value, name: str, trailing_shape: tuple[int, ...], min_leading: int = 0) -> np.ndarray:
-    """Converts ``value`` to float64 with shape ``(..., *trailing_shape)`` and finite entries.
+#: Rows per block when validating large batches: keeps the temporaries in the CPU cache.
+BLOCK_ROWS = 8192
 
-    Args:
-        value: array-like input.
-        name: argument name used in error messages.
-        trailing_shape: required trailing dimensions, e.g. ``(4,)`` for quaternions.
-        min_leading: minimum number of leading (batch) dimensions.
-    """
+
+def _as_shaped_array(value, name: str, trailing_shape: tuple[int, ...], min_leading: int = 0) -> np.ndarray:
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as error:
@@ -29,8 +25,25 @@ def as_array(value, name: str, trailing_shape: tuple[int, ...], min_leading: int
     count = len(trailing_shape)
     if array.ndim < count + min_leading or array.shape[array.ndim - count:] != tuple(trailing_shape):
         raise ValueError(f"{name}: expected shape {expected}, got {array.shape}")
+    return array
+
+
+def _require_finite(array: np.ndarray, name: str) -> None:
     if not np.all(np.isfinite(array)):
         raise ValueError(f"{name}: contains NaN or infinite values")
+
+
+def as_array(value, name: str, trailing_shape: tuple[int, ...], min_leading: int = 0) -> np.ndarray:
+    """Converts ``value`` to float64 with shape ``(..., *trailing_shape)`` and finite entries.
+
+    Args:
+        value: array-like input.
+        name: argument name used in error messages.
+        trailing_shape: required trailing dimensions, e.g. ``(4,)`` for quaternions.
+        min_leading: minimum number of leading (batch) dimensions.
+    """
+    array = _as_shaped_array(value, name, trailing_shape, min_leading)
+    _require_finite(array, name)
     return array
 
 
@@ -47,23 +60,48 @@ def as_points(value, name: str, dimension: int = 3, min_count: int = 1) -> np.nd
 
 def as_unit_quaternion(value, name: str = "quaternion") -> np.ndarray:
     """Returns a ``(..., 4)`` scalar-last quaternion array after checking unit norm."""
-    quaternion = as_array(value, name, (4,))
-    norms = np.linalg.norm(quaternion, axis=-1)
-    if np.any(np.abs(norms - 1.0) > UNIT_NORM_TOLERANCE):
+    quaternion = _as_shaped_array(value, name, (4,))
+    squared_norms = np.einsum("...i,...i->...", quaternion, quaternion)
+    low, high = (1.0 - UNIT_NORM_TOLERANCE) ** 2, (1.0 + UNIT_NORM_TOLERANCE) ** 2
+    # NaN fails both comparisons, so finiteness is only examined on the error path.
+    if not np.all((squared_norms >= low) & (squared_norms <= high)):
+        _require_finite(quaternion, name)
+        norms = np.sqrt(squared_norms)
         worst = norms.flat[np.argmax(np.abs(norms - 1.0))]
         raise ValueError(f"{name}: expected unit quaternions (x, y, z, w), found norm {worst:.6g}; "
                          "normalize with paz6d.backend.quaternion.normalize first")
     return quaternion
 
 
+def _rotation_defects(flat: np.ndarray) -> tuple[float, float]:
+    """Largest ``|R^T R - I|`` entry and smallest determinant of ``(N, 3, 3)`` matrices (NaN-propagating)."""
+    worst, smallest = 0.0, np.inf
+    for start in range(0, len(flat), BLOCK_ROWS):
+        m = np.ascontiguousarray(flat[start:start + BLOCK_ROWS].reshape(-1, 9).T)
+        columns = ((m[0], m[3], m[6]), (m[1], m[4], m[7]), (m[2], m[5], m[8]))
+        errors = []
+        for i in range(3):
+            for j in range(i, 3):
+                dot = columns[i][0] * columns[j][0] + columns[i][1] * columns[j][1] + columns[i][2] * columns[j][2]
+                errors.append(np.abs(dot - 1.0) if i == j else np.abs(dot))
+        (a, b, c), (d, e, f), (g, h, k) = (m[0], m[1], m[2]), (m[3], m[4], m[5]), (m[6], m[7], m[8])
+        determinant = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g)
+        block_worst = np.max(np.maximum.reduce(errors))
+        worst = block_worst if np.isnan(block_worst) else max(worst, float(block_worst))
+        smallest = min(smallest, float(np.min(determinant)))
+        if np.isnan(worst):
+            break
+    return worst, smallest
+
+
 def as_rotation_matrix(value, name: str = "rotation_matrix", tolerance: float = 1e-5) -> np.ndarray:
     """Returns a ``(..., 3, 3)`` array after checking it is orthonormal with determinant +1."""
-    matrix = as_array(value, name, (3, 3))
-    identity_error = np.abs(np.swapaxes(matrix, -1, -2) @ matrix - np.eye(3)).max(axis=(-1, -2))
-    determinant = np.linalg.det(matrix)
-    if np.any(identity_error > tolerance) or np.any(determinant <= 0):
+    matrix = _as_shaped_array(value, name, (3, 3))
+    identity_error, determinant = _rotation_defects(matrix.reshape(-1, 3, 3))
+    if not identity_error <= tolerance or not determinant > 0:
+        _require_finite(matrix, name)
         raise ValueError(f"{name}: expected orthonormal rotation matrices with det +1 "
-                         f"(max |R^T R - I| = {np.max(identity_error):.3g}, min det = {np.min(determinant):.3g})")
+                         f"(max |R^T R - I| = {identity_error:.3g}, min det = {determinant:.3g})")
     return matrix
 
 

