@@ -1,0 +1,196 @@
+"""BOP'19 pose results files: ``scene_id,im_id,obj_id,score,R,t,time``, one estimate per line.
+
+``R`` holds the 9 entries of ``R_model2cam`` row-major separated by spaces, ``t`` the 3 entries
+of ``t_model2cam`` in millimetres, ``time`` the run time in seconds for the whole image (-1 when
+unknown). Lines are numbered from 1 (the header) in every error message.
+
+Example:
+    >>> results = read_pose_results("results_lmo-test.csv", object_ids={1, 5})  # doctest: +SKIP
+    >>> results.rotations.shape                                                  # doctest: +SKIP
+    (1426, 3, 3)
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from evaluation.pose_errors import ROTATION_TOLERANCE
+
+HEADER = ("scene_id", "im_id", "obj_id", "score", "R", "t", "time")
+
+
+@dataclass(frozen=True)
+class PoseResults:
+    """Estimates read from a results file, as parallel arrays of length ``E``.
+
+    Attributes:
+        path: the file read.
+        scene_ids, im_ids, obj_ids: ``(E,)`` int64 BOP ids.
+        scores: ``(E,)`` confidences (higher = more confident).
+        rotations: ``(E, 3, 3)`` ``R_model2cam``.
+        translations: ``(E, 3)`` ``t_model2cam`` in millimetres.
+        times: ``(E,)`` seconds per image (-1 = unknown).
+        line_numbers: ``(E,)`` 1-based line of each estimate in the file.
+        skipped: ``(line, reason)`` of the rows dropped with ``skip_invalid=True``.
+    """
+
+    path: Path
+    scene_ids: np.ndarray
+    im_ids: np.ndarray
+    obj_ids: np.ndarray
+    scores: np.ndarray
+    rotations: np.ndarray
+    translations: np.ndarray
+    times: np.ndarray
+    line_numbers: np.ndarray
+    skipped: tuple[tuple[int, str], ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.scores)
+
+    @property
+    def poses(self) -> np.ndarray:
+        """``(E, 4, 4)`` ``T_model2cam`` with translations in millimetres."""
+        T = np.tile(np.eye(4), (len(self), 1, 1))
+        T[:, :3, :3] = self.rotations
+        T[:, :3, 3] = self.translations
+        return T
+
+
+def _integer(text: str, name: str) -> int:
+    text = text.strip()
+    if not text.isdigit():
+        raise ValueError(f"field {name!r}: expected a non-negative integer, got {text!r}")
+    return int(text)
+
+
+def _numbers(text: str, name: str, count: int) -> np.ndarray:
+    parts = text.split()
+    if len(parts) != count:
+        raise ValueError(f"field {name!r}: expected {count} numbers separated by spaces, got {len(parts)}")
+    try:
+        values = np.array([float(part) for part in parts])
+    except ValueError as error:
+        raise ValueError(f"field {name!r}: not a number ({error})") from error
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"field {name!r}: contains NaN or infinite values")
+    return values
+
+
+def _parse_row(row: list[str], rotation_tolerance: float) -> tuple:
+    if len(row) != len(HEADER):
+        raise ValueError(f"expected {len(HEADER)} comma-separated fields {','.join(HEADER)}, got {len(row)}")
+    scene_id = _integer(row[0], "scene_id")
+    im_id = _integer(row[1], "im_id")
+    obj_id = _integer(row[2], "obj_id")
+    score = _numbers(row[3], "score", 1)[0]
+    R = _numbers(row[4], "R", 9).reshape(3, 3)
+    error = float(np.abs(R.T @ R - np.eye(3)).max())
+    if error > rotation_tolerance or np.linalg.det(R) <= 0:
+        raise ValueError(f"field 'R': not a rotation matrix (max |R^T R - I| = {error:.3g}, "
+                         f"det = {np.linalg.det(R):.3g}; expected orthonormal within {rotation_tolerance:g}, det +1)")
+    t = _numbers(row[5], "t", 3)
+    time = _numbers(row[6], "time", 1)[0]
+    return scene_id, im_id, obj_id, score, R, t, time
+
+
+def read_pose_results(path: str | Path, object_ids=None, image_ids=None, skip_invalid: bool = False,
+                      rotation_tolerance: float = ROTATION_TOLERANCE) -> PoseResults:
+    """Reads a BOP'19 results CSV.
+
+    Args:
+        path: the CSV file (header ``scene_id,im_id,obj_id,score,R,t,time``).
+        object_ids: known object ids; an estimate of another object is invalid (``None``: no check).
+        image_ids: known ``(scene_id, im_id)`` pairs; an estimate of another image is invalid.
+        skip_invalid: drop invalid rows and record them in :attr:`PoseResults.skipped` instead of
+            raising.
+        rotation_tolerance: largest accepted ``max |R^T R - I|``.
+
+    Raises:
+        ValueError: naming the file and line: missing file, wrong header, wrong field count,
+            non-integer ids, NaN/inf numbers, non-rotation ``R``, unknown object or image (the
+            header is always checked, also with ``skip_invalid``).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: results file not found")
+    object_ids = None if object_ids is None else {int(value) for value in object_ids}
+    image_ids = None if image_ids is None else {(int(scene), int(image)) for scene, image in image_ids}
+    parsed, lines, skipped = [], [], []
+    with open(path, newline="", encoding="utf-8") as file:
+        reader = csv.reader(file)
+        header = next(reader, None)
+        if header is None or tuple(field.strip() for field in header) != HEADER:
+            raise ValueError(f"{path}:1: expected the header {','.join(HEADER)}, got "
+                             f"{'an empty file' if header is None else ','.join(header)!r}")
+        for row in reader:
+            if not row or all(not field.strip() for field in row):
+                continue
+            try:
+                values = _parse_row(row, rotation_tolerance)
+                if object_ids is not None and values[2] not in object_ids:
+                    raise ValueError(f"unknown object id {values[2]} (known: {sorted(object_ids)})")
+                if image_ids is not None and (values[0], values[1]) not in image_ids:
+                    raise ValueError(f"unknown image: scene {values[0]}, image {values[1]} is not in the "
+                                     "data set's ground truth")
+            except ValueError as error:
+                if not skip_invalid:
+                    raise ValueError(f"{path}:{reader.line_num}: {error}") from None
+                skipped.append((reader.line_num, str(error)))
+                continue
+            parsed.append(values)
+            lines.append(reader.line_num)
+    count = len(parsed)
+    columns = list(zip(*parsed)) if parsed else [()] * len(HEADER)
+    return PoseResults(
+        path=path,
+        scene_ids=np.array(columns[0], dtype=np.int64),
+        im_ids=np.array(columns[1], dtype=np.int64),
+        obj_ids=np.array(columns[2], dtype=np.int64),
+        scores=np.array(columns[3], dtype=np.float64),
+        rotations=np.array(columns[4], dtype=np.float64).reshape(count, 3, 3),
+        translations=np.array(columns[5], dtype=np.float64).reshape(count, 3),
+        times=np.array(columns[6], dtype=np.float64),
+        line_numbers=np.array(lines, dtype=np.int64),
+        skipped=tuple(skipped))
+
+
+def write_pose_results(path: str | Path, scene_ids, im_ids, obj_ids, scores, rotations, translations_mm,
+                       times=None) -> Path:
+    """Writes estimates as a BOP'19 results CSV (atomically: temporary file, then ``os.replace``).
+
+    Args:
+        path: output CSV.
+        scene_ids, im_ids, obj_ids: ``(E,)`` ids.
+        scores: ``(E,)`` confidences.
+        rotations: ``(E, 3, 3)`` ``R_model2cam``.
+        translations_mm: ``(E, 3)`` ``t_model2cam`` in millimetres.
+        times: ``(E,)`` seconds per image (default -1).
+    """
+    path = Path(path)
+    rotations = np.asarray(rotations, dtype=np.float64).reshape(-1, 9)
+    translations_mm = np.asarray(translations_mm, dtype=np.float64).reshape(-1, 3)
+    count = len(rotations)
+    times = np.full(count, -1.0) if times is None else np.asarray(times, dtype=np.float64)
+    columns = [np.asarray(values).ravel() for values in (scene_ids, im_ids, obj_ids, scores)]
+    if any(len(values) != count for values in columns + [translations_mm, times]):
+        raise ValueError(f"write_pose_results: expected {count} values in every column")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(temporary, "w", newline="", encoding="utf-8") as file:
+        writer = csv.writer(file, lineterminator="\n")
+        writer.writerow(HEADER)
+        for index in range(count):
+            writer.writerow([int(columns[0][index]), int(columns[1][index]), int(columns[2][index]),
+                             repr(float(columns[3][index])),
+                             " ".join(repr(float(value)) for value in rotations[index]),
+                             " ".join(repr(float(value)) for value in translations_mm[index]),
+                             repr(float(times[index])) if math.isfinite(times[index]) else "-1"])
+    os.replace(temporary, path)
+    return path
