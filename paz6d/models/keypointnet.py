@@ -107,8 +107,9 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
         num_keypoints: ``N`` ordered keypoints.
         input_size: crop side ``S`` in pixels; inputs are ``(B, S, S, 3)`` RGB values 0..255.
         filters: channels of every convolution.
-        downsample: stride of the stem (1, 2, 4 or 8); probability maps are ``S / downsample``
-            cells wide. Sub-cell precision comes from the expectation.
+        downsample: total stride of the stem (1, 2, 4 or 8: a stride-2 first convolution, then
+            stride-2 convolutions); probability maps are ``S / downsample`` cells wide. Sub-cell
+            precision comes from the expectation.
         dilations: dilation rate of each 3×3 convolution of the dilated stack.
         depth_prior: initial value of the depth code ``z_hat`` (about the crop margin factor).
     Returns:
@@ -126,10 +127,11 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
     layers = keras.layers
     inputs = keras.Input((input_size, input_size, 3), name="image")
     x = layers.Rescaling(1.0 / 127.5, offset=-1.0, name="scale")(inputs)
-    x = layers.Conv2D(filters, 3, padding="same", use_bias=False, name="stem_conv")(x)
+    stem_stride = min(downsample, 2)
+    x = layers.Conv2D(filters, 3, strides=stem_stride, padding="same", use_bias=False, name="stem_conv")(x)
     x = layers.BatchNormalization(name="stem_bn")(x)
     x = layers.ReLU(name="stem_relu")(x)
-    for level in range(int(math.log2(downsample))):
+    for level in range(int(math.log2(downsample // stem_stride))):
         x = layers.Conv2D(filters, 3, strides=2, padding="same", use_bias=False, name=f"down{level}_conv")(x)
         x = layers.BatchNormalization(name=f"down{level}_bn")(x)
         x = layers.ReLU(name=f"down{level}_relu")(x)

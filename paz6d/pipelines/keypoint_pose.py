@@ -1,0 +1,244 @@
+"""Keypoint-based 6D pose: KeypointNet keypoints in a box crop + 3D keypoints + PnP (RANSAC, LM).
+
+A KeypointNet run directory (written by ``paz6d train keypointnet``) holds:
+
+- ``config.json`` — ``input_size``, ``margin`` (crop side = margin × longer box side), ``mode``, mesh info;
+- ``model.keras`` — the network (safe-mode loadable);
+- ``keypoints.json`` — ``points_model`` ``(N, 3)`` metres in the object frame, ``usable`` flags,
+  ``method`` (``"lifted-median"`` for discovered keypoints, ``"farthest-point"`` for supervised ones).
+
+:class:`KeypointPose6D` crops the square around a box, predicts the ``N`` keypoints, maps them back
+to image pixels and solves PnP with :func:`paz6d.backend.pnp.solve_pnp`.
+
+Example:
+    >>> estimator = KeypointPose6D("runs/keypoints", camera)          # doctest: +SKIP
+    >>> pose = estimator(image, (210, 140, 330, 260))                  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from paz6d.abstract import Box2D, Keypoints2D, Pose6D, Processor
+from paz6d.backend.camera import Camera, unproject
+from paz6d.backend.checks import as_array, as_camera_matrix
+from paz6d.backend.image import as_image
+from paz6d.backend.pnp import PnPError, solve_pnp
+from paz6d.backend.square_crop import crop_square, square_window, to_full_image
+from paz6d.backend.transform import apply, invert
+
+CONFIG_FILE = "config.json"
+MODEL_FILE = "model.keras"
+KEYPOINTS_FILE = "keypoints.json"
+
+
+def lift_keypoints(uv, depth, K, T_model2cam) -> tuple[np.ndarray, np.ndarray]:
+    """3D keypoints in the object frame from views with known poses (median over views).
+
+    Args:
+        uv: ``(V, N, 2)`` keypoints in pixels of each view's ``K``.
+        depth: ``(V, N)`` keypoint depths (metres, along z).
+        K: ``(V, 3, 3)`` intrinsics; T_model2cam: ``(V, 4, 4)`` ground-truth poses.
+    Returns:
+        ``points_model (N, 3)`` (metres) and ``spread (N,)``: median distance of the per-view
+        estimates to that median (metres), a reliability measure.
+    """
+    uv = as_array(uv, "uv", (2,))
+    views, count = uv.shape[:2]
+    depth = np.asarray(depth, dtype=np.float64)
+    K = as_array(K, "K", (3, 3))
+    T_model2cam = as_array(T_model2cam, "T_model2cam", (4, 4))
+    if uv.ndim != 3 or depth.shape != (views, count) or K.shape != (views, 3, 3) or T_model2cam.shape != (views, 4, 4):
+        raise ValueError(f"uv/depth/K/T_model2cam: expected (V, N, 2), (V, N), (V, 3, 3), (V, 4, 4), got "
+                         f"{uv.shape}, {depth.shape}, {K.shape}, {T_model2cam.shape}")
+    if views == 0:
+        raise ValueError("uv: expected at least one view to lift keypoints from")
+    per_view = np.stack([apply(invert(T_model2cam[v]), unproject(uv[v], depth[v], K[v])) for v in range(views)])
+    points = np.median(per_view, axis=0)
+    spread = np.median(np.linalg.norm(per_view - points[None], axis=-1), axis=0)
+    return points, spread
+
+
+def keypoint_spread(probabilities, uv, stride: int) -> np.ndarray:
+    """Standard deviation ``(B, N)`` (pixels) of each probability map ``(B, h, w, N)`` about ``uv (B, N, 2)``."""
+    probabilities = np.asarray(probabilities, dtype=np.float64)
+    _, height, width, _ = probabilities.shape
+    offset = (stride - 1) / 2.0
+    u = np.arange(width) * stride + offset
+    v = np.arange(height) * stride + offset
+    uv = np.asarray(uv, dtype=np.float64)
+    du = (u[None, None, :, None] - uv[:, None, None, :, 0]) ** 2
+    dv = (v[None, :, None, None] - uv[:, None, None, :, 1]) ** 2
+    return np.sqrt(np.sum(probabilities * (du + dv), axis=(1, 2)))
+
+
+def write_keypoints(run_dir: str | Path, points_model, usable, method: str, spread=None) -> Path:
+    """Writes ``keypoints.json`` (temporary file, then rename)."""
+    points_model = as_array(points_model, "points_model", (3,))
+    usable = np.asarray(usable, dtype=bool)
+    if usable.shape != (len(points_model),):
+        raise ValueError(f"usable: expected {len(points_model)} flags, got shape {usable.shape}")
+    data = {"points_model": points_model.tolist(), "usable": usable.tolist(), "method": method,
+            "spread": None if spread is None else np.asarray(spread, dtype=np.float64).tolist(), "units": "metres"}
+    path = Path(run_dir) / KEYPOINTS_FILE
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(json.dumps(data, indent=2))
+    os.replace(temporary, path)
+    return path
+
+
+def _read_json(path: Path, fields: tuple[str, ...]) -> dict:
+    if not path.is_file():
+        raise ValueError(f"{path}: file not found (is {path.parent} a KeypointNet run directory?)")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: invalid JSON ({error})") from error
+    missing = [name for name in fields if name not in data]
+    if missing:
+        raise ValueError(f"{path}: missing field(s) {missing}")
+    return data
+
+
+def read_keypoints(run_dir: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """``points_model (N, 3)`` metres and ``usable (N,)`` flags from a run's ``keypoints.json``."""
+    path = Path(run_dir) / KEYPOINTS_FILE
+    data = _read_json(path, ("points_model", "usable"))
+    points = np.asarray(data["points_model"], dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+        raise ValueError(f"{path}: points_model: expected finite (N, 3) metres, got shape {points.shape}")
+    usable = np.asarray(data["usable"], dtype=bool)
+    if usable.shape != (len(points),):
+        raise ValueError(f"{path}: usable: expected {len(points)} flags, got shape {usable.shape}")
+    return points, usable
+
+
+def _as_box(box) -> Box2D:
+    if isinstance(box, Box2D):
+        return box
+    try:
+        return Box2D.from_array(box)
+    except ValueError as error:
+        raise ValueError(f"box2d: expected a Box2D or (x_min, y_min, x_max, y_max) pixels ({error})") from error
+
+
+class KeypointPose6D(Processor):
+    """``(image, box2d) -> Pose6D`` with a trained KeypointNet run and PnP.
+
+    Args:
+        run_dir: KeypointNet run directory (see module docstring).
+        camera: :class:`~paz6d.backend.camera.Camera` or ``3×3`` ``K`` of the images.
+        ransac_threshold: RANSAC inlier threshold in pixels *of the crop* (scaled to the image).
+        max_spread: keypoints whose probability map has a standard deviation above this many crop
+            pixels are not used (default: ``input_size / 4``).
+        min_keypoints: fewest usable keypoints accepted (PnP needs 4).
+        class_name: written into the returned poses.
+    """
+
+    def __init__(self, run_dir: str | Path, camera: Camera | np.ndarray, ransac_threshold: float = 5.0,
+                 max_spread: float | None = None, min_keypoints: int = 4, class_name: str | None = None):
+        super().__init__()
+        from paz6d.models.keypointnet import load_keypointnet
+
+        self.run_dir = Path(run_dir)
+        if isinstance(camera, Camera):
+            self.camera: Camera | None = camera
+            self.K, self.distortion = camera.K, camera.distortion
+        else:
+            self.camera, self.K, self.distortion = None, as_camera_matrix(camera, "camera"), None
+        config = _read_json(self.run_dir / CONFIG_FILE, ("input_size", "margin", "downsample"))
+        self.input_size, self.margin = int(config["input_size"]), float(config["margin"])
+        self.stride = int(config["downsample"])
+        self.points_model, self.usable = read_keypoints(self.run_dir)
+        self.model = load_keypointnet(self.run_dir / MODEL_FILE)
+        count = int(self.model.output["uv"].shape[1])
+        if count != len(self.points_model):
+            raise ValueError(f"{self.run_dir / KEYPOINTS_FILE}: {len(self.points_model)} keypoints, but the model "
+                             f"predicts {count}")
+        if min_keypoints < 4:
+            raise ValueError(f"min_keypoints: PnP needs at least 4, got {min_keypoints}")
+        if self.usable.sum() < min_keypoints:
+            raise PnPError(f"{self.run_dir / KEYPOINTS_FILE}: only {int(self.usable.sum())} usable keypoints, "
+                           f"PnP needs at least {min_keypoints}")
+        self.ransac_threshold = float(ransac_threshold)
+        self.max_spread = self.input_size / 4.0 if max_spread is None else float(max_spread)
+        self.min_keypoints = int(min_keypoints)
+        self.class_name = class_name if class_name is not None else config.get("class_name")
+
+    def _crop(self, image, box) -> tuple[np.ndarray, tuple[int, int, int], Box2D]:
+        image = as_image(image)
+        if self.camera is not None and image.shape[:2] != (self.camera.height, self.camera.width):
+            raise ValueError(f"image: expected {self.camera.width}x{self.camera.height} pixels (the camera), "
+                             f"got {image.shape[1]}x{image.shape[0]}")
+        box = _as_box(box)
+        if box.width <= 0 or box.height <= 0:
+            raise ValueError(f"box2d: expected a box with positive width and height, got {box.to_array().tolist()}")
+        height, width = image.shape[:2]
+        if box.x_max <= 0 or box.y_max <= 0 or box.x_min >= width or box.y_min >= height:
+            raise ValueError(f"box2d: {box.to_array().tolist()} lies outside the {width}x{height} image")
+        window = square_window(box.to_array(), self.margin)
+        return crop_square(image, window, self.input_size), window, box
+
+    def detect_batch(self, images, boxes) -> list[Keypoints2D]:
+        """Keypoints in image pixels for each ``(image, box)``; scores are ``1 / (1 + spread_px)``
+        (spread in crop pixels), and keypoints with an unusable 3D point or a spread above
+        ``max_spread`` get score 0."""
+        if len(images) != len(boxes):
+            raise ValueError(f"images/boxes: expected equal lengths, got {len(images)} and {len(boxes)}")
+        if len(images) == 0:
+            return []
+        crops, windows = [], []
+        for image, box in zip(images, boxes):
+            crop, window, _ = self._crop(image, box)
+            crops.append(crop)
+            windows.append(window)
+        outputs = self.model(np.stack(crops).astype(np.float32), training=False)
+        uv = np.asarray(outputs["uv"], dtype=np.float64)
+        spread = keypoint_spread(outputs["probabilities"], uv, self.stride)
+        results = []
+        for index, window in enumerate(windows):
+            scores = 1.0 / (1.0 + spread[index])
+            scores[(spread[index] > self.max_spread) | ~self.usable] = 0.0
+            results.append(Keypoints2D(to_full_image(uv[index], window, self.input_size), scores, self.class_name))
+        return results
+
+    def detect(self, image, box2d) -> Keypoints2D:
+        """Keypoints of one ``(image, box)`` (see :meth:`detect_batch`)."""
+        return self.detect_batch([image], [box2d])[0]
+
+    def pose_from_keypoints(self, keypoints: Keypoints2D, window_side: float) -> Pose6D:
+        """PnP (RANSAC + Levenberg–Marquardt) on the keypoints with a positive score.
+
+        Args:
+            window_side: side of the crop window in image pixels (scales the RANSAC threshold).
+        Raises:
+            PnPError: fewer than ``min_keypoints`` usable keypoints, or no PnP solution.
+        """
+        usable = np.asarray(keypoints.scores) > 0
+        if usable.sum() < self.min_keypoints:
+            raise PnPError(f"keypoints: only {int(usable.sum())} of {len(usable)} keypoints are usable "
+                           f"(need at least {self.min_keypoints} for PnP)")
+        threshold = self.ransac_threshold * window_side / self.input_size
+        return solve_pnp(self.points_model[usable], keypoints.points[usable], self.K, method="epnp", ransac=True,
+                         distortion=self.distortion, reprojection_threshold=threshold, class_name=self.class_name)
+
+    def estimate_batch(self, images, boxes) -> list[Pose6D | None]:
+        """Poses for many ``(image, box)`` pairs with one network call; ``None`` where PnP fails."""
+        poses: list[Pose6D | None] = []
+        for box, keypoints in zip(boxes, self.detect_batch(images, boxes)):
+            side = square_window(_as_box(box).to_array(), self.margin)[2]
+            try:
+                poses.append(self.pose_from_keypoints(keypoints, side))
+            except PnPError:
+                poses.append(None)
+        return poses
+
+    def call(self, image, box2d) -> Pose6D:
+        """Pose ``T_model2cam`` (metres) of the object inside ``box2d`` (``Box2D`` or ``xyxy`` pixels)."""
+        keypoints = self.detect(image, box2d)
+        side = square_window(_as_box(box2d).to_array(), self.margin)[2]
+        return self.pose_from_keypoints(keypoints, side)

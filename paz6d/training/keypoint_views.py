@@ -1,0 +1,413 @@
+"""Synthetic views of one mesh for KeypointNet: poses, crops, rendering in worker processes, batches.
+
+Every view ``i`` of a set is drawn from ``numpy.random.default_rng([seed, i])``: a uniformly random
+rotation, a distance of ``distance`` object diameters and an image position inside the central part
+of a ``camera`` image, plus random lights. Training views are rendered directly as the
+``input_size``² square crop around the object's silhouette box (``margin`` × its longer side), with
+the crop's own intrinsics ``K_crop`` (see :mod:`paz6d.backend.square_crop`); test views are whole
+camera images over random backgrounds with their ground-truth boxes.
+
+Rendering runs in ``multiprocessing`` *spawn* worker processes that never import TensorFlow
+(Mesa llvmpipe and TensorFlow's LLVM must not share a process unguarded); ``workers=0`` renders in
+the calling process (only safe if TensorFlow, if present, was imported through
+``paz6d.backend.tensorflow_guard``). The same seed gives the same views for any number of workers.
+
+Batches (:func:`training_batch`) pair two views of the object, composite them over random
+backgrounds, jitter the crop (updating ``K_crop``) and the colours; the relative pose of a pair is
+``T_model2cam[b] @ inv(T_model2cam[a])``.
+
+This module imports neither TensorFlow nor pyrender at import time.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from paz6d.backend import image as image_backend
+from paz6d.backend import quaternion
+from paz6d.backend.camera import Camera
+from paz6d.backend.mesh import diameter, load_mesh
+from paz6d.backend.square_crop import crop_intrinsics, square_window
+
+#: LINEMOD-like 640×480 camera used when no camera is given.
+DEFAULT_CAMERA = Camera(np.array([[572.4114, 0.0, 325.2611], [0.0, 573.5704, 242.0490], [0.0, 0.0, 1.0]]), 640, 480)
+
+
+@dataclass(frozen=True)
+class ViewSampling:
+    """How views are drawn.
+
+    Attributes:
+        input_size: crop side ``S`` in pixels.
+        camera: the full camera whose images are cropped.
+        distance: range of the object's distance (along z) in object diameters.
+        border: fraction of the image width/height kept free at each side for the object centre.
+        margin: crop side = ``margin`` × the longer side of the silhouette box.
+    """
+
+    input_size: int = 128
+    camera: Camera = field(default=DEFAULT_CAMERA)
+    distance: tuple[float, float] = (3.0, 7.0)
+    border: float = 0.15
+    margin: float = 1.25
+
+    def __post_init__(self):
+        if self.input_size < 8:
+            raise ValueError(f"input_size: expected at least 8 pixels, got {self.input_size}")
+        low, high = self.distance
+        if not 0 < low <= high:
+            raise ValueError(f"distance: expected 0 < low <= high (object diameters), got {self.distance}")
+        if not 0 <= self.border < 0.5:
+            raise ValueError(f"border: expected a fraction in [0, 0.5), got {self.border}")
+        if self.margin < 1.0:
+            raise ValueError(f"margin: expected >= 1 so the crop holds the whole box, got {self.margin}")
+
+    def to_dict(self) -> dict:
+        data = asdict(self)
+        data["camera"] = self.camera.to_dict()
+        data["distance"] = list(self.distance)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "ViewSampling":
+        data = dict(data)
+        data["camera"] = Camera.from_dict(data["camera"])
+        data["distance"] = tuple(data["distance"])
+        return cls(**data)
+
+
+@dataclass
+class ViewSet:
+    """Rendered crops of one object.
+
+    Attributes:
+        rgb: ``(V, S, S, 3)`` uint8 renderings on black.
+        alpha: ``(V, S, S)`` uint8 anti-aliased coverage (255 = object).
+        masks: ``(V, S, S)`` bool silhouettes.
+        K: ``(V, 3, 3)`` crop intrinsics (pixels of the crop).
+        T_model2cam: ``(V, 4, 4)`` poses (metres).
+    """
+
+    rgb: np.ndarray
+    alpha: np.ndarray
+    masks: np.ndarray
+    K: np.ndarray
+    T_model2cam: np.ndarray
+
+    def __post_init__(self):
+        count, size = len(self.rgb), self.rgb.shape[1] if self.rgb.ndim == 4 else -1
+        expected = {"rgb": (count, size, size, 3), "alpha": (count, size, size), "masks": (count, size, size),
+                    "K": (count, 3, 3), "T_model2cam": (count, 4, 4)}
+        for name, shape in expected.items():
+            if getattr(self, name).shape != shape:
+                raise ValueError(f"ViewSet.{name}: expected shape {shape}, got {getattr(self, name).shape}")
+        empty = np.flatnonzero(~self.masks.reshape(count, -1).any(axis=1))
+        if len(empty):
+            raise ValueError(f"ViewSet.masks: views {empty[:10].tolist()} have empty masks (object not visible); "
+                             "every view needs a non-empty silhouette")
+
+    def __len__(self) -> int:
+        return len(self.rgb)
+
+    def save(self, path: str | Path) -> Path:
+        """Writes an ``.npz`` (temporary file, then rename)."""
+        path = Path(path)
+        temporary = path.with_name(path.stem + ".tmp.npz")
+        np.savez(temporary, **asdict(self))
+        os.replace(temporary, path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "ViewSet":
+        path = Path(path)
+        try:
+            with np.load(path) as data:
+                return cls(**{name: data[name] for name in ("rgb", "alpha", "masks", "K", "T_model2cam")})
+        except (OSError, KeyError, ValueError) as error:
+            raise ValueError(f"{path}: not a readable view set ({error})") from error
+
+
+@dataclass
+class TestImages:
+    """Whole camera images of the object over random backgrounds.
+
+    Attributes:
+        images: ``(V, H, W, 3)`` uint8; boxes: ``(V, 4)`` silhouette boxes ``xyxy`` (pixels);
+        T_model2cam: ``(V, 4, 4)``; masks: ``(V, H, W)`` bool.
+    """
+
+    images: np.ndarray
+    boxes: np.ndarray
+    T_model2cam: np.ndarray
+    masks: np.ndarray
+
+
+# ------------------------------------------------------------------------------- pose sampling
+
+def _hull_vertices(vertices: np.ndarray) -> np.ndarray:
+    """Convex hull vertices (the projected bounding box of a point set is that of its hull)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        return vertices[ConvexHull(vertices).vertices]
+    except QhullError:
+        return vertices
+
+
+def sample_pose(rng: np.random.Generator, vertices: np.ndarray, object_diameter: float,
+                sampling: ViewSampling) -> np.ndarray:
+    """``T_model2cam (4, 4)``: random rotation; the bounding-box centre at a random pixel and depth."""
+    rotation = quaternion.to_rotation_matrix(quaternion.random(seed=rng))
+    depth = rng.uniform(*sampling.distance) * object_diameter
+    camera = sampling.camera
+    u = rng.uniform(sampling.border, 1 - sampling.border) * camera.width - 0.5
+    v = rng.uniform(sampling.border, 1 - sampling.border) * camera.height - 0.5
+    centre_cam = camera.unproject(np.array([[u, v]]), np.array([depth]))[0]
+    centre_model = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+    T = np.eye(4)
+    T[:3, :3] = rotation
+    T[:3, 3] = centre_cam - rotation @ centre_model
+    return T
+
+
+def silhouette_box(vertices: np.ndarray, T_model2cam: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """``xyxy`` box (pixel ``i`` covers ``[i, i+1)``) of the projection of ``vertices (N, 3)``."""
+    points = vertices @ T_model2cam[:3, :3].T + T_model2cam[:3, 3]
+    if np.any(points[:, 2] <= 0):
+        raise ValueError("T_model2cam: part of the object is behind the camera")
+    pixels = points[:, :2] / points[:, 2:] @ K[:2, :2].T + K[:2, 2]
+    return np.concatenate([pixels.min(axis=0) + 0.5, pixels.max(axis=0) + 0.5])
+
+
+def random_lighting(rng: np.random.Generator):
+    """Ambient + a directional key light from a random direction towards the scene + a camera fill."""
+    from renderers import Light, Lighting
+
+    direction = rng.normal(size=3)
+    direction[2] = abs(direction[2]) + 0.5  # travelling away from the camera, into the scene
+    ambient = float(rng.uniform(0.25, 0.5))
+    return Lighting(ambient=(ambient, ambient, ambient),
+                    lights=(Light("directional", intensity=float(rng.uniform(1.5, 3.5)), direction=tuple(direction)),
+                            Light("point", intensity=float(rng.uniform(0.3, 1.5)), position=(0.0, 0.0, 0.0))))
+
+
+def random_background(height: int, width: int, rng: np.random.Generator) -> np.ndarray:
+    """``(height, width, 3)`` uint8 clutter: smooth colour noise plus random rectangles and ellipses."""
+    cells = int(rng.integers(2, 9))
+    coarse = rng.integers(0, 256, (cells, cells, 3)).astype(np.uint8)
+    background = cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC)
+    scale = max(height, width)
+    for _ in range(int(rng.integers(3, 12))):
+        colour = tuple(int(value) for value in rng.integers(0, 256, 3))
+        centre = (int(rng.integers(0, width)), int(rng.integers(0, height)))
+        extent = (int(rng.integers(2, scale // 4 + 3)), int(rng.integers(2, scale // 4 + 3)))
+        if rng.random() < 0.5:
+            cv2.ellipse(background, centre, extent, float(rng.uniform(0, 180)), 0, 360, colour, -1)
+        else:
+            cv2.rectangle(background, (centre[0] - extent[0], centre[1] - extent[1]),
+                          (centre[0] + extent[0], centre[1] + extent[1]), colour, -1)
+    noise = rng.normal(0.0, rng.uniform(0, 12), background.shape)
+    return np.clip(background + noise, 0, 255).astype(np.uint8)
+
+
+# ------------------------------------------------------------------------------- rendering
+
+_WORKER: dict = {}
+
+
+def _init_worker(mesh_path: str, mesh_scale: float, width: int, height: int) -> None:
+    """Spawn-worker initializer: loads the mesh and opens one renderer (no TensorFlow here)."""
+    from renderers import Renderer
+
+    mesh = load_mesh(mesh_path, mesh_scale)
+    _WORKER.update(mesh=mesh, renderer=Renderer(width, height), hull=_hull_vertices(np.asarray(mesh.vertices)),
+                   diameter=diameter(np.asarray(mesh.vertices)))
+
+
+def _render_crops(indices: list[int], seed: int, sampling: ViewSampling) -> dict[str, np.ndarray]:
+    mesh, renderer, hull, object_diameter = (_WORKER[key] for key in ("mesh", "renderer", "hull", "diameter"))
+    size = sampling.input_size
+    out = {"rgb": np.zeros((len(indices), size, size, 3), np.uint8), "alpha": np.zeros((len(indices), size, size), np.uint8),
+           "masks": np.zeros((len(indices), size, size), bool), "K": np.zeros((len(indices), 3, 3)),
+           "T_model2cam": np.zeros((len(indices), 4, 4))}
+    for row, index in enumerate(indices):
+        rng = np.random.default_rng([seed, index])
+        T = sample_pose(rng, hull, object_diameter, sampling)
+        window = square_window(silhouette_box(hull, T, sampling.camera.K), sampling.margin)
+        K_crop = crop_intrinsics(sampling.camera.K, window, size)
+        rendered = renderer.render(K_crop, [(mesh, T)], lighting=random_lighting(rng))
+        out["rgb"][row], out["alpha"][row], out["masks"][row] = rendered.rgb, rendered.alpha, rendered.masks[0]
+        out["K"][row], out["T_model2cam"][row] = K_crop, T
+    return out
+
+
+def _render_full(indices: list[int], seed: int, sampling: ViewSampling) -> dict[str, np.ndarray]:
+    mesh, renderer, hull, object_diameter = (_WORKER[key] for key in ("mesh", "renderer", "hull", "diameter"))
+    camera = sampling.camera
+    images, boxes, poses, masks = [], [], [], []
+    for index in indices:
+        rng = np.random.default_rng([seed, index])
+        T = sample_pose(rng, hull, object_diameter, sampling)
+        rendered = renderer.render(camera.K, [(mesh, T)], lighting=random_lighting(rng))
+        mask = rendered.masks[0]
+        if not mask.any():
+            raise ValueError(f"view {index}: the object is not visible (empty mask)")
+        rows, columns = np.nonzero(mask)
+        background = random_background(camera.height, camera.width, rng)
+        images.append(image_backend.alpha_blend(rendered.rgb, rendered.alpha, background))
+        boxes.append([columns.min(), rows.min(), columns.max() + 1, rows.max() + 1])
+        poses.append(T)
+        masks.append(mask)
+    return {"images": np.stack(images), "boxes": np.asarray(boxes, float), "T_model2cam": np.stack(poses),
+            "masks": np.stack(masks)}
+
+
+def _run_job(job: tuple) -> dict[str, np.ndarray]:
+    kind, indices, seed, sampling = job
+    return (_render_crops if kind == "crops" else _render_full)(indices, seed, sampling)
+
+
+def _render(kind: str, mesh_path: Path, mesh_scale: float, count: int, seed: int, sampling: ViewSampling,
+            workers: int, chunk: int, progress: bool, description: str) -> dict[str, np.ndarray]:
+    from tqdm.auto import tqdm
+
+    if count <= 0:
+        raise ValueError(f"count: expected a positive number of views, got {count}")
+    mesh_path = Path(mesh_path)
+    if not mesh_path.is_file():
+        raise ValueError(f"{mesh_path}: mesh file not found")
+    width, height = ((sampling.input_size, sampling.input_size) if kind == "crops"
+                     else (sampling.camera.width, sampling.camera.height))
+    jobs = [(kind, list(range(start, min(start + chunk, count))), seed, sampling) for start in range(0, count, chunk)]
+    parts: list[dict[str, np.ndarray]] = []
+    bar = tqdm(total=count, desc=description, disable=not progress, dynamic_ncols=True)
+    if workers <= 0:
+        _init_worker(str(mesh_path), mesh_scale, width, height)
+        try:
+            for job in jobs:
+                parts.append(_run_job(job))
+                bar.update(len(job[1]))
+        finally:
+            _WORKER.pop("renderer").close()
+    else:
+        context = multiprocessing.get_context("spawn")
+        with context.Pool(min(workers, len(jobs)), initializer=_init_worker,
+                          initargs=(str(mesh_path), mesh_scale, width, height)) as pool:
+            for job, part in zip(jobs, pool.imap(_run_job, jobs)):
+                parts.append(part)
+                bar.update(len(job[1]))
+    bar.close()
+    return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
+
+
+def render_views(mesh_path: str | Path, count: int, seed: int, sampling: ViewSampling = ViewSampling(),
+                 mesh_scale: float = 1.0, workers: int = 2, chunk: int = 64, progress: bool = True) -> ViewSet:
+    """Renders ``count`` crop views (see module docstring); ``mesh_scale`` converts the file to metres."""
+    rendered = _render("crops", Path(mesh_path), mesh_scale, count, seed, sampling, workers, chunk, progress,
+                       "render views")
+    try:
+        return ViewSet(**rendered)
+    except ValueError as error:
+        raise ValueError(f"{mesh_path}: {error}") from error
+
+
+def render_test_images(mesh_path: str | Path, count: int, seed: int, sampling: ViewSampling = ViewSampling(),
+                       mesh_scale: float = 1.0, workers: int = 2, chunk: int = 25,
+                       progress: bool = True) -> TestImages:
+    """Renders ``count`` whole camera images over random backgrounds with their GT boxes and poses."""
+    return TestImages(**_render("full", Path(mesh_path), mesh_scale, count, seed, sampling, workers, chunk,
+                                progress, "render test images"))
+
+
+# ------------------------------------------------------------------------------- batches
+
+@dataclass(frozen=True)
+class Augmentation:
+    """Batch-time augmentation strengths.
+
+    Attributes:
+        crop_scale: crop zoom factor drawn from ``[1 - crop_scale, 1 + crop_scale]``.
+        crop_shift: crop shift drawn from ``±crop_shift`` × crop side.
+        colour: apply brightness/contrast/saturation/hue jitter and noise.
+        background: composite over random backgrounds (else black).
+    """
+
+    crop_scale: float = 0.08
+    crop_shift: float = 0.05
+    colour: bool = True
+    background: bool = True
+
+
+def _jitter_crop(views: ViewSet, index: int, rng: np.random.Generator, augmentation: Augmentation):
+    size = views.rgb.shape[1]
+    scale = rng.uniform(1 - augmentation.crop_scale, 1 + augmentation.crop_scale)
+    shift = rng.uniform(-augmentation.crop_shift, augmentation.crop_shift, 2) * size
+    centre = (size - 1) / 2.0
+    A = np.array([[scale, 0.0, (1 - scale) * centre + shift[0]], [0.0, scale, (1 - scale) * centre + shift[1]],
+                  [0.0, 0.0, 1.0]])
+    rgb = cv2.warpAffine(views.rgb[index], A[:2], (size, size), flags=cv2.INTER_LINEAR)
+    alpha = cv2.warpAffine(views.alpha[index], A[:2], (size, size), flags=cv2.INTER_LINEAR)
+    mask = cv2.warpAffine(views.masks[index].astype(np.uint8), A[:2], (size, size), flags=cv2.INTER_NEAREST) > 0
+    return rgb, alpha, mask, A @ views.K[index]
+
+
+def _colour_jitter(picture: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    picture = image_backend.random_brightness(picture, rng, max_delta=30.0)
+    picture = image_backend.random_contrast(picture, rng, 0.7, 1.3)
+    picture = image_backend.random_saturation(picture, rng, 0.7, 1.3)
+    picture = image_backend.random_hue(picture, rng, 8.0)
+    if rng.random() < 0.3:
+        picture = image_backend.random_gaussian_blur(picture, rng, (3,))
+    return image_backend.random_image_noise(picture, rng, 6.0)
+
+
+def augmented_view(views: ViewSet, index: int, rng: np.random.Generator,
+                   augmentation: Augmentation = Augmentation()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One augmented crop: ``image (S, S, 3) uint8``, ``mask (S, S) bool`` and its ``K (3, 3)``."""
+    rgb, alpha, mask, K = _jitter_crop(views, index, rng, augmentation)
+    size = rgb.shape[0]
+    background = random_background(size, size, rng) if augmentation.background else np.zeros_like(rgb)
+    picture = image_backend.alpha_blend(rgb, alpha, background)
+    if augmentation.colour:
+        picture = _colour_jitter(picture, rng)
+    return picture, mask, K
+
+
+def downsample_masks(masks: np.ndarray, factor: int) -> np.ndarray:
+    """``(B, S, S)`` bool masks to ``(B, S/f, S/f)`` float32 occupancy fractions (area average)."""
+    batch, height, width = masks.shape
+    if height % factor or width % factor:
+        raise ValueError(f"masks: expected sides divisible by {factor}, got {masks.shape}")
+    blocks = masks.reshape(batch, height // factor, factor, width // factor, factor)
+    return blocks.mean(axis=(2, 4), dtype=np.float32)
+
+
+def training_batch(views: ViewSet, rng: np.random.Generator, pairs: int, downsample: int,
+                   augmentation: Augmentation = Augmentation()) -> dict[str, np.ndarray]:
+    """A batch of ``pairs`` view pairs ``(a, b)`` of the object, views A first then views B.
+
+    Returns:
+        ``images (2P, S, S, 3) float32`` (0..255), ``masks (2P, S/d, S/d) float32``, ``K (2P, 3, 3)``
+        and ``T_model2cam (2P, 4, 4)`` (float32).
+    """
+    if len(views) < 2:
+        raise ValueError(f"views: expected at least 2 views to form pairs, got {len(views)}")
+    first = rng.integers(0, len(views), pairs)
+    second = (first + rng.integers(1, len(views), pairs)) % len(views)
+    order = np.concatenate([first, second])
+    images, masks, intrinsics = [], [], []
+    for index in order:
+        picture, mask, K = augmented_view(views, int(index), rng, augmentation)
+        images.append(picture)
+        masks.append(mask)
+        intrinsics.append(K)
+    return {"images": np.stack(images).astype(np.float32),
+            "masks": downsample_masks(np.stack(masks), downsample),
+            "K": np.stack(intrinsics).astype(np.float32),
+            "T_model2cam": views.T_model2cam[order].astype(np.float32)}

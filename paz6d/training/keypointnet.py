@@ -1,0 +1,409 @@
+"""``paz6d train keypointnet``: KeypointNet keypoints for one object, trained with the shared Trainer.
+
+Two modes share the data, the network, the PnP pipeline and the evaluation:
+
+- ``discovery`` (Suwajanakorn et al. 2018): pairs of views with known relative pose; the network
+  finds ``N`` ordered keypoints by itself (multi-view consistency, relative pose, separation,
+  silhouette and variance losses). Their 3D positions in the object frame are then lifted from
+  training views with known poses (median over views).
+- ``supervised``: ``N`` keypoints chosen by farthest-point sampling on the mesh surface are
+  projected into every view; the network learns them as heatmaps (cross-entropy to a Gaussian)
+  plus their coordinates and depths. The 3D keypoints are known exactly.
+
+The run directory is what :class:`paz6d.pipelines.keypoint_pose.KeypointPose6D` loads
+(``config.json``, ``model.keras``, ``keypoints.json``), plus the Trainer's checkpoints, ``log.csv``,
+``tensorboard/`` and ``samples/``, the rendered views (``views_train.npz``, ``views_val.npz``) and
+``metrics.json`` (keypoint consistency on held-out views). Re-running the same command resumes.
+
+This module is cheap to import: TensorFlow and the renderer are loaded inside :func:`run`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+CONFIGS: dict[str, dict] = {
+    # Demo budget: about 10 minutes of training on 2 CPU cores.
+    "quick": {"num_keypoints": 10, "input_size": 128, "filters": 32, "downsample": 4,
+              "dilations": (1, 2, 4, 8, 1, 2, 4), "views": 1500, "validation_views": 100, "lift_views": 200,
+              "steps": 1200, "pairs": 8, "learning_rate": 2e-3, "checkpoint_every": 200, "sample_every": 200},
+    # Paper-sized network and schedule, for a GPU or a long CPU run.
+    "full": {"num_keypoints": 10, "input_size": 128, "filters": 64, "downsample": 2,
+             "dilations": (1, 1, 2, 4, 8, 16, 1, 2, 4, 8, 16, 1), "views": 20000, "validation_views": 200,
+             "lift_views": 1000, "steps": 60000, "pairs": 16, "learning_rate": 1e-3, "checkpoint_every": 2000,
+             "sample_every": 2000},
+}
+MODES = ("discovery", "supervised")
+#: Discovery loss weights (coordinates normalised to [-1, 1] as in the paper, 3D in object diameters).
+DISCOVERY_WEIGHTS = {"consistency": 1.0, "pose": 0.2, "separation": 1.0, "silhouette": 1.0, "variance": 0.1}
+SEPARATION_DELTA = 0.1  # object diameters
+#: Supervised loss weights (heatmap cross-entropy, coordinates in [-1, 1] units, depth code).
+SUPERVISED_WEIGHTS = {"heatmap": 1.0, "coordinates": 2.0, "depth": 1.0}
+
+
+@dataclass
+class KeypointTraining:
+    """Everything a KeypointNet run needs (written to ``run_dir/config.json``)."""
+
+    out: Path
+    mesh_path: Path
+    mesh_scale: float = 1.0
+    config: str = "quick"
+    mode: str = "supervised"
+    seed: int = 0
+    workers: int = 2
+    steps: int | None = None
+    progress: bool = True
+    overrides: dict = field(default_factory=dict)
+
+    def settings(self) -> dict:
+        if self.config not in CONFIGS:
+            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
+        if self.mode not in MODES:
+            raise ValueError(f"mode: expected one of {MODES}, got {self.mode!r}")
+        settings = {**CONFIGS[self.config], **self.overrides}
+        if self.steps is not None:
+            if self.steps <= 0:
+                raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
+            settings["steps"] = int(self.steps)
+        return settings
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Adds the ``paz6d train keypointnet`` arguments."""
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--mesh", type=Path, help="object mesh (PLY/OBJ/GLB); views are rendered on the fly")
+    source.add_argument("--dataset", type=Path, help="BOP dataset folder: views are cut from its images")
+    parser.add_argument("--out", type=Path, required=True, help="run directory (re-run the command to resume)")
+    parser.add_argument("--config", choices=sorted(CONFIGS), default="quick", help="model/schedule size")
+    parser.add_argument("--mode", choices=MODES, default="supervised",
+                        help="discovery (paper, unsupervised) or supervised (farthest-point keypoints)")
+    parser.add_argument("--steps", type=int, default=None, help="override the number of training steps")
+    parser.add_argument("--seed", type=int, default=0, help="seed of every random choice")
+    parser.add_argument("--mesh-scale", type=float, default=None,
+                        help="factor from mesh file units to metres (default 1; 0.001 for BOP millimetre meshes; "
+                             "with --dataset the BOP default 0.001)")
+    parser.add_argument("--object-id", type=int, default=None, help="with --dataset: BOP object id (default: first)")
+    parser.add_argument("--split", default=None, help="with --dataset: split folder (default: train_pbr, else train)")
+    parser.add_argument("--workers", type=int, default=2, help="rendering worker processes (0 = in process)")
+    parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point of ``paz6d train keypointnet``."""
+    if args.dataset is not None:
+        from paz6d.training.keypoint_dataset import bop_object_views
+
+        views, mesh_path, scale = bop_object_views(args.dataset, args.object_id, args.split,
+                                                   CONFIGS[args.config]["input_size"],
+                                                   1e-3 if args.mesh_scale is None else args.mesh_scale)
+        job = KeypointTraining(args.out, mesh_path, scale, args.config, args.mode, args.seed, args.workers,
+                               args.steps, not args.no_progress)
+        summary = train_keypointnet(job, views=views)
+    else:
+        job = KeypointTraining(args.out, args.mesh, 1.0 if args.mesh_scale is None else args.mesh_scale, args.config,
+                               args.mode, args.seed, args.workers, args.steps, not args.no_progress)
+        summary = train_keypointnet(job)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+# ------------------------------------------------------------------------------- run directory
+
+def _write_json(path: Path, data: dict) -> None:
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(json.dumps(data, indent=2))
+    os.replace(temporary, path)
+
+
+def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling) -> dict:
+    """Writes ``config.json`` or checks that an existing one describes the same run."""
+    from paz6d.pipelines.keypoint_pose import CONFIG_FILE
+
+    config = {"mode": job.mode, "config": job.config, "seed": job.seed, "mesh_path": str(Path(job.mesh_path).resolve()),
+              "mesh_scale": job.mesh_scale, "diameter": object_diameter,
+              "input_size": settings["input_size"], "margin": sampling.margin, "downsample": settings["downsample"],
+              "settings": {key: list(value) if isinstance(value, tuple) else value for key, value in settings.items()},
+              "sampling": sampling.to_dict()}
+    job.out.mkdir(parents=True, exist_ok=True)
+    path = job.out / CONFIG_FILE
+    if path.exists():
+        previous = json.loads(path.read_text())
+        for key in ("mode", "config", "seed", "mesh_path", "mesh_scale", "input_size", "downsample"):
+            if previous.get(key) != config[key]:
+                raise ValueError(f"{path}: this run directory holds a different run ({key}={previous.get(key)!r}, "
+                                 f"now {config[key]!r}); choose another --out")
+        if previous["settings"].get("steps") != config["settings"]["steps"]:
+            previous["settings"]["steps"] = config["settings"]["steps"]  # extending a run is allowed
+            _write_json(path, previous)
+        return previous
+    _write_json(path, config)
+    return config
+
+
+def _cached_views(path: Path, render):
+    from paz6d.training.keypoint_views import ViewSet
+
+    if path.exists():
+        return ViewSet.load(path)
+    views = render()
+    views.save(path)
+    return views
+
+
+# ------------------------------------------------------------------------------- losses
+
+def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_model: np.ndarray | None):
+    """``loss_fn(model, batch) -> dict`` for the shared Trainer (TensorFlow imported here)."""
+    from paz6d.models import keypointnet as kp
+
+    tf = kp.tf
+    size = float(settings["input_size"])
+    stride = int(settings["downsample"])
+    grid = kp.cell_centres(int(size) // stride, int(size) // stride, stride)
+    to_unit = tf.constant([[2.0 / size, 0.0, 1.0 / size - 1.0], [0.0, 2.0 / size, 1.0 / size - 1.0], [0.0, 0.0, 1.0]])
+
+    def normalised(uv):
+        return uv * (2.0 / size) + (1.0 / size - 1.0)  # pixels -> [-1, 1], as paz6d.backend.keypoints.normalize
+
+    if mode == "discovery":
+        grid_unit = normalised(grid)
+
+        def loss_fn(model, batch):
+            outputs = model(batch["images"], training=True)
+            K, T = batch["K"], batch["T_model2cam"]
+            pairs = tf.shape(K)[0] // 2
+            depth = kp.depth_to_metres(outputs["depth"], object_diameter, K, int(size))
+            uv_unit = normalised(outputs["uv"])
+            K_unit = tf.einsum("ij,bjk->bik", to_unit, K)
+            T_a2b = tf.einsum("bij,bjk->bik", T[pairs:], kp.invert_transforms(T[:pairs]))
+            consistency = kp.consistency_loss(uv_unit[:pairs], depth[:pairs], uv_unit[pairs:], depth[pairs:],
+                                              K_unit[:pairs], K_unit[pairs:], T_a2b)
+            points = kp.unproject(outputs["uv"], depth, K) / object_diameter
+            pose = kp.relative_pose_loss(points[:pairs], points[pairs:], T_a2b[:, :3, :3])
+            separation = kp.separation_loss(points, SEPARATION_DELTA)
+            silhouette = kp.silhouette_loss(outputs["probabilities"], batch["masks"])
+            variance = kp.variance_loss(outputs["probabilities"], uv_unit, grid_unit)
+            terms = {"consistency": consistency, "pose": pose, "separation": separation, "silhouette": silhouette,
+                     "variance": variance}
+            loss = tf.add_n([DISCOVERY_WEIGHTS[name] * value for name, value in terms.items()])
+            return {"loss": loss, **terms}
+
+        return loss_fn
+
+    points = tf.constant(keypoints_model, tf.float32)
+    sigma = float(stride)  # one feature cell
+
+    def pixel_error(uv, target_uv):
+        return tf.reduce_mean(tf.norm(uv - target_uv, axis=-1))
+
+    def supervised_loss(model, batch):
+        outputs = model(batch["images"], training=True)
+        K, T = batch["K"], batch["T_model2cam"]
+        points_cam = tf.einsum("bij,nj->bni", T[:, :3, :3], points) + T[:, None, :3, 3]
+        target_uv = kp.project(points_cam, K)
+        target_code = points_cam[..., 2] / (object_diameter * K[:, 0:1, 0] / size)
+        heatmap = kp.heatmap_loss(outputs["probabilities"], kp.gaussian_heatmaps(target_uv, grid, sigma))
+        coordinates = kp.coordinate_loss(normalised(outputs["uv"]), normalised(target_uv))
+        depth = tf.reduce_mean(tf.abs(outputs["depth"] - target_code))
+        terms = {"heatmap": heatmap, "coordinates": coordinates, "depth": depth}
+        loss = tf.add_n([SUPERVISED_WEIGHTS[name] * value for name, value in terms.items()])
+        return {"loss": loss, "pixel_error": pixel_error(outputs["uv"], target_uv), **terms}
+
+    return supervised_loss
+
+
+# ------------------------------------------------------------------------------- evaluation on crops
+
+def fixed_crops(views, seed: int, count: int | None = None):
+    """Views composited over seeded random backgrounds without crop/colour jitter: ``images (V, S, S, 3)
+    uint8``, ``K (V, 3, 3)``, ``T_model2cam (V, 4, 4)``."""
+    from paz6d.training.keypoint_views import Augmentation, augmented_view
+
+    count = len(views) if count is None else min(count, len(views))
+    plain = Augmentation(crop_scale=0.0, crop_shift=0.0, colour=False, background=True)
+    images, intrinsics = [], []
+    for index in range(count):
+        picture, _, K = augmented_view(views, index, np.random.default_rng([seed, index]), plain)
+        images.append(picture)
+        intrinsics.append(K)
+    return np.stack(images), np.stack(intrinsics), views.T_model2cam[:count]
+
+
+def predict_crops(model, images: np.ndarray, batch_size: int = 32) -> dict[str, np.ndarray]:
+    """Runs the model over ``(V, S, S, 3)`` crops in batches; numpy outputs."""
+    parts: dict[str, list] = {}
+    for start in range(0, len(images), batch_size):
+        outputs = model(images[start:start + batch_size].astype(np.float32), training=False)
+        for name, value in outputs.items():
+            parts.setdefault(name, []).append(np.asarray(value))
+    return {name: np.concatenate(values) for name, values in parts.items()}
+
+
+def cross_view_errors(uv, depth, K, T_model2cam) -> np.ndarray:
+    """Re-projection consistency ``(P, N)`` in pixels of consecutive view pairs ``(2i, 2i+1)``.
+
+    Keypoint ``n`` of view A, lifted with its predicted depth (metres), moved by the true relative
+    pose and projected into view B, against keypoint ``n`` predicted in view B (and B into A; the
+    two distances are averaged).
+    """
+    from paz6d.backend.camera import project_points, unproject
+    from paz6d.backend.transform import apply, compose, invert
+
+    pairs = len(uv) // 2
+    errors = np.zeros((pairs, uv.shape[1]))
+    for pair in range(pairs):
+        a, b = 2 * pair, 2 * pair + 1
+        T_a2b = compose(T_model2cam[b], invert(T_model2cam[a]))
+        a_in_b = project_points(apply(T_a2b, unproject(uv[a], depth[a], K[a])), K[b])
+        b_in_a = project_points(apply(invert(T_a2b), unproject(uv[b], depth[b], K[b])), K[a])
+        errors[pair] = 0.5 * (np.linalg.norm(a_in_b - uv[b], axis=1) + np.linalg.norm(b_in_a - uv[a], axis=1))
+    return errors
+
+
+def model_reprojection_errors(uv, K, T_model2cam, points_model, usable) -> np.ndarray:
+    """``(V, N_usable)`` pixel distances between predicted keypoints and the 3D keypoints projected
+    with the true pose."""
+    from paz6d.backend.camera import transform_and_project
+
+    if not np.any(usable):
+        return np.zeros((len(uv), 0))
+    return np.stack([np.linalg.norm(transform_and_project(points_model[usable], T_model2cam[v], K[v])
+                                    - uv[v][usable], axis=1) for v in range(len(uv))])
+
+
+# ------------------------------------------------------------------------------- samples
+
+def _sample_drawer(images: np.ndarray, targets: np.ndarray | None):
+    """``sample_callback(model, step, path)`` drawing predicted keypoints (filled) and targets (hollow)."""
+
+    def draw(model, step, path):
+        from paz6d.backend.draw import draw_keypoints, image_grid
+        from paz6d.backend.image import save_image
+
+        uv = np.asarray(model(images.astype(np.float32), training=False)["uv"])
+        tiles = []
+        for index, picture in enumerate(images.astype(np.uint8)):
+            if targets is not None:
+                picture = draw_keypoints(picture, targets[index], visible=[False] * len(targets[index]), radius=4)
+            tiles.append(draw_keypoints(picture, uv[index], radius=3))
+        save_image(path, image_grid(tiles, columns=4))
+
+    return draw
+
+
+# ------------------------------------------------------------------------------- training
+
+def supervised_keypoints(mesh, count: int, seed: int) -> np.ndarray:
+    """``(count, 3)`` farthest-point samples (metres) of 5000 points drawn on the mesh surface."""
+    from paz6d.backend.farthest_points import farthest_point_sampling
+    from paz6d.backend.mesh import sample_points
+
+    surface = sample_points(mesh, 5000, seed)
+    return surface[farthest_point_sampling(surface, count)]
+
+
+def train_keypointnet(job: KeypointTraining, views=None) -> dict:
+    """Trains (or resumes) one KeypointNet run and writes everything ``KeypointPose6D`` needs.
+
+    Args:
+        job: what to train and where.
+        views: optional pre-built :class:`~paz6d.training.keypoint_views.ViewSet` (e.g. from a BOP set);
+            by default views of ``job.mesh_path`` are rendered in worker processes.
+    Returns:
+        A summary dict (also written to ``job.out/metrics.json``): training time, final losses,
+        keypoint consistency (px) on held-out views.
+    """
+    from paz6d.backend.tensorflow_guard import import_tensorflow
+
+    import_tensorflow()  # before any renderer in this process (workers=0)
+    from paz6d.backend.mesh import diameter, load_mesh
+    from paz6d.pipelines.keypoint_pose import (MODEL_FILE, keypoint_spread, lift_keypoints, read_keypoints,
+                                               write_keypoints)
+    from paz6d.training.keypoint_views import ViewSampling, render_views, training_batch
+
+    settings = job.settings()
+    started = time.perf_counter()
+    mesh = load_mesh(job.mesh_path, job.mesh_scale)
+    object_diameter = diameter(np.asarray(mesh.vertices))
+    sampling = ViewSampling(input_size=settings["input_size"])
+    _prepare_run_dir(job, settings, object_diameter, sampling)
+    out = job.out
+
+    def render(count, seed):
+        return lambda: render_views(job.mesh_path, count, seed, sampling, job.mesh_scale, job.workers,
+                                    progress=job.progress)
+
+    train_views = views if views is not None else _cached_views(out / "views_train.npz", render(settings["views"], job.seed))
+    validation_views = _cached_views(out / "views_val.npz", render(settings["validation_views"], job.seed + 10_000))
+    render_seconds = time.perf_counter() - started
+
+    keypoints_model = None
+    if job.mode == "supervised":
+        keypoints_model = supervised_keypoints(mesh, settings["num_keypoints"], job.seed)
+        write_keypoints(out, keypoints_model, np.ones(len(keypoints_model), bool), "farthest-point")
+
+    from paz6d.models import keypointnet as kp
+    from paz6d.training.prefetch import PrefetchedBatches
+    from paz6d.training.trainer import Trainer
+
+    keras = kp.keras
+    keras.utils.set_random_seed(job.seed)
+    model = kp.build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
+                                 settings["downsample"], tuple(settings["dilations"]))
+    schedule = keras.optimizers.schedules.CosineDecay(settings["learning_rate"], settings["steps"], alpha=0.05)
+    optimizer = keras.optimizers.Adam(schedule, global_clipnorm=5.0)
+    pairs, downsample = settings["pairs"], settings["downsample"]
+
+    def make_batch(step: int):
+        return training_batch(train_views, np.random.default_rng([job.seed, 1, step]), pairs, downsample)
+
+    sample_images, sample_K, sample_T = fixed_crops(validation_views, job.seed, 8)
+    sample_targets = None
+    if keypoints_model is not None:
+        from paz6d.backend.camera import transform_and_project
+
+        sample_targets = np.stack([transform_and_project(keypoints_model, T, K) for T, K in zip(sample_T, sample_K)])
+    with PrefetchedBatches(make_batch) as data:
+        trainer = Trainer(model, optimizer, _loss_function(job.mode, settings, object_diameter, keypoints_model),
+                          data, out, settings["steps"], checkpoint_every=settings["checkpoint_every"], log_every=10,
+                          sample_every=settings["sample_every"],
+                          sample_callback=_sample_drawer(sample_images, sample_targets), progress=job.progress)
+        training = trainer.fit()
+    kp.save_keypointnet(model, out / MODEL_FILE)
+    train_seconds = time.perf_counter() - started - render_seconds
+
+    if job.mode == "discovery":
+        images, K, T = fixed_crops(train_views, job.seed + 1, settings["lift_views"])
+        outputs = predict_crops(model, images)
+        depth = kp.depth_to_metres(outputs["depth"], object_diameter, K, settings["input_size"]).numpy()
+        points, spread = lift_keypoints(outputs["uv"], depth, K, T)
+        write_keypoints(out, points, spread <= 0.1 * object_diameter, "lifted-median", spread)
+    points_model, usable = read_keypoints(out)
+
+    images, K, T = fixed_crops(validation_views, job.seed + 2)
+    outputs = predict_crops(model, images)
+    depth = np.asarray(kp.depth_to_metres(outputs["depth"], object_diameter, K, settings["input_size"]))
+    consistency = cross_view_errors(outputs["uv"], depth, K, T)
+    reprojection = model_reprojection_errors(outputs["uv"], K, T, points_model, usable)
+    spread = keypoint_spread(outputs["probabilities"], outputs["uv"], downsample)
+    summary = {"mode": job.mode, "config": job.config, "steps": training.final_step,
+               "train_seconds": round(train_seconds, 1), "render_seconds": round(render_seconds, 1),
+               "final_losses": training.metrics,
+               "loader_samples_per_second": round(training.loader_samples_per_second, 1),
+               "model_samples_per_second": round(training.model_samples_per_second, 1),
+               "consistency_px_median": float(np.median(consistency)),
+               "consistency_px_mean": float(np.mean(consistency)),
+               "reprojection_px_median": float(np.median(reprojection)) if reprojection.size else None,
+               "spread_px_median": float(np.median(spread)),
+               "usable_keypoints": int(usable.sum()), "validation_views": len(images),
+               "input_size": settings["input_size"]}
+    _write_json(out / "metrics.json", summary)
+    return summary

@@ -1,0 +1,238 @@
+"""Keypoint-based 6D pose: crop geometry, lifting, farthest points, drawing, KeypointPose6D + PnP."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from paz6d.abstract import Box2D, Keypoints2D, Pose6D
+from paz6d.backend.camera import Camera, transform_and_project
+from paz6d.backend.draw import draw_box, draw_cube, draw_keypoints, image_grid, keypoint_colors
+from paz6d.backend.farthest_points import farthest_point_sampling
+from paz6d.backend.pnp import PnPError
+from paz6d.backend.square_crop import crop_intrinsics, crop_square, crop_transform, square_window, to_full_image
+from paz6d.pipelines.keypoint_pose import keypoint_spread, lift_keypoints, read_keypoints, write_keypoints
+
+K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
+
+
+def _pose(rotation_vector, translation) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(rotation_vector).as_matrix()
+    T[:3, 3] = translation
+    return T
+
+
+# ----------------------------------------------------------------------------- square crops
+
+def test_square_window_centres_and_scales_the_box():
+    assert square_window((10, 20, 30, 60), margin=1.0) == (0, 20, 40)
+    assert square_window((100, 100, 150, 120), margin=1.2) == (95, 80, 60)
+    with pytest.raises(ValueError, match="box"):
+        square_window((10, 10, 10, 20))
+    with pytest.raises(ValueError, match="margin"):
+        square_window((0, 0, 5, 5), margin=0)
+
+
+@pytest.mark.parametrize("window, size", [((40, 30, 64), 128), ((40, 30, 80), 64), ((37, 51, 70), 64),
+                                          ((-20, -10, 64), 64)])
+def test_crop_square_samples_where_crop_transform_says(window, size):
+    # resampling reproduces a linear image exactly: crop pixel (u', v') must hold the value of the
+    # full-image coordinate to_full_image((u', v'))
+    height, width = 240, 320
+    v, u = np.mgrid[0:height, 0:width].astype(np.float32)
+    image = (0.5 * u + 0.25 * v + 10.0).astype(np.float32)
+    crop = crop_square(image, window, size)
+    rows, columns = np.mgrid[0:size, 0:size]
+    full = to_full_image(np.stack([columns, rows], -1).reshape(-1, 2).astype(float), window, size)
+    expected = (0.5 * full[:, 0] + 0.25 * full[:, 1] + 10.0).reshape(size, size)
+    scale = size / window[2]
+    inside = ((full[:, 0] > 1 / scale + 1) & (full[:, 1] > 1 / scale + 1)).reshape(size, size)
+    inside &= (np.stack([columns, rows], -1).min(-1) >= 1) & (np.stack([columns, rows], -1).max(-1) <= size - 2)
+    # OpenCV's bilinear warp rounds sample positions to 1/32 px: slope (0.5 + 0.25) / 32 < 0.025
+    np.testing.assert_allclose(crop[inside], expected[inside], atol=0.025)
+
+
+def test_crop_intrinsics_equal_projection_then_crop_transform():
+    rng = np.random.default_rng(0)
+    points = rng.uniform([-0.2, -0.2, 0.8], [0.2, 0.2, 1.5], (20, 3))
+    window = (200, 150, 180)
+    pixels = points[:, :2] / points[:, 2:] @ K[:2, :2].T + K[:2, 2]
+    A = crop_transform(window, 128)
+    expected = pixels @ A[:2, :2].T + A[:2, 2]
+    K_crop = crop_intrinsics(K, window, 128)
+    got = points[:, :2] / points[:, 2:] @ K_crop[:2, :2].T + K_crop[:2, 2]
+    np.testing.assert_allclose(got, expected, atol=1e-9)
+    np.testing.assert_allclose(to_full_image(expected, window, 128), pixels, atol=1e-9)
+
+
+def test_crop_square_rejects_a_window_off_the_image():
+    with pytest.raises(ValueError, match="window"):
+        crop_square(np.zeros((10, 10, 3), np.uint8), (50, 50, 8), 8)
+
+
+# ----------------------------------------------------------------------------- lifting
+
+def _views(points_model, count, seed=0):
+    rng = np.random.default_rng(seed)
+    poses = np.stack([_pose(rng.normal(size=3), [rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1), 0.6])
+                      for _ in range(count)])
+    uv = np.stack([transform_and_project(points_model, T, K) for T in poses])
+    depth = np.stack([(points_model @ T[:3, :3].T + T[:3, 3])[:, 2] for T in poses])
+    return uv, depth, np.repeat(K[None], count, 0), poses
+
+
+def test_lift_keypoints_recovers_points_and_ignores_outlier_views():
+    points_model = np.random.default_rng(1).uniform(-0.05, 0.05, (6, 3))
+    uv, depth, intrinsics, poses = _views(points_model, 9)
+    lifted, spread = lift_keypoints(uv, depth, intrinsics, poses)
+    np.testing.assert_allclose(lifted, points_model, atol=1e-9)
+    np.testing.assert_allclose(spread, 0.0, atol=1e-9)
+    uv[:3] += 40.0  # three of nine views are wrong by 40 px: the median ignores them
+    lifted, spread = lift_keypoints(uv, depth, intrinsics, poses)
+    np.testing.assert_allclose(lifted, points_model, atol=1e-9)
+    with pytest.raises(ValueError, match="uv/depth"):
+        lift_keypoints(uv, depth[:, :2], intrinsics, poses)
+
+
+def test_keypoint_spread_is_the_standard_deviation():
+    probabilities = np.zeros((1, 1, 3, 1))
+    probabilities[0, 0, [0, 2], 0] = 0.5  # stride 2: cells at u = 0.5 and 4.5, mean 2.5 -> std 2
+    assert keypoint_spread(probabilities, np.array([[[2.5, 0.5]]]), 2)[0, 0] == pytest.approx(2.0)
+
+
+def test_keypoints_file_round_trip_and_errors(tmp_path):
+    points = np.arange(12.0).reshape(4, 3) / 100
+    write_keypoints(tmp_path, points, [True, True, False, True], "farthest-point")
+    read_points, usable = read_keypoints(tmp_path)
+    np.testing.assert_allclose(read_points, points)
+    assert usable.tolist() == [True, True, False, True]
+    (tmp_path / "keypoints.json").write_text(json.dumps({"points_model": [[0, 0]], "usable": [True]}))
+    with pytest.raises(ValueError, match="points_model"):
+        read_keypoints(tmp_path)
+    with pytest.raises(ValueError, match="not found"):
+        read_keypoints(tmp_path / "missing")
+
+
+# ----------------------------------------------------------------------------- farthest points
+
+def test_farthest_point_sampling_matches_brute_force_greedy():
+    points = np.random.default_rng(2).normal(size=(300, 3))
+    chosen = farthest_point_sampling(points, 8)
+    reference = [int(np.argmax(np.sum((points - points.mean(0)) ** 2, 1)))]
+    for _ in range(7):
+        distances = np.min(np.linalg.norm(points[:, None] - points[reference][None], axis=-1), axis=1)
+        reference.append(int(np.argmax(distances)))
+    assert chosen.tolist() == reference
+    cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    filled = np.concatenate([cube, np.random.default_rng(0).uniform(0.2, 0.8, (100, 3))])
+    assert sorted(farthest_point_sampling(filled, 8).tolist()) == list(range(8))  # the 8 corners
+    with pytest.raises(ValueError, match="count"):
+        farthest_point_sampling(points, 301)
+
+
+# ----------------------------------------------------------------------------- drawing
+
+def test_keypoint_colours_are_stable_and_distinct():
+    np.testing.assert_array_equal(keypoint_colors(5), keypoint_colors(30)[:5])
+    assert len({tuple(colour) for colour in keypoint_colors(30)}) == 30
+
+
+def test_draw_keypoints_box_cube_and_grid():
+    canvas = np.zeros((40, 60, 3), np.uint8)
+    drawn = draw_keypoints(canvas, [[10, 12], [40.4, 30.6]], radius=3)
+    assert canvas.sum() == 0  # input untouched
+    np.testing.assert_array_equal(drawn[12, 10], keypoint_colors(2)[0])
+    np.testing.assert_array_equal(drawn[31, 40], keypoint_colors(2)[1])
+    boxed = draw_box(canvas, (5, 5, 20, 15), color=(255, 0, 0))
+    assert boxed[5, 10, 0] > 0 and boxed[14, 10, 0] > 0 and boxed[10, 10, 0] == 0
+    corners = np.array([[x, y] for x in (5, 50) for y in (5, 35) for _ in (0, 1)], float)
+    assert draw_cube(canvas, corners).sum() > 0
+    grid = image_grid([canvas, drawn, boxed], columns=2, padding=1)
+    assert grid.shape == (2 * 40 + 3, 2 * 60 + 3, 3)
+    np.testing.assert_array_equal(grid[1:41, 62:122], drawn)
+    with pytest.raises(ValueError, match="colors"):
+        draw_keypoints(canvas, [[1, 1]], colors=[[1, 2, 3], [4, 5, 6]])
+
+
+# ----------------------------------------------------------------------------- KeypointPose6D
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    """A run directory with an (untrained) tiny KeypointNet and 8 known 3D keypoints."""
+    kp = pytest.importorskip("paz6d.models.keypointnet")
+    folder = tmp_path_factory.mktemp("keypoint_run")
+    kp.save_keypointnet(kp.build_keypointnet(8, 32, 4, 2, (1,)), folder / "model.keras")
+    (folder / "config.json").write_text(json.dumps({"input_size": 32, "margin": 1.25, "downsample": 2}))
+    cube = np.array([[x, y, z] for x in (-0.04, 0.04) for y in (-0.03, 0.03) for z in (-0.02, 0.02)])
+    write_keypoints(folder, cube, np.ones(8, bool), "farthest-point")
+    return folder
+
+
+def test_pnp_lifting_recovers_a_known_pose_from_perfect_keypoints(run_dir):
+    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+
+    estimator = KeypointPose6D(run_dir, K)
+    T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
+    perfect = Keypoints2D(transform_and_project(estimator.points_model, T, K), np.ones(8))
+    pose = estimator.pose_from_keypoints(perfect, window_side=100)
+    np.testing.assert_allclose(pose.to_matrix(), T, atol=1e-7)  # Levenberg-Marquardt stops near 1e-8
+    assert pose.score == 1.0
+    corrupted = np.array(perfect.points)
+    corrupted[2] += [35.0, -20.0]  # one wrong keypoint: RANSAC drops it
+    pose = estimator.pose_from_keypoints(Keypoints2D(corrupted, np.ones(8)), window_side=100)
+    np.testing.assert_allclose(pose.to_matrix(), T, atol=1e-6)
+    assert pose.score == pytest.approx(7 / 8)
+
+
+def test_fewer_than_four_usable_keypoints_is_a_clear_error(run_dir, tmp_path):
+    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+
+    estimator = KeypointPose6D(run_dir, K)
+    T = _pose([0.1, 0.2, 0.3], [0.0, 0.0, 0.5])
+    scores = np.array([1, 1, 1, 0, 0, 0, 0, 0], float)
+    keypoints = Keypoints2D(transform_and_project(estimator.points_model, T, K), scores)
+    with pytest.raises(PnPError, match="only 3 of 8 keypoints are usable"):
+        estimator.pose_from_keypoints(keypoints, window_side=100)
+    for name in ("model.keras", "config.json"):
+        (tmp_path / name).write_bytes((run_dir / name).read_bytes())
+    write_keypoints(tmp_path, estimator.points_model, [True, True, True] + [False] * 5, "lifted-median")
+    with pytest.raises(ValueError, match="only 3 usable keypoints"):
+        KeypointPose6D(tmp_path, K)
+
+
+def test_estimator_accepts_camera_or_matrix_and_box_or_tuple(run_dir):
+    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+
+    image = np.random.default_rng(0).integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    by_camera = KeypointPose6D(run_dir, Camera(K, 160, 120))
+    by_matrix = KeypointPose6D(run_dir, K)
+    first = by_camera.detect(image, Box2D(40, 30, 90, 80))
+    second = by_matrix.detect(image, (40, 30, 90, 80))
+    np.testing.assert_allclose(first.points, second.points, atol=1e-4)
+    # keypoints come back in image pixels, inside the crop window around the box
+    window = square_window((40, 30, 90, 80), 1.25)
+    assert np.all(first.points >= np.array(window[:2]) - 0.5)
+    assert np.all(first.points <= np.array(window[:2]) + window[2] - 0.5)
+    with pytest.raises(ValueError, match="160x120"):
+        by_camera.detect(image[:100], (40, 30, 90, 80))
+    with pytest.raises(ValueError, match="outside"):
+        by_matrix.detect(image, (500, 500, 600, 600))
+    with pytest.raises(ValueError, match="box2d"):
+        by_matrix.detect(image, (10, 10, 5))
+    result = by_matrix.estimate_batch([image, image], [(40, 30, 90, 80), (20, 20, 60, 70)])
+    assert len(result) == 2 and all(pose is None or isinstance(pose, Pose6D) for pose in result)
+
+
+def test_corrupt_or_incomplete_run_directory_is_a_clear_error(run_dir, tmp_path):
+    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+
+    with pytest.raises(ValueError, match="config.json"):
+        KeypointPose6D(tmp_path, K)
+    for name in ("config.json", "keypoints.json"):
+        (tmp_path / name).write_bytes((run_dir / name).read_bytes())
+    (tmp_path / "model.keras").write_bytes(b"PK\x03\x04 truncated")
+    with pytest.raises(ValueError, match="model.keras"):
+        KeypointPose6D(tmp_path, K)

@@ -1,0 +1,234 @@
+"""KeypointNet data and training: rendered views, batch geometry, tiny training runs, resume, CLI, BOP views."""
+
+import argparse
+import csv
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from paz6d.backend.camera import Camera, transform_and_project
+from paz6d.backend.tensorflow_guard import import_tensorflow
+from paz6d.training import keypoint_views as kv
+
+import_tensorflow()  # the renderer shares this process with TensorFlow (workers=0)
+
+TINY = {"num_keypoints": 6, "input_size": 32, "filters": 8, "downsample": 2, "dilations": (1, 2), "views": 24,
+        "validation_views": 8, "lift_views": 8, "pairs": 4, "learning_rate": 3e-3, "checkpoint_every": 20,
+        "sample_every": 20}
+SMALL_CAMERA = Camera(np.array([[150.0, 0.0, 79.5], [0.0, 150.0, 59.5], [0.0, 0.0, 1.0]]), 160, 120)
+
+
+@pytest.fixture(scope="module")
+def mesh_path(tmp_path_factory):
+    from paz6d.assets.demo_object import write_demo_object
+
+    return write_demo_object(tmp_path_factory.mktemp("mesh"))  # millimetres, BOP style
+
+
+@pytest.fixture(scope="module")
+def views(mesh_path):
+    return kv.render_views(mesh_path, 6, seed=3, sampling=kv.ViewSampling(input_size=32), mesh_scale=1e-3,
+                           workers=0, progress=False)
+
+
+def test_views_depend_on_seed_and_index_only(mesh_path, views):
+    sampling = kv.ViewSampling(input_size=32)
+    other_chunks = kv.render_views(mesh_path, 6, seed=3, sampling=sampling, mesh_scale=1e-3, workers=0, chunk=4,
+                                   progress=False)
+    np.testing.assert_array_equal(other_chunks.rgb, views.rgb)
+    np.testing.assert_array_equal(other_chunks.T_model2cam, views.T_model2cam)
+    prefix = kv.render_views(mesh_path, 3, seed=3, sampling=sampling, mesh_scale=1e-3, workers=0, progress=False)
+    np.testing.assert_array_equal(prefix.rgb, views.rgb[:3])
+    other_seed = kv.render_views(mesh_path, 2, seed=4, sampling=sampling, mesh_scale=1e-3, workers=0, progress=False)
+    assert not np.array_equal(other_seed.T_model2cam, views.T_model2cam[:2])
+
+
+@pytest.mark.slow
+def test_spawn_workers_render_the_same_views(mesh_path, views):
+    in_workers = kv.render_views(mesh_path, 6, seed=3, sampling=kv.ViewSampling(input_size=32), mesh_scale=1e-3,
+                                 workers=2, chunk=2, progress=False)
+    np.testing.assert_array_equal(in_workers.rgb, views.rgb)
+    np.testing.assert_array_equal(in_workers.masks, views.masks)
+
+
+def _silhouette_box_error(mask, vertices, T, K) -> float:
+    rows, columns = np.nonzero(mask)
+    projected = transform_and_project(vertices, T, K)
+    box = np.array([columns.min(), rows.min(), columns.max() + 1, rows.max() + 1])
+    return float(np.abs(np.concatenate([projected.min(0) + 0.5, projected.max(0) + 0.5]) - box).max())
+
+
+def test_view_masks_and_jittered_batches_agree_with_their_intrinsics(mesh_path, views):
+    from paz6d.backend.mesh import load_mesh
+
+    vertices = np.asarray(load_mesh(mesh_path, 1e-3).vertices)
+    for index in range(len(views)):
+        assert _silhouette_box_error(views.masks[index], vertices, views.T_model2cam[index], views.K[index]) <= 1.0
+    rng = np.random.default_rng(0)
+    strong = kv.Augmentation(crop_scale=0.2, crop_shift=0.1)
+    for index in range(len(views)):
+        picture, mask, K = kv.augmented_view(views, index, rng, strong)
+        assert picture.shape == (32, 32, 3) and picture.dtype == np.uint8
+        if mask.any() and not (mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any()):
+            assert _silhouette_box_error(mask, vertices, views.T_model2cam[index], K) <= 1.5
+    batch = kv.training_batch(views, np.random.default_rng(1), pairs=3, downsample=2)
+    assert batch["images"].shape == (6, 32, 32, 3) and batch["masks"].shape == (6, 16, 16)
+    assert batch["K"].shape == (6, 3, 3) and batch["T_model2cam"].shape == (6, 4, 4)
+    pairs_differ = [not np.array_equal(batch["T_model2cam"][i], batch["T_model2cam"][i + 3]) for i in range(3)]
+    assert all(pairs_differ)  # a pair is two different views
+
+
+def test_empty_masks_are_a_clear_error(views):
+    masks = views.masks.copy()
+    masks[2] = False
+    with pytest.raises(ValueError, match=r"views \[2\] have empty masks"):
+        kv.ViewSet(views.rgb, views.alpha, masks, views.K, views.T_model2cam)
+    with pytest.raises(ValueError, match="ViewSet.K"):
+        kv.ViewSet(views.rgb, views.alpha, views.masks, views.K[:2], views.T_model2cam)
+
+
+def test_view_set_save_load_round_trip(views, tmp_path):
+    path = views.save(tmp_path / "views.npz")
+    loaded = kv.ViewSet.load(path)
+    np.testing.assert_array_equal(loaded.rgb, views.rgb)
+    np.testing.assert_array_equal(loaded.K, views.K)
+    (tmp_path / "broken.npz").write_bytes(b"nope")
+    with pytest.raises(ValueError, match="broken.npz"):
+        kv.ViewSet.load(tmp_path / "broken.npz")
+
+
+def test_downsample_masks_area_average():
+    masks = np.zeros((1, 4, 4), bool)
+    masks[0, :2, :1] = True
+    np.testing.assert_allclose(kv.downsample_masks(masks, 2)[0], [[0.5, 0.0], [0.0, 0.0]])
+
+
+def _losses(run_dir) -> list[float]:
+    with (run_dir / "log.csv").open() as handle:
+        return [float(row["loss"]) for row in csv.DictReader(handle)]
+
+
+@pytest.mark.parametrize("mode", ["supervised", "discovery"])
+def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path, tmp_path):
+    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+    from paz6d.training.keypointnet import KeypointTraining, train_keypointnet
+
+    job = KeypointTraining(tmp_path / mode, mesh_path, 1e-3, "quick", mode, seed=0, workers=0, steps=40,
+                           progress=False, overrides=TINY)
+    summary = train_keypointnet(job)
+    losses = _losses(job.out)
+    assert len(losses) == 4 and np.mean(losses[-2:]) < np.mean(losses[:2])
+    for name in ("config.json", "model.keras", "keypoints.json", "metrics.json", "views_train.npz",
+                 "samples/step_00000040.png"):
+        assert (job.out / name).exists(), name
+    assert summary["steps"] == 40 and np.isfinite(summary["consistency_px_median"])
+    keypoints = json.loads((job.out / "keypoints.json").read_text())
+    assert keypoints["method"] == ("farthest-point" if mode == "supervised" else "lifted-median")
+    if mode == "supervised":
+        # the 3D keypoints are all usable, the estimator loads the run and answers with a pose or a clear error
+        estimator = KeypointPose6D(job.out, SMALL_CAMERA.K)
+        image = np.random.default_rng(0).integers(0, 256, (120, 160, 3), dtype=np.uint8)
+        assert len(estimator.detect(image, (60, 40, 100, 80))) == 6
+        # resuming continues from the last checkpoint up to the new total
+        resumed = train_keypointnet(KeypointTraining(job.out, mesh_path, 1e-3, "quick", mode, 0, 0, 50, False, TINY))
+        assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
+
+
+def test_a_run_directory_refuses_a_different_run(mesh_path, tmp_path):
+    from paz6d.training.keypointnet import KeypointTraining, _prepare_run_dir
+
+    job = KeypointTraining(tmp_path, mesh_path, 1e-3, "quick", "supervised", overrides=TINY)
+    _prepare_run_dir(job, job.settings(), 0.1, kv.ViewSampling(input_size=32))
+    other = KeypointTraining(tmp_path, mesh_path, 1e-3, "quick", "discovery", overrides=TINY)
+    with pytest.raises(ValueError, match="different run"):
+        _prepare_run_dir(other, other.settings(), 0.1, kv.ViewSampling(input_size=32))
+    with pytest.raises(ValueError, match="mode"):
+        KeypointTraining(tmp_path, mesh_path, mode="other").settings()
+    with pytest.raises(ValueError, match="steps"):
+        KeypointTraining(tmp_path, mesh_path, steps=0).settings()
+
+
+def test_cross_view_errors_are_zero_for_geometrically_consistent_keypoints():
+    from paz6d.training.keypointnet import cross_view_errors
+
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-0.05, 0.05, (5, 3))
+    K = np.repeat(SMALL_CAMERA.K[None], 4, 0)
+    poses = []
+    for _ in range(4):
+        T = np.eye(4)
+        T[:3, :3] = cv2.Rodrigues(rng.normal(size=3))[0]
+        T[:3, 3] = [0.0, 0.0, 0.5]
+        poses.append(T)
+    poses = np.stack(poses)
+    uv = np.stack([transform_and_project(points, T, SMALL_CAMERA.K) for T in poses])
+    depth = np.stack([(points @ T[:3, :3].T + T[:3, 3])[:, 2] for T in poses])
+    np.testing.assert_allclose(cross_view_errors(uv, depth, K, poses), 0.0, atol=1e-9)
+    uv[1, 0] += [3.0, 4.0]  # view 1 keypoint 0 off by 5 px: only pair (0, 1), keypoint 0 changes
+    errors = cross_view_errors(uv, depth, K, poses)
+    assert errors[0, 0] > 2.0 and np.allclose(errors[1], 0.0) and np.allclose(errors[0, 1:], 0.0)
+
+
+def test_cli_arguments_and_clear_errors(tmp_path, capsys):
+    from paz6d.cli import main
+    from paz6d.training.keypointnet import configure
+
+    parser = argparse.ArgumentParser()
+    configure(parser)
+    args = parser.parse_args(["--mesh", "m.ply", "--out", "run", "--mode", "discovery", "--steps", "5"])
+    assert args.mode == "discovery" and args.steps == 5 and args.config == "quick"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--mesh", "m.ply", "--dataset", "d", "--out", "run"])
+    assert main(["train", "keypointnet", "--mesh", str(tmp_path / "missing.ply"), "--out", str(tmp_path / "r")]) == 2
+    assert "missing.ply" in capsys.readouterr().err
+    assert main(["train", "keypointnet", "--dataset", str(tmp_path), "--out", str(tmp_path / "r")]) == 2
+    assert "models_info.json" in capsys.readouterr().err
+
+
+def _write_bop_set(root, mesh_path, count: int = 3):
+    """A tiny BOP train split of the demo object rendered at 160x120 (millimetres in the files)."""
+    from paz6d.backend.mesh import diameter, load_mesh
+    from renderers import Renderer
+
+    (root / "models").mkdir(parents=True)
+    (root / "models" / "obj_000001.ply").write_bytes(mesh_path.read_bytes())
+    mesh = load_mesh(mesh_path, 1e-3)
+    (root / "models" / "models_info.json").write_text(json.dumps({"1": {"diameter": diameter(mesh.vertices) * 1e3}}))
+    scene = root / "train" / "000000"
+    (scene / "rgb").mkdir(parents=True)
+    (scene / "mask_visib").mkdir()
+    gt, cameras, poses = {}, {}, []
+    sampling = kv.ViewSampling(input_size=32, camera=SMALL_CAMERA)
+    vertices = np.asarray(mesh.vertices)
+    with Renderer(160, 120) as renderer:
+        for im_id in range(count):
+            T = kv.sample_pose(np.random.default_rng(im_id), vertices, diameter(vertices), sampling)
+            out = renderer.render(SMALL_CAMERA.K, [(mesh, T)])
+            cv2.imwrite(str(scene / "rgb" / f"{im_id:06d}.png"), out.rgb[..., ::-1])
+            mask = out.masks[0] if im_id != 1 else np.zeros_like(out.masks[0])  # image 1: empty mask, skipped
+            cv2.imwrite(str(scene / "mask_visib" / f"{im_id:06d}_000000.png"), mask.astype(np.uint8) * 255)
+            gt[str(im_id)] = [{"obj_id": 1, "cam_R_m2c": T[:3, :3].ravel().tolist(),
+                               "cam_t_m2c": (T[:3, 3] * 1e3).tolist()}]
+            cameras[str(im_id)] = {"cam_K": SMALL_CAMERA.K.ravel().tolist(), "depth_scale": 1.0}
+            poses.append(T)
+    (scene / "scene_gt.json").write_text(json.dumps(gt))
+    (scene / "scene_camera.json").write_text(json.dumps(cameras))
+    return np.stack(poses), vertices
+
+
+def test_bop_object_views_crop_around_visible_instances(mesh_path, tmp_path):
+    from paz6d.training.keypoint_dataset import bop_object_views
+
+    poses, vertices = _write_bop_set(tmp_path, mesh_path)
+    views, found_mesh, scale = bop_object_views(tmp_path, input_size=32)
+    assert len(views) == 2 and found_mesh.name == "obj_000001.ply" and scale == 1e-3
+    np.testing.assert_allclose(views.T_model2cam, poses[[0, 2]], atol=1e-9)
+    for index in range(2):
+        assert _silhouette_box_error(views.masks[index], vertices, views.T_model2cam[index], views.K[index]) <= 1.0
+    assert np.all(views.alpha == 255)  # real backgrounds are kept
+    with pytest.raises(ValueError, match="no object id 7"):
+        bop_object_views(tmp_path, object_id=7)
+    with pytest.raises(ValueError, match="found 1 usable views"):
+        bop_object_views(tmp_path, input_size=32, max_views=1)
