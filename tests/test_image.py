@@ -255,3 +255,10 @@ def test_alpha_blend(picture):
         image.alpha_blend(picture, alpha[:, 1:], background)
     with pytest.raises(ValueError, match=r"background: expected shape \(48, 64, 3\) like foreground"):
         image.alpha_blend(picture, alpha, background[1:])
+
+
+def test_alpha_blend_uint8_alpha_rounds_like_the_float_formula(picture):
+    alpha = np.random.default_rng(1).integers(0, 256, picture.shape[:2], dtype=np.uint8)
+    background = np.random.default_rng(2).integers(0, 256, picture.shape, dtype=np.uint8)
+    expected = np.rint(alpha[..., None] / 255 * picture + (1 - alpha[..., None] / 255) * background)
+    np.testing.assert_array_equal(image.alpha_blend(picture, alpha, background), expected)

@@ -329,11 +329,14 @@ def alpha_blend(foreground, alpha, background) -> np.ndarray:
     alpha = np.asarray(alpha)
     if alpha.shape != foreground.shape[:2]:
         raise ValueError(f"alpha: expected shape {foreground.shape[:2]}, got {alpha.shape}")
-    if alpha.dtype == np.uint8:
-        weight = alpha.astype(np.float32) / 255.0
-    else:
-        weight = alpha.astype(np.float32)
-        if not np.all((weight >= 0) & (weight <= 1)):
-            raise ValueError("alpha: expected values in [0, 1] (or a uint8/bool mask)")
+    if alpha.dtype == bool:
+        return np.where(alpha[..., None], foreground, background)
+    if alpha.dtype == np.uint8:  # exact integer form of round(fg * a / 255 + bg * (1 - a / 255))
+        weight = alpha[..., None].astype(np.uint16)
+        blended = (foreground * weight + background * (255 - weight) + 127) // 255
+        return blended.astype(np.uint8)
+    weight = alpha.astype(np.float32)
+    if not np.all((weight >= 0) & (weight <= 1)):
+        raise ValueError("alpha: expected values in [0, 1] (or a uint8/bool mask)")
     weight = weight[..., None]
     return _to_uint8(weight * foreground + (1.0 - weight) * background)
