@@ -193,6 +193,11 @@ def test_bad_camera_input_names_the_argument():
         Camera(K, 0, 480)
     with pytest.raises(ValueError, match=r"distortion: expected 4, 5, 8, 12 or 14 OpenCV coefficients, got 3"):
         Camera(K, 640, 480, [0.1, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"distortion: expected 4, 5, 8, 12 or 14 OpenCV coefficients, got 1"):
+        Camera(K, 640, 480, 0.1)
+    with pytest.raises(ValueError, match=r"distortion: contains NaN"):
+        Camera(K, 640, 480, [np.nan, 0.0, 0.0, 0.0])
+    assert Camera(K, 640, 480, np.array([[0.1, 0.0, 0.0, 0.0, 0.0]])).distortion.shape == (5,)  # OpenCV's (1, 5)
     with pytest.raises(ValueError, match=r"points_cam: expected shape \(\.\.\., 3\), got \(4, 2\)"):
         camera.project_points(np.ones((4, 2)), K)
     with pytest.raises(ValueError, match=r"points_cam: contains NaN"):

@@ -19,7 +19,8 @@ from paz6d.backend.checks import as_array, as_camera_matrix, as_points
 def _as_distortion(distortion) -> np.ndarray | None:
     if distortion is None:
         return None
-    coefficients = as_array(distortion, "distortion", (np.asarray(distortion).shape[-1],)).ravel()
+    values = np.atleast_1d(distortion)
+    coefficients = as_array(values, "distortion", (values.shape[-1],)).ravel()
     if coefficients.size not in (4, 5, 8, 12, 14):
         raise ValueError(f"distortion: expected 4, 5, 8, 12 or 14 OpenCV coefficients, got {coefficients.size}")
     return None if not np.any(coefficients) else coefficients
