@@ -97,6 +97,18 @@ def encoder_of(autoencoder):
         raise ValueError(f"autoencoder: has no nested model named {ENCODER_NAME!r}") from error
 
 
+def encode_function(encoder):
+    """``encoder`` as a compiled function ``(B, S, S, 3) float32 -> (B, L)`` numpy codes (one
+    ``tf.function`` trace serves every batch size; several times faster than eager calls for one crop)."""
+    from paz6d.backend.tensorflow_guard import import_tensorflow
+
+    tf = import_tensorflow()
+    size = encoder.input.shape[1]
+    compiled = tf.function(lambda x: encoder(x, training=False),
+                           input_signature=[tf.TensorSpec((None, size, size, 3), tf.float32)])
+    return lambda inputs: compiled(tf.convert_to_tensor(inputs, dtype=tf.float32)).numpy()
+
+
 def reconstruction_loss(target, prediction, bootstrap_fraction: float = 1.0):
     """Per-batch mean squared error; with ``bootstrap_fraction < 1`` the paper's bootstrapped L2:
     per image, only the largest ``bootstrap_fraction`` of the pixel errors count (paper: 1/4).

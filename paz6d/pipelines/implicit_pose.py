@@ -183,7 +183,7 @@ class ImplicitPose6D(Processor):
     def __init__(self, run_dir: str | Path, camera, refine: bool = True, top_k: int = 1,
                  class_name: str | None = None):
         super().__init__()
-        from paz6d.models.aae import encoder_of, load_model
+        from paz6d.models.aae import encode_function, encoder_of, load_model
         from paz6d.models.codebook import Codebook
 
         run_dir = Path(run_dir)
@@ -207,6 +207,7 @@ class ImplicitPose6D(Processor):
         self.refine, self.top_k, self.class_name = refine, int(top_k), class_name
         self.autoencoder = load_model(run_dir / "model.keras")
         self.encoder = encoder_of(self.autoencoder)
+        self._encode = encode_function(self.encoder)
         self.codebook = Codebook.load(run_dir / "codebook.npz")
         if self.codebook.latent_size != self.encoder.output.shape[-1]:
             raise ValueError(f"{run_dir / 'codebook.npz'}: latent size {self.codebook.latent_size} does not match "
@@ -241,7 +242,7 @@ class ImplicitPose6D(Processor):
         inputs = to_model_input(crops)
         if inputs.shape[1:3] != (self.crop_size, self.crop_size):
             raise ValueError(f"crops: expected {self.crop_size}x{self.crop_size} crops, got {inputs.shape[1:3]}")
-        return np.asarray(self.encoder(inputs, training=False))
+        return self._encode(inputs)
 
     def reconstruct(self, crops) -> np.ndarray:
         """The autoencoder's reconstructions ``(B, S, S, 3)`` uint8 of crops."""

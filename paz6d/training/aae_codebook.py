@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from paz6d.models.aae import crop_object, to_model_input
+from paz6d.models.aae import crop_object, encode_function, to_model_input
 from paz6d.models.codebook import Codebook, codebook_angles, codebook_rotations
 from paz6d.training.aae_views import ViewGeometry, mask_box, rotate_view, silhouette_boxes
 
@@ -45,6 +45,7 @@ def build_codebook(encoder, rgb: np.ndarray, alpha: np.ndarray, view_rotations: 
     """
     from tqdm.auto import tqdm
 
+    encode = encode_function(encoder)
     rotations = codebook_rotations(view_rotations, in_plane)
     views_per_batch = max(1, batch_size // in_plane)
     codes = []
@@ -52,7 +53,7 @@ def build_codebook(encoder, rgb: np.ndarray, alpha: np.ndarray, view_rotations: 
         for start in range(0, len(rgb), views_per_batch):
             views = range(start, min(start + views_per_batch, len(rgb)))
             crops = codebook_crops(rgb, alpha, geometry, in_plane, crop_size, padding, views)
-            codes.append(np.asarray(encoder(to_model_input(crops), training=False)))
+            codes.append(encode(to_model_input(crops)))
             bar.update(len(crops))
     boxes = silhouette_boxes(hull_points, rotations, geometry.K, [0.0, 0.0, geometry.distance])
     return Codebook(np.concatenate(codes), rotations, boxes, geometry.K, geometry.distance)

@@ -1,0 +1,78 @@
+"""AAE inference speed on the CPU: encoding + codebook lookup per crop, single and batched.
+
+Measures, for the quick (64x64, latent 64) and the paper's (128x128, latent 128) encoders with a
+10,000-entry codebook:
+
+* single crop: ``ImplicitPose6D.encode`` + ``Codebook.nearest`` per crop (target <= 20 ms);
+* batched: 64 crops per call;
+* the lookup alone as one matrix product vs the obvious alternative, ``scipy.spatial.distance.cdist``
+  with the cosine metric + argmin, measured in the same run.
+
+Run: ``.venv/bin/python benchmarks/aae_inference.py``. Weights are random: speed does not depend on them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+
+def _best_of(function, repeats: int) -> float:
+    """Median seconds of ``repeats`` calls (after one warm-up call)."""
+    function()
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        function()
+        times.append(time.perf_counter() - started)
+    return float(np.median(times))
+
+
+def measure(crop_size: int, latent_size: int, filters: tuple[int, ...], entries: int, batch: int, repeats: int) -> dict:
+    from scipy.spatial.distance import cdist
+
+    from paz6d.backend.tensorflow_guard import import_keras
+    from paz6d.models.aae import build_encoder, encode_function, to_model_input
+    from paz6d.models.codebook import Codebook
+
+    keras = import_keras()
+    keras.utils.set_random_seed(0)
+    encoder = encode_function(build_encoder(crop_size, latent_size, filters))  # as ImplicitPose6D runs it
+    rng = np.random.default_rng(0)
+    codebook = Codebook(rng.normal(size=(entries, latent_size)), np.broadcast_to(np.eye(3), (entries, 3, 3)),
+                        np.tile([0.0, 0.0, 10.0, 10.0], (entries, 1)), np.eye(3), 1.0)
+    crops = rng.integers(0, 256, (batch, crop_size, crop_size, 3), dtype=np.uint8)
+
+    single = _best_of(lambda: codebook.nearest(encoder(to_model_input(crops[:1]))), repeats)
+    batched = _best_of(lambda: codebook.nearest(encoder(to_model_input(crops))), max(3, repeats // 4)) / batch
+    encode_single = _best_of(lambda: encoder(to_model_input(crops[:1])), repeats)
+    codes = np.asarray(encoder(to_model_input(crops)))
+    lookup_matrix = _best_of(lambda: codebook.nearest(codes), repeats) / batch
+    lookup_cdist = _best_of(lambda: np.argmin(cdist(codes, codebook.codes, "cosine"), axis=1), repeats) / batch
+    return {"crop": crop_size, "latent": latent_size, "entries": entries,
+            "single_ms": 1000 * single, "batched_ms_per_crop": 1000 * batched, "encode_single_ms": 1000 * encode_single,
+            "lookup_matrix_us_per_crop": 1e6 * lookup_matrix, "lookup_cdist_us_per_crop": 1e6 * lookup_cdist}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--entries", type=int, default=10_000)
+    parser.add_argument("--batch", type=int, default=64)
+    parser.add_argument("--repeats", type=int, default=20)
+    args = parser.parse_args()
+    print(f"CPU cores: {os.cpu_count()}, load average (1 min) at start: {os.getloadavg()[0]:.1f}")
+    for name, crop, latent, filters in (("quick", 64, 64, (32, 64, 64, 128)), ("paper", 128, 128, (128, 256, 256, 512))):
+        r = measure(crop, latent, filters, args.entries, args.batch, args.repeats)
+        print(f"{name:5s} {crop}x{crop} latent {latent}, {r['entries']} entries: "
+              f"single crop {r['single_ms']:.2f} ms (encode {r['encode_single_ms']:.2f} ms), "
+              f"batch of {args.batch} {r['batched_ms_per_crop']:.2f} ms/crop "
+              f"({r['single_ms'] / r['batched_ms_per_crop']:.1f}x faster than single); "
+              f"lookup {r['lookup_matrix_us_per_crop']:.1f} us/crop vs cdist {r['lookup_cdist_us_per_crop']:.1f} us/crop "
+              f"({r['lookup_cdist_us_per_crop'] / r['lookup_matrix_us_per_crop']:.1f}x)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,262 @@
+"""``paz6d demo``: from a mesh to a scored 6D pose estimator on a CPU, end to end.
+
+1. writes the procedural, asymmetric, coloured demo object (``DIR/mesh/obj_000001.ply`` in
+   millimetres + ``models_info.json``, BOP units);
+2. generates held-out synthetic test images with ``data_gen`` (random lights, backgrounds,
+   distractors, occluders; a seed different from training);
+3. trains an Augmented Autoencoder with the quick config (``DIR/model/``, an ``ImplicitPose6D`` run dir);
+4. estimates the pose of every test instance from its ground-truth box;
+5. scores them with ``evaluation.pose_errors`` (ADD(-S) recall at 0.1 d, rotation/translation errors,
+   AUC of the ADD(-S) accuracy curve up to 10 cm) and writes ``DIR/report.json``, a printed table and
+   PNGs (recall curves, input / reconstruction / estimate grid).
+
+Every stage resumes from what ``DIR`` already holds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+TRAIN_SEED = 0
+TEST_SEED = 1000
+MIN_VISIBLE_FRACTION = 0.1  # BOP's rule for evaluation targets
+AUC_MAX_THRESHOLD = 0.1  # metres (PoseCNN's ADD(-S) AUC)
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Adds the ``paz6d demo`` arguments."""
+    parser.add_argument("--out", type=Path, default=Path("demo_output"), help="output folder (re-run to resume)")
+    parser.add_argument("--test-images", type=int, default=200, help="held-out synthetic test images")
+    parser.add_argument("--steps", type=int, default=None, help="training steps (default: the quick config's)")
+    parser.add_argument("--workers", type=int, default=2, help="rendering processes")
+    parser.add_argument("--platform", choices=("egl", "osmesa"), default=None, help="OpenGL platform")
+
+
+def _stage(message: str) -> None:
+    print(f"\n== {message}", flush=True)
+
+
+def _write_json(path: Path, data) -> None:
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(json.dumps(data, indent=2))
+    os.replace(temporary, path)
+
+
+def _test_targets(dataset_root: Path) -> list[dict]:
+    """Every annotated instance with visible fraction >= 0.1: image, camera, GT pose and GT box."""
+    from paz6d.datasets.bop import BOPDataset
+
+    targets = []
+    for sample in BOPDataset(dataset_root, split="test"):
+        for instance in sample.objects:
+            info = instance.info or {}
+            if info.get("visib_fract", 1.0) < MIN_VISIBLE_FRACTION:
+                continue
+            x, y, width, height = info["bbox_obj"]
+            targets.append({"image": sample.image, "camera": sample.camera, "T_gt": instance.T_model2cam,
+                            "box": (float(x), float(y), float(x + width), float(y + height)),
+                            "scene_id": sample.scene_id, "im_id": sample.im_id})
+    return targets
+
+
+def _estimate(run_dir: Path, targets: list[dict]) -> tuple[list, float, object]:
+    from tqdm.auto import tqdm
+
+    from paz6d.pipelines.implicit_pose import ImplicitPose6D
+
+    estimator = ImplicitPose6D(run_dir, targets[0]["camera"])
+    poses = []
+    started = time.perf_counter()
+    for target in tqdm(targets, desc="estimate poses", unit="object", dynamic_ncols=True):
+        poses.append(estimator(target["image"], target["box"]))
+    return poses, (time.perf_counter() - started) / len(targets), estimator
+
+
+def score(poses, targets, points, diameter: float) -> dict:
+    """ADD (the demo object is asymmetric, so ADD(-S) = ADD) recall at 0.1 d, rotation and translation
+    errors and the ADD AUC; lengths in metres, angles in degrees."""
+    from evaluation.pose_errors import accuracy_auc, add_error, rotation_error_deg, translation_error
+
+    T_est = np.stack([pose.to_matrix() for pose in poses])
+    T_gt = np.stack([target["T_gt"] for target in targets])
+    add = add_error(T_est, T_gt, points)
+    rotation = rotation_error_deg(T_est[:, :3, :3], T_gt[:, :3, :3])
+    translation = translation_error(T_est[:, :3, 3], T_gt[:, :3, 3])
+    return {"count": len(poses), "diameter_m": diameter,
+            "add_recall_0.1d": float(np.mean(add < 0.1 * diameter)),
+            "add_auc_10cm": accuracy_auc(add, AUC_MAX_THRESHOLD),
+            "rotation_error_deg": {"median": float(np.median(rotation)), "mean": float(np.mean(rotation)),
+                                   "below_5": float(np.mean(rotation < 5)), "below_10": float(np.mean(rotation < 10))},
+            "translation_error_m": {"median": float(np.median(translation)), "mean": float(np.mean(translation))},
+            "z_error_m_median": float(np.median(np.abs(T_est[:, 2, 3] - T_gt[:, 2, 3]))),
+            "_add": add, "_rotation": rotation}
+
+
+def _plot_recall(path: Path, add: np.ndarray, rotation: np.ndarray, diameter: float) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(1, 2, figsize=(10, 4))
+    thresholds = np.linspace(0, AUC_MAX_THRESHOLD, 201)
+    axes[0].plot(thresholds * 100, [np.mean(add <= t) for t in thresholds])
+    axes[0].axvline(10 * diameter, color="gray", linestyle="--", label=f"0.1 d = {100 * 0.1 * diameter:.1f} cm")
+    axes[0].set(xlabel="ADD threshold (cm)", ylabel="recall", title="ADD(-S) accuracy curve", ylim=(0, 1.02))
+    axes[0].legend()
+    angles = np.linspace(0, 45, 181)
+    axes[1].plot(angles, [np.mean(rotation <= a) for a in angles])
+    axes[1].set(xlabel="rotation error threshold (deg)", ylabel="recall", title="rotation accuracy", ylim=(0, 1.02))
+    for axis in axes:
+        axis.grid(alpha=0.3)
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def _overlay(image: np.ndarray, mask_gt: np.ndarray, mask_est: np.ndarray) -> np.ndarray:
+    import cv2
+
+    canvas = image.copy()
+    for mask, color in ((mask_gt, (0, 255, 0)), (mask_est, (255, 40, 40))):
+        contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        cv2.drawContours(canvas, contours, -1, color, 1)
+    return canvas
+
+
+def _plot_grid(path: Path, estimator, targets, poses, mesh_path: Path, rows: int = 8) -> None:
+    """Rows of: test crop (model input) / reconstruction / estimate overlay (green GT, red estimate)."""
+    from paz6d.backend.image import save_image
+    from paz6d.backend.mesh import load_mesh
+    from paz6d.models.aae import crop_object
+    from renderers import Renderer
+
+    mesh = load_mesh(mesh_path, 0.001)
+    size = 128
+    chosen = np.linspace(0, len(targets) - 1, min(rows, len(targets))).astype(int)
+    camera = targets[0]["camera"]
+    tiles = []
+    with Renderer(camera.width, camera.height) as renderer:
+        for index in chosen:
+            target, pose = targets[index], poses[index]
+            crop = estimator.crop(target["image"], target["box"])
+            reconstruction = estimator.reconstruct(crop[None])[0]
+            masks = renderer.render(camera.K, [(mesh, target["T_gt"]), (mesh, pose.to_matrix())], rgb=False).masks
+            overlay = _overlay(target["image"], masks[0], masks[1])
+            view = crop_object(overlay, target["box"], size, padding=1.5)
+            row = [crop_object(crop, (0, 0, crop.shape[1], crop.shape[0]), size, 1.0),
+                   crop_object(reconstruction, (0, 0, crop.shape[1], crop.shape[0]), size, 1.0), view]
+            tiles.append(np.concatenate(row, axis=1))
+    save_image(path, np.concatenate(tiles, axis=0))
+
+
+def _print_table(report: dict) -> None:
+    metrics = report["metrics"]
+    lines = [("test instances", f"{metrics['count']}"),
+             ("ADD(-S) recall @ 0.1 d", f"{100 * metrics['add_recall_0.1d']:.1f} %"),
+             ("ADD(-S) AUC (0-10 cm)", f"{100 * metrics['add_auc_10cm']:.1f} %"),
+             ("median rotation error", f"{metrics['rotation_error_deg']['median']:.2f} deg"),
+             ("rotation error < 5 / 10 deg", f"{100 * metrics['rotation_error_deg']['below_5']:.1f} % / "
+                                             f"{100 * metrics['rotation_error_deg']['below_10']:.1f} %"),
+             ("median translation error", f"{1000 * metrics['translation_error_m']['median']:.1f} mm"),
+             ("median |z| error", f"{1000 * metrics['z_error_m_median']:.1f} mm"),
+             ("training steps", f"{report['training']['steps']}"),
+             ("loader samples/s (1 thread)", f"{report['training']['loader_samples_per_second_one_thread']:.0f}"),
+             ("model samples/s", f"{report['training']['model_samples_per_second']:.0f}"),
+             ("inference per object", f"{1000 * report['seconds_per_estimate']:.1f} ms"),
+             ("total time", f"{report['timings']['total_seconds'] / 60:.1f} min")]
+    width = max(len(name) for name, _ in lines)
+    print("\n" + "\n".join(f"  {name:<{width}}  {value}" for name, value in lines))
+
+
+def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, platform: str | None = None,
+             grid_rows: int = 8) -> dict:
+    """Runs the whole demo into ``out`` and returns the report (also written to ``out/report.json``)."""
+    from paz6d.backend.tensorflow_guard import import_tensorflow
+
+    import_tensorflow()  # first: rendering in this process (overlays) is then safe next to TensorFlow
+    from data_gen.config import GenerationConfig
+    from data_gen.generator import generate
+    from paz6d.assets.demo_object import OBJECT_ID, write_demo_object
+    from paz6d.training.aae import QUICK, train_aae
+
+    config = QUICK if config is None else config
+    if int(test_images) <= 0:
+        raise ValueError(f"--test-images: expected a positive number of images, got {test_images}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    timings = {}
+    started = time.perf_counter()
+
+    _stage("1/5 demo object")
+    mesh_path = write_demo_object(out / "mesh")
+    print(f"wrote {mesh_path} and {out / 'mesh' / 'models_info.json'}")
+
+    _stage(f"2/5 held-out test images ({test_images}, seed {TEST_SEED})")
+    tick = time.perf_counter()
+    generation = GenerationConfig(meshes=(mesh_path,), output=out / "test_data", num_images=test_images,
+                                  seed=TEST_SEED, split="test", scale=0.001, objects_per_image=(1, 1),
+                                  platform=platform)
+    generate(generation, workers=max(1, workers))
+    timings["test_data_seconds"] = time.perf_counter() - tick
+
+    _stage(f"3/5 training the Augmented Autoencoder ({config.steps} steps, seed {TRAIN_SEED})")
+    tick = time.perf_counter()
+    training = train_aae(mesh_path, out / "model", config, mesh_scale=0.001, seed=TRAIN_SEED, workers=workers,
+                         platform=platform)
+    timings["training_seconds"] = time.perf_counter() - tick
+
+    _stage("4/5 estimating poses from ground-truth boxes")
+    tick = time.perf_counter()
+    targets = _test_targets(out / "test_data")
+    if not targets:
+        raise ValueError(f"{out / 'test_data'}: no test instance is visible enough to evaluate")
+    poses, seconds_per_estimate, estimator = _estimate(out / "model", targets)
+    timings["estimation_seconds"] = time.perf_counter() - tick
+
+    _stage("5/5 scoring and plots")
+    from paz6d.datasets.bop import load_models_info
+
+    with np.load(out / "model" / "object.npz") as data:
+        points = data["vertices"]
+    diameter = load_models_info(out / "mesh" / "models_info.json")[OBJECT_ID].diameter
+    metrics = score(poses, targets, points, diameter)
+    add, rotation = metrics.pop("_add"), metrics.pop("_rotation")
+    _plot_recall(out / "recall_curves.png", add, rotation, diameter)
+    _plot_grid(out / "estimates_grid.png", estimator, targets, poses, mesh_path, grid_rows)
+    timings["total_seconds"] = time.perf_counter() - started
+    report = {"metrics": metrics, "training": training, "seconds_per_estimate": seconds_per_estimate,
+              "timings": timings, "test_images": test_images, "test_seed": TEST_SEED, "train_seed": TRAIN_SEED,
+              "config": config.to_dict(), "cpu_count": os.cpu_count(),
+              "load_average_1min_at_end": os.getloadavg()[0],
+              "targets": {"instances_evaluated": len(targets), "min_visible_fraction": MIN_VISIBLE_FRACTION},
+              "estimates": [{"scene_id": t["scene_id"], "im_id": t["im_id"], "box": list(t["box"]),
+                             "T_est": p.to_matrix().tolist(), "T_gt": t["T_gt"].tolist(),
+                             "add_m": float(a), "rotation_error_deg": float(r)}
+                            for t, p, a, r in zip(targets, poses, add, rotation)],
+              "files": {"model": str(out / "model"), "mesh": str(mesh_path),
+                        "recall_curves": str(out / "recall_curves.png"), "grid": str(out / "estimates_grid.png")}}
+    _write_json(out / "report.json", report)
+    _print_table(report)
+    print(f"\nreport: {out / 'report.json'}; plots: {out / 'recall_curves.png'}, {out / 'estimates_grid.png'}")
+    return report
+
+
+def run(args: argparse.Namespace) -> int:
+    """Runs ``paz6d demo``."""
+    from paz6d.training.aae import QUICK
+
+    config = QUICK
+    if args.steps is not None:
+        if args.steps <= 0:
+            raise ValueError(f"--steps: expected a positive number of steps, got {args.steps}")
+        config = replace(QUICK, steps=args.steps)
+    run_demo(args.out, config, args.test_images, args.workers, args.platform)
+    return 0
