@@ -49,7 +49,7 @@ def image_relative_paths(config: GenerationConfig, index: int, instance_count: i
     """Relative paths (from the output folder) of an image's files, keyed by kind."""
     scene_id, im_id = image_location(index, config.images_per_scene)
     scene = f"{config.split}/{scene_id:06d}"
-    paths = {"rgb": f"{scene}/rgb/{im_id:06d}.png", "depth": f"{scene}/depth/{im_id:06d}.png"}
+    paths = {"rgb": f"{scene}/rgb/{im_id:06d}.{config.rgb_format}", "depth": f"{scene}/depth/{im_id:06d}.png"}
     for instance in range(instance_count):
         paths[f"mask/{instance}"] = f"{scene}/mask/{im_id:06d}_{instance:06d}.png"
         paths[f"mask_visib/{instance}"] = f"{scene}/mask_visib/{im_id:06d}_{instance:06d}.png"
@@ -65,7 +65,8 @@ def write_state(config: GenerationConfig) -> None:
     if path.exists():
         previous = json.loads(path.read_text())
         if previous != fingerprint:
-            changed = sorted(key for key in set(previous) | set(fingerprint) if previous.get(key) != fingerprint.get(key))
+            keys = set(previous) | set(fingerprint)
+            changed = sorted(key for key in keys if previous.get(key) != fingerprint.get(key))
             raise ValueError(f"output: {config.output} holds a data set generated with other settings "
                              f"({', '.join(changed)} differ); use another --out or the same settings to resume")
         return
@@ -139,7 +140,7 @@ def merge_scenes(config: GenerationConfig, object_ids: list[int]) -> list[Path]:
             key = str(shard["im_id"])
             scene_gt[key], scene_camera[key] = shard["scene_gt"], shard["scene_camera"]
             scene_gt_info[key] = shard["scene_gt_info"]
-            coco["images"].append({"id": shard["im_id"], "file_name": f"rgb/{shard['im_id']:06d}.png",
+            coco["images"].append({"id": shard["im_id"], "file_name": f"rgb/{shard['im_id']:06d}.{config.rgb_format}",
                                    "width": config.width, "height": config.height})
             for annotation in shard["coco_annotations"]:
                 coco["annotations"].append({"id": len(coco["annotations"]) + 1, **annotation})

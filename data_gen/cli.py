@@ -43,6 +43,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--images-per-scene", type=int, default=1000)
     parser.add_argument("--crop-size", type=int, default=0, help="also write object crops of this size (0: off)")
     parser.add_argument("--symmetries", type=Path, help="JSON {obj_id: {symmetries_discrete/continuous}}")
+    parser.add_argument("--rgb-format", choices=("png", "jpg"), default="png",
+                        help="rgb images: lossless png or jpg (quality 95, like BOP PBR sets; faster)")
     parser.add_argument("--no-antialias", action="store_true",
                         help="single-sample colour: ~2x faster for scenes without overlapping objects")
     parser.add_argument("--platform", choices=("egl", "osmesa"), help="OpenGL platform (default: auto)")
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         light_count=tuple(args.light_count), color_jitter=args.color_jitter,
         blur_probability=args.blur_probability, noise_std=args.noise, depth_scale=args.depth_scale,
         images_per_scene=args.images_per_scene, crop_size=args.crop_size, symmetries=args.symmetries,
-        antialias=not args.no_antialias, platform=args.platform)
+        rgb_format=args.rgb_format, antialias=not args.no_antialias, platform=args.platform)
     summary = generate(config, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
                        show_progress=not args.quiet)
     print(f"paz6d generate: {summary.images_total} images in {config.output} "

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROTATION_MODES = ("so3", "view-sphere")
+RGB_FORMATS = ("png", "jpg")
 BACKGROUND_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 
 
@@ -65,12 +66,14 @@ class GenerationConfig:
         light_count: ``(min, max)`` number of random lights.
         color_jitter: objects' base colour is multiplied by ``U(1 - j, 1 + j)`` per channel.
         blur_probability: chance of a Gaussian blur of the final image.
-        noise_std: maximum standard deviation (grey levels) of the Gaussian image noise.
+        noise_std: maximum standard deviation (grey levels) of the Gaussian image noise (added
+            to half of the images).
         depth_scale: BOP depth scale: depth PNG value × ``depth_scale`` = millimetres.
         images_per_scene: images per ``<split>/<scene>`` folder.
         crop_size: side in pixels of per-object crops written for autoencoder training (0: off).
         symmetries: JSON file ``{obj_id: {"symmetries_discrete": [...], "symmetries_continuous": [...]}}``
             copied into ``models_info.json`` (BOP units: mm).
+        rgb_format: ``"png"`` (lossless) or ``"jpg"`` (quality 95, as BOP's PBR sets; faster).
         antialias: 4× multisampled colour (slower; off: one render pass per image without overlaps).
         platform: OpenGL platform for the renderers (``egl``/``osmesa``/auto).
     """
@@ -100,6 +103,7 @@ class GenerationConfig:
     images_per_scene: int = 1000
     crop_size: int = 0
     symmetries: Path | None = None
+    rgb_format: str = "png"
     antialias: bool = True
     platform: str | None = None
 
@@ -128,6 +132,8 @@ class GenerationConfig:
             _range(self.distance, "distance")
             if self.distance[0] <= 0:
                 raise ValueError(f"distance: expected a positive range in metres, got {tuple(self.distance)}")
+        if self.rgb_format not in RGB_FORMATS:
+            raise ValueError(f"rgb_format: expected one of {RGB_FORMATS}, got {self.rgb_format!r}")
         if self.rotation not in ROTATION_MODES:
             raise ValueError(f"rotation: expected one of {ROTATION_MODES}, got {self.rotation!r}")
         if not 0 <= self.inplane_degrees <= 180:

@@ -13,6 +13,7 @@ import numpy as np
 TEMPORARY_PREFIX = ".paz6d-tmp-"
 #: zlib level 1: several times faster than the default at ~10 % larger files; output is deterministic.
 PNG_PARAMETERS = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+JPEG_PARAMETERS = [cv2.IMWRITE_JPEG_QUALITY, 95]
 
 
 def write_bytes_atomically(path: Path, data: bytes) -> None:
@@ -37,15 +38,17 @@ def write_json_atomically(path: Path, data) -> None:
     write_bytes_atomically(path, json_bytes(data))
 
 
-def png_bytes(image: np.ndarray) -> bytes:
-    """PNG encoding of uint8 RGB ``(H, W, 3)``, uint8/uint16 ``(H, W)`` or bool ``(H, W)`` (as {0, 255})."""
+def image_bytes(image: np.ndarray, image_format: str = "png") -> bytes:
+    """``png`` or ``jpg`` encoding of uint8 RGB ``(H, W, 3)``, uint8/uint16 ``(H, W)`` or bool
+    ``(H, W)`` (written as {0, 255})."""
     if image.dtype == bool:
         image = image.astype(np.uint8) * 255
     elif image.ndim == 3:
         image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
-    ok, encoded = cv2.imencode(".png", image, PNG_PARAMETERS)
+    parameters = PNG_PARAMETERS if image_format == "png" else JPEG_PARAMETERS
+    ok, encoded = cv2.imencode("." + image_format, image, parameters)
     if not ok:
-        raise ValueError(f"image: OpenCV could not encode a {image.dtype} {image.shape} array as PNG")
+        raise ValueError(f"image: OpenCV could not encode a {image.dtype} {image.shape} array as {image_format}")
     return encoded.tobytes()
 
 

@@ -10,10 +10,10 @@ import numpy as np
 from data_gen import bop_writer
 from data_gen.assets import ZNEAR, load_assets
 from data_gen.config import GenerationConfig
-from data_gen.files import png_bytes, write_bytes_atomically
-from data_gen.randomization import background_image, degrade, random_colors, random_lighting, random_tints
+from data_gen.files import image_bytes, write_bytes_atomically
+from data_gen.randomization import (background_image, composite, degrade, random_colors, random_lighting,
+                                    random_tints)
 from data_gen.scene import sample_scene
-from paz6d.backend.image import alpha_blend
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, square_window
 
 CROP_MARGIN = 1.2
@@ -66,7 +66,7 @@ class ImageProducer:
         out = self.renderer.render(self.K, objects, lighting=lighting, tints=tints,
                                    masked_objects=len(scene.object_indices))
         background = background_image(generator, assets.backgrounds, config.width, config.height)
-        rgb = degrade(generator, alpha_blend(out.rgb, out.alpha, background), config)
+        rgb = degrade(generator, composite(out.rgb, out.alpha, background), config)
         depth_png = np.round(out.depth * (1000.0 / config.depth_scale))
         return RenderedImage(index, rgb, np.minimum(depth_png, 65535).astype(np.uint16), out.masks,
                              out.visible_masks, [assets.object_ids[i] for i in scene.object_indices], scene.poses)
@@ -76,19 +76,20 @@ class ImageProducer:
         which marks the image as complete, comes last."""
         config = self.config
         paths = bop_writer.image_relative_paths(config, image.index, len(image.object_ids))
-        files = {paths["rgb"]: png_bytes(image.rgb), paths["depth"]: png_bytes(image.depth_png)}
+        files = {paths["rgb"]: image_bytes(image.rgb, config.rgb_format),
+                 paths["depth"]: image_bytes(image.depth_png)}
         depth_valid = image.depth_png > 0
         infos, crops = [], []
         for instance, (full, visible) in enumerate(zip(image.masks, image.visible_masks)):
-            files[paths[f"mask/{instance}"]] = png_bytes(full)
-            files[paths[f"mask_visib/{instance}"]] = png_bytes(visible)
+            files[paths[f"mask/{instance}"]] = image_bytes(full)
+            files[paths[f"mask_visib/{instance}"]] = image_bytes(visible)
             info = bop_writer.instance_annotations(visible, full, depth_valid)
             infos.append(info)
             if config.crop_size and info["px_count_visib"] > 0:
                 x, y, w, h = info["bbox_obj"]
                 window = square_window((x, y, x + w, y + h), margin=CROP_MARGIN)
-                files[paths[f"crop_rgb/{instance}"]] = png_bytes(crop_square(image.rgb, window, config.crop_size))
-                files[paths[f"crop_mask/{instance}"]] = png_bytes(
+                files[paths[f"crop_rgb/{instance}"]] = image_bytes(crop_square(image.rgb, window, config.crop_size))
+                files[paths[f"crop_mask/{instance}"]] = image_bytes(
                     crop_square(full.astype(np.uint8) * 255, window, config.crop_size) > 127)
                 pose = image.poses[instance]
                 crops.append({"inst_id": instance, "obj_id": image.object_ids[instance], "window": list(window),

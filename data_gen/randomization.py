@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from data_gen.config import GenerationConfig
-from paz6d.backend.image import add_gaussian_noise, gaussian_blur, load_image
+from paz6d.backend.image import gaussian_blur, load_image
 from renderers import Light, Lighting
 
 
@@ -48,21 +48,36 @@ def random_colors(generator: np.random.Generator, count: int) -> np.ndarray:
 
 
 def procedural_background(generator: np.random.Generator, width: int, height: int) -> np.ndarray:
-    """``(H, W, 3)`` uint8 multi-octave value noise mixed between random colours."""
-    field = np.zeros((height, width), dtype=np.float32)
+    """``(H, W, 3)`` uint8 multi-octave value noise mixed between random colours, sometimes
+    with stripes (made at half resolution, then enlarged: the pattern is smooth anyway)."""
+    low_width, low_height = max(1, (width + 1) // 2), max(1, (height + 1) // 2)
+    field = np.zeros((low_height, low_width), dtype=np.float32)
     for octave, cells in enumerate((2, 4, 8, 32)):
-        grid = generator.random((cells + 1, cells + 1)).astype(np.float32)
-        field += cv2.resize(grid, (width, height), interpolation=cv2.INTER_CUBIC) / (octave + 1)
+        grid = generator.random((cells + 1, cells + 1), dtype=np.float32)
+        field += cv2.resize(grid, (low_width, low_height), interpolation=cv2.INTER_CUBIC) / (octave + 1)
     field = (field - field.min()) / max(float(field.max() - field.min()), 1e-6)
-    low, high = generator.uniform(0, 255, 3), generator.uniform(0, 255, 3)
+    low, high = generator.uniform(0, 255, 3).astype(np.float32), generator.uniform(0, 255, 3).astype(np.float32)
     image = low + field[..., None] * (high - low)
-    if generator.random() < 0.5:  # stripes or checks add edges, as real clutter does
-        period = generator.uniform(8, 64)
+    if generator.random() < 0.5:  # stripes add edges, as real clutter does
+        period = np.float32(generator.uniform(4, 32))
         angle = generator.uniform(0, np.pi)
-        rows, columns = np.mgrid[0:height, 0:width]
-        stripes = np.sin((columns * np.cos(angle) + rows * np.sin(angle)) * 2 * np.pi / period) > 0
-        image = np.where(stripes[..., None], image, 255 - image)
-    return np.clip(image, 0, 255).astype(np.uint8)
+        columns = np.arange(low_width, dtype=np.float32) * np.float32(np.cos(angle))
+        rows = np.arange(low_height, dtype=np.float32) * np.float32(np.sin(angle))
+        stripes = np.sin((columns[None, :] + rows[:, None]) * np.float32(2 * np.pi) / period) > 0
+        image = np.where(stripes[..., None], image, np.float32(255) - image)
+    image = np.clip(image, 0, 255).astype(np.uint8)
+    return cv2.resize(image, (width, height), interpolation=cv2.INTER_LINEAR)
+
+
+def composite(foreground: np.ndarray, alpha: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """``alpha`` (uint8, 255 = opaque) blend of uint8 RGB images, computed only where ``alpha > 0``
+    (the same result as :func:`paz6d.backend.image.alpha_blend` up to rounding, several times faster)."""
+    image = background.copy()
+    covered = alpha > 0
+    weight = alpha[covered].astype(np.uint16)[:, None]
+    blended = (foreground[covered].astype(np.uint16) * weight + background[covered] * (255 - weight) + 127) // 255
+    image[covered] = blended.astype(np.uint8)
+    return image
 
 
 def background_image(generator: np.random.Generator, files: list[Path], width: int, height: int) -> np.ndarray:
@@ -82,9 +97,12 @@ def background_image(generator: np.random.Generator, files: list[Path], width: i
 
 
 def degrade(generator: np.random.Generator, image: np.ndarray, config: GenerationConfig) -> np.ndarray:
-    """Random Gaussian blur (with ``blur_probability``) then Gaussian noise up to ``noise_std``."""
+    """Random Gaussian blur (with ``blur_probability``) then, for half of the images, Gaussian
+    noise up to ``noise_std`` grey levels (float32 draws: far finer than a grey level)."""
     if generator.random() < config.blur_probability:
         image = gaussian_blur(image, 5, sigma=float(generator.uniform(0.4, 1.2)))
-    if config.noise_std > 0:
-        image = add_gaussian_noise(image, float(generator.uniform(0, config.noise_std)), seed=generator)
+    if config.noise_std > 0 and generator.random() < 0.5:
+        std = np.float32(generator.uniform(0, config.noise_std))
+        noise = generator.standard_normal(image.shape, dtype=np.float32) * std
+        image = np.clip(image + noise, 0, 255).astype(np.uint8)
     return image

@@ -297,3 +297,29 @@ def test_procedural_backgrounds_are_seeded_and_varied():
     np.testing.assert_array_equal(first, procedural_background(np.random.default_rng(1), 64, 48))
     assert not np.array_equal(first, procedural_background(np.random.default_rng(2), 64, 48))
     assert first.std() > 5
+
+
+def test_jpg_rgb_is_read_back_and_listed_in_coco(lmo_meshes, tmp_path):
+    config = tiny_config(lmo_meshes, tmp_path / "jpg", num_images=1, rgb_format="jpg", crop_size=0)
+    generate(config, show_progress=False)
+    folder = config.output / "train" / "000000"
+    assert (folder / "rgb" / "000000.jpg").is_file() and not (folder / "rgb" / "000000.png").exists()
+    sample = next(iter(BOPDataset(config.output, split="train")))
+    assert sample.image.shape == (72, 96, 3)
+    coco = json.loads((folder / "scene_gt_coco.json").read_text())
+    assert coco["images"][0]["file_name"] == "rgb/000000.jpg"
+
+
+def test_composite_matches_the_backend_alpha_blend():
+    from data_gen.randomization import composite
+    from paz6d.backend.image import alpha_blend
+
+    generator = np.random.default_rng(0)
+    foreground, background = generator.integers(0, 256, (2, 30, 40, 3), dtype=np.uint8)
+    alpha = generator.integers(0, 256, (30, 40), dtype=np.uint8)
+    alpha[:10] = 0
+    alpha[10:20] = 255
+    result = composite(foreground, alpha, background)
+    np.testing.assert_array_equal(result[:10], background[:10])
+    np.testing.assert_array_equal(result[10:20], foreground[10:20])
+    assert np.abs(result.astype(int) - alpha_blend(foreground, alpha, background).astype(int)).max() <= 1

@@ -89,7 +89,8 @@ def test_scene_camera_and_gt_info_parsers(lmo):
 @pytest.mark.parametrize("content, pattern", [
     ("{not json", "scene_gt.json: invalid JSON"),
     ('{"a": []}', "key 'a' is not an image id"),
-    ('{"3": [{"cam_R_m2c": [1, 0, 0, 0, 1, 0, 0, 0, 1], "obj_id": 1}]}', "image 3, instance 0: missing field 'cam_t_m2c'"),
+    ('{"3": [{"cam_R_m2c": [1, 0, 0, 0, 1, 0, 0, 0, 1], "obj_id": 1}]}',
+     "image 3, instance 0: missing field 'cam_t_m2c'"),
     ('{"3": [{"cam_R_m2c": [1, 0, 0], "cam_t_m2c": [0, 0, 1], "obj_id": 1}]}', "field 'cam_R_m2c' must hold 9"),
     ('{"3": [{"cam_R_m2c": [1, 0, 0, 0, 2, 0, 0, 0, 1], "cam_t_m2c": [0, 0, 1], "obj_id": 1}]}',
      "image 3, instance 0: not a rotation matrix"),

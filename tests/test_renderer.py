@@ -356,3 +356,15 @@ def test_single_sample_mode_gives_the_same_depth_and_masks(renderer, ape, layout
         assert ((reference.alpha > 0) & (reference.alpha < 255)).any()
     if layout == "overlapping":
         assert (out.visible_masks[1] != out.masks[1]).any()
+
+
+def test_masks_only_for_the_first_objects_with_the_rest_occluding(renderer):
+    front, back = square(0.04), square(0.1)
+    T_front, T_back = pose([0, 0, 0], [0.01, 0.0, 0.4]), pose([0, 0, 0], [0.0, 0.0, 0.5])
+    everything = renderer.render(K_128, [(back, T_back), (front, T_front)])
+    first_only = renderer.render(K_128, [(back, T_back), (front, T_front)], masked_objects=1)
+    assert first_only.masks.shape == (1, 128, 128)
+    np.testing.assert_array_equal(first_only.masks[0], everything.masks[0])
+    np.testing.assert_array_equal(first_only.visible_masks[0], everything.visible_masks[0])
+    with pytest.raises(ValueError, match="masked_objects"):
+        renderer.render(K_128, [(back, T_back)], masked_objects=2)
