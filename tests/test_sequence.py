@@ -178,6 +178,7 @@ def test_keras_fit_with_thread_workers_sees_each_epochs_batches(keras):
     assert sequence.epoch == 2
 
 
+@pytest.mark.timeout(300)  # forked workers must never hang the suite
 def test_keras_fit_with_worker_processes(keras):
     from paz6d.abstract.sequence import ProcessingSequence
 
