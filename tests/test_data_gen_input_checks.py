@@ -106,3 +106,19 @@ def test_other_settings_in_an_existing_output_are_refused(tmp_path, cube):
     with pytest.raises(ValueError, match="other settings \\(seed differ"):
         run_cli(*arguments, "--seed", "5")
     assert np.asarray(sorted(p.name for p in (out / "train" / "000000" / "rgb").iterdir())).tolist() == ["000000.png"]
+
+
+def test_paz6d_generate_command_prints_a_summary_and_exits_2_on_bad_input(tmp_path, cube, capsys):
+    from paz6d.cli import main
+
+    out = tmp_path / "cli"
+    assert main(["generate", "--mesh", str(cube), "--out", str(out), "--num-images", "2", "--width", "32",
+                 "--height", "24", "--quiet"]) == 0
+    summary = capsys.readouterr().out
+    assert "2 images" in summary and "2 rendered, 0 already done" in summary and "images/s" in summary
+    assert main(["generate", "--mesh", str(cube), "--out", str(out), "--num-images", "2", "--width", "32",
+                 "--height", "24", "--quiet"]) == 0
+    assert "0 rendered, 2 already done" in capsys.readouterr().out
+    assert main(["generate", "--mesh", str(tmp_path / "nope.ply"), "--out", str(tmp_path / "x"),
+                 "--num-images", "1"]) == 2
+    assert "nope.ply: mesh file not found" in capsys.readouterr().err
