@@ -6,7 +6,8 @@ For each image size it measures, in one process and run:
   nothing written (the floor any generator built on pyrender pays);
 * generator, 1 worker, steady state: the ``generate`` code path (sampling, randomization,
   rendering, masks, BOP + COCO annotation, PNG writing) after start-up;
-* generator end to end with 1 and 2 worker processes (start-up included), for the speed-up.
+* generator end to end with 1 and 2 worker processes: with start-up ("e2e") and once all
+  workers run ("run", from the shard files' finishing times), for the 2-worker speed-up.
 
 Usage: ``.venv/bin/python benchmarks/generate.py [--images-small 200] [--images-large 40]``.
 Needs the LM-O meshes in ``../shared/data`` (or pass ``--mesh``).
@@ -73,9 +74,15 @@ def generator_steady(config: GenerationConfig, producer: ImageProducer, count: i
     return count / (time.perf_counter() - started)
 
 
-def end_to_end(config: GenerationConfig, workers: int) -> float:
+def end_to_end(config: GenerationConfig, workers: int) -> tuple[float, float]:
+    """``(views/s including start-up, views/s once every worker runs)``; the second comes from
+    the finishing times of the images' shard files, skipping each worker's first two images."""
     summary = generate(config, workers=workers, show_progress=False)
-    return summary.images_rendered / summary.seconds
+    shards = config.output / ".paz6d-generate" / "shards"
+    finished = sorted(path.stat().st_mtime for path in shards.rglob("*.json"))
+    skip = 2 * workers
+    running = (len(finished) - skip) / (finished[-1] - finished[skip - 1])
+    return summary.images_rendered / summary.seconds, running
 
 
 def measure(meshes: list[Path], width: int, height: int, count: int, antialias: bool, workdir: Path) -> dict:
@@ -87,9 +94,10 @@ def measure(meshes: list[Path], width: int, height: int, count: int, antialias: 
     bare, bare_renderer = bare_loop(config, producer, count)
     producer.close()
     bare_renderer.delete()
-    one = end_to_end(dataclasses.replace(config, output=workdir / "one"), 1)
-    two = end_to_end(dataclasses.replace(config, output=workdir / "two"), 2)
-    return {"bare": bare, "steady": steady, "one": one, "two": two}
+    one, one_running = end_to_end(dataclasses.replace(config, output=workdir / "one"), 1)
+    two, two_running = end_to_end(dataclasses.replace(config, output=workdir / "two"), 2)
+    return {"bare": bare, "steady": steady, "one": one, "two": two, "one_running": one_running,
+            "two_running": two_running}
 
 
 def main() -> int:
@@ -107,7 +115,7 @@ def main() -> int:
     platform = select_platform(args.platform)
     print(f"platform {platform}; one annotated object per image, no distractors; views/s")
     print(f"{'size':>8} {'antialias':>9} {'bare loop':>10} {'gen 1w':>8} {'ratio':>6} "
-          f"{'e2e 1w':>7} {'e2e 2w':>7} {'2w/1w':>6}")
+          f"{'e2e 1w':>7} {'e2e 2w':>7} {'2w/1w':>6} {'run 1w':>7} {'run 2w':>7} {'2w/1w':>6}")
     for (width, height), count in (((640, 480), args.images_large), ((128, 128), args.images_small)):
         for antialias in (True, False):
             workdir = Path(tempfile.mkdtemp(prefix="paz6d-bench-"))
@@ -117,7 +125,8 @@ def main() -> int:
                 shutil.rmtree(workdir, ignore_errors=True)
             print(f"{width}x{height:<4} {str(antialias):>9} {result['bare']:10.1f} {result['steady']:8.1f} "
                   f"{result['steady'] / result['bare']:6.2f} {result['one']:7.1f} {result['two']:7.1f} "
-                  f"{result['two'] / result['one']:6.2f}", flush=True)
+                  f"{result['two'] / result['one']:6.2f} {result['one_running']:7.1f} {result['two_running']:7.1f} "
+                  f"{result['two_running'] / result['one_running']:6.2f}", flush=True)
     return 0
 
 

@@ -7,6 +7,9 @@ Per frame it makes at most three kinds of pass on one reused GL context:
    (the colour pass' depth is resolved from one MSAA sample, up to half a pixel off-centre);
 3. one instance pass per object whose projected bounding box overlaps another object's, for its
    full (unoccluded) mask; an object that overlaps nothing has full mask == visible mask.
+
+Without anti-aliasing (``antialias=False``, or OSMesa) the colour pass is single-sample, so its
+depth is exact and pass 2 is needed only when boxes overlap.
 """
 
 from __future__ import annotations
