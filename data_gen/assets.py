@@ -11,6 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import trimesh
+from scipy.spatial import ConvexHull, QhullError
 
 from data_gen.config import GenerationConfig, list_backgrounds
 from paz6d.backend.mesh import MeshError, diameter, load_mesh
@@ -31,8 +32,10 @@ class Assets:
         centres: ``(M, 3)`` bounding-box centres of the meshes (model frame, metres).
         radii: ``(M,)`` radius of the bounding sphere about ``centres`` (metres).
         diameters: ``(M,)`` largest vertex distance (metres).
+        outlines: convex-hull vertices of each mesh (a mesh is inside the image iff they are).
         distractors: unannotated primitives (white vertex colours; tinted when rendered).
         distractor_radii: their bounding-sphere radii (metres, centred at the origin).
+        distractor_outlines: their convex-hull vertices.
         backgrounds: background image files (empty: procedural backgrounds).
         distance: ``(min, max)`` distance range (metres) in which every object fits the image.
         symmetries: ``{obj_id: {field: value}}`` for ``models_info.json``.
@@ -43,11 +46,21 @@ class Assets:
     centres: np.ndarray
     radii: np.ndarray
     diameters: np.ndarray
+    outlines: list[np.ndarray]
     distractors: list[trimesh.Trimesh]
     distractor_radii: np.ndarray
+    distractor_outlines: list[np.ndarray]
     backgrounds: list[Path]
     distance: tuple[float, float]
     symmetries: dict[int, dict]
+
+
+def hull_vertices(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Vertices of the convex hull of ``mesh`` (all vertices when the hull is degenerate)."""
+    try:
+        return mesh.vertices[ConvexHull(mesh.vertices).vertices]
+    except QhullError:
+        return np.asarray(mesh.vertices)
 
 
 def object_ids_for(paths) -> list[int]:
@@ -162,5 +175,6 @@ def load_assets(config: GenerationConfig) -> Assets:
         config.occluder_probability > 0 else []
     distractor_radii = np.array([np.linalg.norm(mesh.vertices, axis=1).max() for mesh in distractors])
     backgrounds = check_backgrounds(config.backgrounds) if config.backgrounds is not None else []
-    return Assets(meshes, object_ids, centres, radii, diameters, distractors, distractor_radii, backgrounds,
+    return Assets(meshes, object_ids, centres, radii, diameters, [hull_vertices(mesh) for mesh in meshes],
+                  distractors, distractor_radii, [hull_vertices(mesh) for mesh in distractors], backgrounds,
                   _distance_range(config, radii, diameters), _load_symmetries(config.symmetries, object_ids))

@@ -16,7 +16,7 @@ from typing import Callable, Iterable
 from tqdm import tqdm
 
 from data_gen import bop_writer
-from data_gen.assets import load_assets
+from data_gen.assets import Assets, load_assets
 from data_gen.config import GenerationConfig, check_output_writable
 from data_gen.files import remove_stale_temporaries
 
@@ -77,11 +77,11 @@ def _chunks(indices: list[int], size: int) -> list[list[int]]:
     return [indices[start:start + size] for start in range(0, len(indices), size)]
 
 
-def _run_local(config: GenerationConfig, pending: list[int], workers: int, progress: tqdm) -> int:
+def _run_local(config: GenerationConfig, assets: Assets, pending: list[int], workers: int, progress: tqdm) -> int:
     if workers == 1:
         from data_gen.producer import ImageProducer
 
-        producer = ImageProducer(config)
+        producer = ImageProducer(config, assets)
         try:
             return render_indices(producer, pending, config.output, progress.update)
         finally:
@@ -129,7 +129,7 @@ def generate(config: GenerationConfig, workers: int = 1, backend: str = "local",
     with tqdm(total=config.num_images, initial=config.num_images - len(pending), unit="img",
               desc="paz6d generate", disable=not show_progress) as progress:
         if pending and backend == "local":
-            written += _run_local(config, pending, int(workers), progress)
+            written += _run_local(config, assets, pending, int(workers), progress)
         elif pending:
             from data_gen.ray_backend import run_with_ray
 

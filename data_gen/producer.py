@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from data_gen import bop_writer
-from data_gen.assets import ZNEAR, load_assets
+from data_gen.assets import ZNEAR, Assets, load_assets
 from data_gen.config import GenerationConfig
 from data_gen.files import image_bytes, write_bytes_atomically
 from data_gen.randomization import (background_image, composite, degrade, random_colors, random_lighting,
@@ -38,13 +38,14 @@ class RenderedImage:
 
 
 class ImageProducer:
-    """Owns the assets and one :class:`renderers.Renderer` (one GL context) of a worker."""
+    """Owns the assets (loaded here unless given) and one :class:`renderers.Renderer` (one GL
+    context) of a worker."""
 
-    def __init__(self, config: GenerationConfig):
+    def __init__(self, config: GenerationConfig, assets: Assets | None = None):
         from renderers import Renderer  # GL is loaded only where images are made
 
         self.config = config
-        self.assets = load_assets(config)
+        self.assets = assets if assets is not None else load_assets(config)
         self.K = np.asarray(config.K)
         zfar = 2.0 * (self.assets.distance[1] + float(self.assets.radii.max()))
         self.renderer = Renderer(config.width, config.height, platform=config.platform, znear=ZNEAR, zfar=zfar,

@@ -91,7 +91,7 @@ def sample_scene(generator: np.random.Generator, assets: Assets, config: Generat
     object_indices, poses = [], []
     for index in candidates.tolist():
         rotation = random_rotation(generator, config)
-        outline = assets.meshes[index].bounding_box_oriented.vertices
+        outline = assets.outlines[index]
         translation = _place(generator, rotation, assets.centres[index], assets.radii[index], outline, K, config,
                              assets.distance, placed)
         if translation is None and not object_indices:
@@ -107,7 +107,7 @@ def sample_scene(generator: np.random.Generator, assets: Assets, config: Generat
         for _ in range(int(generator.integers(0, config.distractors + 1))):
             choice = int(generator.integers(len(assets.distractors)))
             rotation = quaternion.to_rotation_matrix(quaternion.random(seed=generator))
-            outline = assets.distractors[choice].bounding_box_oriented.vertices
+            outline = assets.distractor_outlines[choice]
             translation = _place(generator, rotation, np.zeros(3), assets.distractor_radii[choice], outline, K,
                                  config, assets.distance, placed)
             if translation is not None:

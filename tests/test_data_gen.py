@@ -95,10 +95,11 @@ def test_masks_depth_and_gt_info_agree(generated, lmo_meshes):
             z_low, z_high = posed.vertices[:, 2].min(), posed.vertices[:, 2].max()
             visible_depth = sample.depth[obj.mask_visib]
             assert np.all(visible_depth >= z_low - 1e-3) and np.all(visible_depth <= z_high + 1e-3)
-            # Projected vertices fall in the full mask (within one pixel at the outline).
+            # Projected vertices fall in the full mask, or one pixel off it at the outline of
+            # these tiny objects.
             pixels = np.round(transform_and_project(meshes[obj.obj_id].vertices, obj.T_model2cam, sample.K))
-            inside = obj.mask[pixels[:, 1].astype(int), pixels[:, 0].astype(int)]
-            assert inside.mean() > 0.8
+            grown = cv2.dilate(obj.mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+            assert grown[pixels[:, 1].astype(int), pixels[:, 0].astype(int)].all()
 
 
 def test_depth_png_uses_depth_scale(generated):
