@@ -127,8 +127,8 @@ def read_pose_results(path: str | Path, object_ids=None, image_ids=None, skip_in
         reader = csv.reader(file)
         header = next(reader, None)
         if header is None or tuple(field.strip() for field in header) != HEADER:
-            raise ValueError(f"{path}:1: expected the header {','.join(HEADER)}, got "
-                             f"{'an empty file' if header is None else ','.join(header)!r}")
+            found = "an empty file" if header is None else repr(",".join(header))
+            raise ValueError(f"{path}:1: expected the header {','.join(HEADER)}, got {found}")
         for row in reader:
             if not row or all(not field.strip() for field in row):
                 continue

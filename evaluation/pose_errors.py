@@ -37,6 +37,8 @@ MAX_SYMMETRY_STEP = 0.01
 #: stored in BOP ground truth (LM-O scene 2 reaches 0.0094), tight enough to reject scaled,
 #: sheared or reflected matrices. Errors are computed with the matrices as given, as BOP does.
 ROTATION_TOLERANCE = 0.05
+#: ``max |R^T R - I|`` below which an estimated rotation is treated as exactly orthonormal by ADI.
+ORTHONORMAL_TO_MACHINE = 1e-12
 
 
 def as_pose_batch(T, name: str) -> np.ndarray:
@@ -134,7 +136,8 @@ def adi_error(T_est, T_gt, points, tree: cKDTree | None = None, workers: int = 1
 
     Rigid motions preserve distances, so every query is mapped into the model frame of the
     estimate, ``x -> R_est^T (R_gt x + t_gt - t_est)``, and answered by one KD-tree on the model
-    points built once per object.
+    points built once per object. An estimate whose rotation is not orthonormal to 1e-12 (where
+    that mapping would not preserve distances) gets its own KD-tree on its posed points instead.
 
     Args:
         T_est: ``(E, 4, 4)`` or ``(4, 4)`` estimated ``T_model2cam``.
@@ -152,28 +155,32 @@ def adi_error(T_est, T_gt, points, tree: cKDTree | None = None, workers: int = 1
     R_est_inverse = np.swapaxes(T_est[:, :3, :3], -1, -2)
     A = R_est_inverse @ T_gt[:, :3, :3]
     b = np.einsum("eij,ej->ei", R_est_inverse, T_gt[:, :3, 3] - T_est[:, :3, 3])
+    orthonormal = np.abs(R_est_inverse @ T_est[:, :3, :3] - np.eye(3)).max(axis=(1, 2)) <= ORTHONORMAL_TO_MACHINE
     errors = np.empty(len(T_est))
-    for part in _chunks(len(T_est), len(points)):
-        queries = _transform(A[part], b[part], points)
+    rigid = np.flatnonzero(orthonormal)
+    for part in _chunks(len(rigid), len(points)):
+        rows = rigid[part]
+        queries = _transform(A[rows], b[rows], points)
         distances, _ = tree.query(queries.reshape(-1, 3), k=1, workers=workers)
-        errors[part] = distances.reshape(len(queries), len(points)).mean(axis=-1)
+        errors[rows] = distances.reshape(len(rows), len(points)).mean(axis=-1)
+    for row in np.flatnonzero(~orthonormal):
+        posed_est = _transform(T_est[row, :3, :3], T_est[row, :3, 3], points)
+        posed_gt = _transform(T_gt[row, :3, :3], T_gt[row, :3, 3], points)
+        errors[row] = cKDTree(posed_est).query(posed_gt, k=1, workers=workers)[0].mean()
     return errors
 
 
 def rotation_error_deg(R_est, R_gt) -> np.ndarray:
-    """Angle of ``R_est R_gt^T`` in degrees, ``(...)``, from ``(..., 3, 3)`` rotations.
+    """Rotation error in degrees, ``(...)``, from ``(..., 3, 3)`` matrices, as BOP defines it:
+    ``acos((trace(R_est R_gt^-1) - 1) / 2)`` with the cosine clipped to [-1, 1].
 
-    ``atan2(sin, cos)`` of the relative rotation: accurate near 0 and 180 degrees, where the
-    ``acos((trace - 1) / 2)`` form used by BOP loses digits.
+    ``R_gt^-1`` is the matrix inverse, not the transpose, because BOP ground-truth rotations are
+    rounded (not exactly orthonormal). ``acos`` limits the resolution near 0 to about 1e-6 deg.
     """
     R_est = as_array(R_est, "R_est", (3, 3))
     R_gt = as_array(R_gt, "R_gt", (3, 3))
-    relative = R_est @ np.swapaxes(R_gt, -1, -2)
-    cosine = (np.trace(relative, axis1=-2, axis2=-1) - 1.0) / 2.0
-    skew = np.stack([relative[..., 2, 1] - relative[..., 1, 2], relative[..., 0, 2] - relative[..., 2, 0],
-                     relative[..., 1, 0] - relative[..., 0, 1]], axis=-1)
-    sine = np.linalg.norm(skew, axis=-1) / 2.0
-    return np.degrees(np.arctan2(sine, cosine))
+    cosine = (np.trace(R_est @ np.linalg.inv(R_gt), axis1=-2, axis2=-1) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
 
 
 def translation_error(t_est, t_gt) -> np.ndarray:
