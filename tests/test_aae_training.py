@@ -195,3 +195,34 @@ def test_icp_refinement_with_depth_recovers_the_pose(toy_run):
     assert angle < 1.5 and np.linalg.norm(refined.translation - T_true[:3, 3]) < 0.002
     full = estimator(output.rgb, box, depth=output.depth)  # whole path: codebook guess, then ICP
     assert isinstance(full, Pose6D)
+
+
+def test_training_from_a_generated_data_set(toy_run, tmp_path):
+    """--dataset: inputs are crops of the data set's images, targets clean renderings through the same
+    crop windows; they line up with the data generator's own crops of the full masks."""
+    from data_gen.config import GenerationConfig
+    from data_gen.generator import generate
+    from paz6d.backend.image import load_image
+    from paz6d.training.aae_views import mask_box
+
+    root, mesh, _ = toy_run
+    data = tmp_path / "data"
+    generate(GenerationConfig(meshes=(mesh,), output=data, num_images=3, seed=5, scale=0.001, objects_per_image=(1, 1),
+                              crop_size=TOY.crop_size), workers=1, show_progress=False)
+    summary = train_aae(mesh, tmp_path / "run", replace(TOY, steps=10), mesh_scale=0.001, workers=0, progress=False,
+                        dataset=data, object_id=1)
+    pairs = np.load(tmp_path / "run" / "pairs.npz")
+    assert summary["dataset_pairs"] == len(pairs["inputs"]) >= 1
+    scene = next(data.glob("train/*"))
+    crops = json.loads((scene / "crops.json").read_text())
+    kept = [(int(key), entry) for key, entries in sorted(crops.items(), key=lambda item: int(item[0]))
+            for entry in entries if entry["visib_fract"] >= 0.1]
+    assert len(kept) == len(pairs["inputs"])
+    for index, (im_id, entry) in enumerate(kept):
+        name = f"{im_id:06d}_{entry['inst_id']:06d}.png"
+        np.testing.assert_array_equal(pairs["inputs"][index], load_image(scene / "crop_rgb" / name))  # data_gen's crop
+        mask = load_image(scene / "crop_mask" / name, grayscale=True)
+        target_mask = (pairs["targets"][index].max(axis=-1) > 0).astype(np.uint8) * 255
+        np.testing.assert_allclose(mask_box(target_mask), mask_box(mask), atol=1.0)  # the target sits on the object
+    with pytest.raises(ValueError, match="--dataset"):
+        train_aae(mesh, tmp_path / "run", TOY, mesh_scale=0.001, workers=0, progress=False)

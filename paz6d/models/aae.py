@@ -20,9 +20,9 @@ import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
-import cv2
 import numpy as np
 
+from paz6d.backend.square_crop import crop_square, square_window
 from paz6d.backend.tensorflow_guard import import_keras
 
 ENCODER_NAME = "encoder"
@@ -177,19 +177,12 @@ def load_model(path: str | Path):
         raise ValueError(f"{path}: could not load the .keras model ({type(error).__name__}: {error})") from error
 
 
-def crop_box(box, padding: float) -> tuple[float, float, float]:
-    """Square crop region of an object box ``(x_min, y_min, x_max, y_max)`` (pixels, box convention):
-    returns ``(centre_x, centre_y, side)`` with ``side = padding * max(width, height)``."""
-    x_min, y_min, x_max, y_max = (float(v) for v in box)
-    side = padding * max(x_max - x_min, y_max - y_min)
-    return 0.5 * (x_min + x_max), 0.5 * (y_min + y_max), side
-
-
 def crop_object(image: np.ndarray, box, size: int, padding: float = 1.2) -> np.ndarray:
-    """Square crop around ``box`` resized to ``(size, size, C)``, zero outside the image.
+    """Square crop around ``box`` resized to ``(size, size[, C])``, zero outside the image.
 
-    Sub-pixel accurate (one affine resampling); when shrinking by more than 1.3× the region is
-    smoothed first (Gaussian, sigma ~ 0.4 × shrink factor) to avoid aliasing.
+    The window is :func:`paz6d.backend.square_crop.square_window` (side ``padding * max(w, h)``, integer
+    corner) resampled by :func:`paz6d.backend.square_crop.crop_square`: the same crops ``paz6d generate
+    --crop-size`` writes (its margin is also 1.2).
 
     Args:
         image: ``(H, W, C)`` uint8 (RGB, or RGB + alpha).
@@ -197,25 +190,4 @@ def crop_object(image: np.ndarray, box, size: int, padding: float = 1.2) -> np.n
         size: output side in pixels.
         padding: crop side / longest box side.
     """
-    centre_x, centre_y, side = crop_box(box, padding)
-    if side <= 0:
-        raise ValueError(f"box: expected a box with positive width or height, got {list(box)}")
-    scale = size / side
-    x0, y0 = centre_x - 0.5 * side, centre_y - 0.5 * side  # box-convention corner of the square
-    shrink = 1.0 / scale
-    if shrink > 1.3:
-        margin = int(np.ceil(3 * 0.4 * shrink)) + 1
-        left, top = max(int(np.floor(x0)) - margin, 0), max(int(np.floor(y0)) - margin, 0)
-        right = min(int(np.ceil(x0 + side)) + margin, image.shape[1])
-        bottom = min(int(np.ceil(y0 + side)) + margin, image.shape[0])
-        if right <= left or bottom <= top:
-            return np.zeros((size, size) + image.shape[2:], image.dtype)
-        region = cv2.GaussianBlur(image[top:bottom, left:right], (0, 0), 0.4 * shrink)
-        x0, y0 = x0 - left, y0 - top
-        image = region
-    # crop pixel j (centre j + 0.5 in box units) samples box coordinate x0 + (j + 0.5) / scale,
-    # i.e. array coordinate x0 + (j + 0.5) / scale - 0.5.
-    matrix = np.array([[scale, 0.0, (0.5 - x0) * scale - 0.5],
-                       [0.0, scale, (0.5 - y0) * scale - 0.5]])
-    return cv2.warpAffine(image, matrix, (size, size), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                          borderValue=0)
+    return crop_square(image, square_window(box, padding), size)

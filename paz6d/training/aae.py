@@ -5,6 +5,7 @@ Stages, each resumable from what is already in the run directory::
     RUN_DIR/config.json       settings (a re-run reuses them; --steps may extend training)
     RUN_DIR/object.npz        hull vertices, surface points and diameter of the object (metres)
     RUN_DIR/views.npz         clean on-axis renderings on the view sphere (rendered in worker processes)
+    RUN_DIR/pairs.npz         with --dataset: input crops of the data set + clean targets rendered for them
     RUN_DIR/checkpoints/ ...  Trainer checkpoints, log.csv, tensorboard/, samples/*.png
     RUN_DIR/model.keras       the trained autoencoder (native Keras format, safe to load)
     RUN_DIR/codebook.npz      latent codes of every view x in-plane rotation
@@ -32,6 +33,7 @@ VIEWS_FILE = "views.npz"
 MODEL_FILE = "model.keras"
 CODEBOOK_FILE = "codebook.npz"
 SUMMARY_FILE = "summary.json"
+PAIRS_FILE = "pairs.npz"
 
 
 @dataclass(frozen=True)
@@ -65,8 +67,8 @@ class AAEConfig:
     in_plane: int = 36
     steps: int = 3000
     batch_size: int = 32
-    learning_rate: float = 2e-4
-    bootstrap_fraction: float = 1.0
+    learning_rate: float = 1e-3
+    bootstrap_fraction: float = 0.25
     augmentation: Augmentation = field(default_factory=Augmentation)
     checkpoint_every: int = 500
     sample_every: int = 500
@@ -98,7 +100,7 @@ class AAEConfig:
 QUICK = AAEConfig()
 #: The paper's setting: 128x128 crops, latent 128, 30k iterations of 64, 2,562 x 36 = 92,232 codebook views.
 FULL = AAEConfig(crop_size=128, latent_size=128, filters=(128, 256, 256, 512), render_size=192, views=2562,
-                 in_plane=36, steps=30000, batch_size=64, bootstrap_fraction=0.25, checkpoint_every=1000,
+                 in_plane=36, steps=30000, batch_size=64, learning_rate=2e-4, checkpoint_every=1000,
                  sample_every=2000, log_every=50)
 CONFIGS = {"quick": QUICK, "full": FULL}
 
@@ -109,7 +111,8 @@ def _write_json(path: Path, data: dict) -> None:
     os.replace(temporary, path)
 
 
-def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, seed: int) -> tuple[AAEConfig, int]:
+def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, seed: int,
+                 dataset: Path | None) -> tuple[AAEConfig, int]:
     """Writes ``config.json`` for a new run, or reads the stored one (only ``steps`` may change)."""
     path = run_dir / CONFIG_FILE
     if path.exists():
@@ -121,10 +124,14 @@ def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEC
         if Path(stored["mesh"]).resolve() != mesh_path.resolve() or stored["mesh_scale"] != mesh_scale:
             raise ValueError(f"{path}: this run directory was trained on {stored['mesh']} (scale "
                              f"{stored['mesh_scale']}); use another --out for {mesh_path}")
+        wanted = None if dataset is None else str(dataset.resolve())
+        if stored.get("dataset") != wanted:
+            raise ValueError(f"{path}: this run directory was trained with --dataset {stored.get('dataset')}; "
+                             f"use another --out for --dataset {wanted}")
         config, seed = replace(stored_config, steps=config.steps), int(stored["seed"])
     run_dir.mkdir(parents=True, exist_ok=True)
     _write_json(path, {"config": config.to_dict(), "mesh": str(mesh_path.resolve()), "mesh_scale": mesh_scale,
-                       "seed": seed})
+                       "seed": seed, "dataset": None if dataset is None else str(dataset.resolve())})
     return config, seed
 
 
@@ -190,8 +197,27 @@ def measure_loader(sampler, batch_size: int, batches: int = 4) -> float:
     return batches * batch_size / (time.perf_counter() - started)
 
 
+def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Path, mesh_scale: float,
+           config: AAEConfig, workers: int, platform: str | None, progress: bool):
+    from paz6d.training.aae_dataset import CropPairs, dataset_pairs
+
+    path = run_dir / PAIRS_FILE
+    if path.exists():
+        with np.load(path) as data:
+            if data["inputs"].shape[1] == config.crop_size:
+                return CropPairs(data["inputs"], data["targets"], data["poses"])
+    pairs = dataset_pairs(dataset, obj_id, mesh_path, mesh_scale, config.crop_size, config.padding, split, workers,
+                          platform, progress)
+    temporary = path.with_name(path.stem + ".tmp.npz")
+    np.savez(temporary, inputs=pairs.inputs, targets=pairs.targets, poses=pairs.poses)
+    os.replace(temporary, path)
+    return pairs
+
+
 def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QUICK, mesh_scale: float = 1.0,
-              seed: int = 0, workers: int = 2, platform: str | None = None, progress: bool = True) -> dict:
+              seed: int = 0, workers: int = 2, platform: str | None = None, progress: bool = True,
+              dataset: str | Path | None = None, object_id: int = 1, split: str = "train",
+              pair_fraction: float = 0.5) -> dict:
     """Trains an AAE on renderings of ``mesh_path`` and writes a run directory ``ImplicitPose6D`` loads.
 
     Args:
@@ -200,8 +226,10 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
         config: :data:`QUICK`, :data:`FULL` or a custom :class:`AAEConfig`.
         mesh_scale: factor from mesh units to metres (0.001 for BOP meshes in millimetres).
         seed: seed of the model initialisation and of the data stream.
-        workers: rendering processes.
+        workers: rendering processes (0: render in this process).
         platform: OpenGL platform of the renderers (``"egl"``, ``"osmesa"`` or None = auto).
+        dataset: optional BOP data set whose crops of ``object_id`` (``split``) become a share
+            ``pair_fraction`` of the training inputs, with clean rendered targets (the rest are rendered views).
 
     Returns:
         The summary written to ``summary.json``.
@@ -220,14 +248,19 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     mesh_path, run_dir = Path(mesh_path), Path(run_dir)
     if not mesh_path.is_file():
         raise ValueError(f"--mesh: {mesh_path}: mesh file not found")
-    config, seed = _prepare_run(run_dir, mesh_path, mesh_scale, config, seed)
+    dataset = None if dataset is None else Path(dataset)
+    config, seed = _prepare_run(run_dir, mesh_path, mesh_scale, config, seed, dataset)
     geometry_data = _object_geometry(run_dir, mesh_path, mesh_scale, seed)
     geometry = ViewGeometry.for_points(geometry_data["vertices"], config.render_size)
     views = _views(run_dir, mesh_path, mesh_scale, config, geometry, workers, platform, progress)
     timings["views_seconds"] = time.perf_counter() - started
 
+    pairs = None
+    if dataset is not None:
+        pairs = _pairs(run_dir, dataset, object_id, split, mesh_path, mesh_scale, config, workers, platform,
+                       progress)
     sampler = ViewSampler(views["rgb"], views["alpha"], geometry.K, config.crop_size, config.padding,
-                          config.augmentation, seed=seed)
+                          config.augmentation, seed=seed, pairs=pairs, pair_fraction=pair_fraction)
     loader_speed = measure_loader(sampler, config.batch_size)
     keras.utils.set_random_seed(seed)
     model = build_autoencoder(config.crop_size, config.latent_size, config.filters, config.kernel_size)
@@ -258,7 +291,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     summary = {"steps": training.final_step, "resumed_from_step": training.start_step,
                "final_metrics": training.metrics, "loader_samples_per_second_one_thread": loader_speed,
                "model_samples_per_second": training.model_samples_per_second,
-               "codebook_size": len(codebook), **timings}
+               "codebook_size": len(codebook), "dataset_pairs": 0 if pairs is None else len(pairs), **timings}
     _write_json(run_dir / SUMMARY_FILE, summary)
     return summary
 
@@ -267,9 +300,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     """Adds the ``paz6d train aae`` arguments."""
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--mesh", type=Path, help="mesh of the object (PLY/OBJ/GLB)")
-    source.add_argument("--dataset", type=Path, help="BOP data set written by `paz6d generate`; its "
-                        "models/obj_XXXXXX.ply (millimetres) is the object")
+    source.add_argument("--dataset", type=Path, help="BOP data set (e.g. from `paz6d generate`): its "
+                        "models/obj_XXXXXX.ply (millimetres) is the object and its image crops are training inputs")
     parser.add_argument("--object-id", type=int, default=None, help="object of --dataset (default: the only one)")
+    parser.add_argument("--split", default="train", help="split of --dataset to read (default: train)")
+    parser.add_argument("--pair-fraction", type=float, default=0.5,
+                        help="with --dataset: share of training samples taken from its crops (rest: rendered views)")
     parser.add_argument("--out", type=Path, required=True, help="run directory (re-run to resume)")
     parser.add_argument("--config", choices=sorted(CONFIGS), default="quick",
                         help="quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
@@ -281,18 +317,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--platform", choices=("egl", "osmesa"), default=None, help="OpenGL platform")
 
 
-def _dataset_mesh(dataset: Path, object_id: int | None) -> Path:
+def _dataset_mesh(dataset: Path, object_id: int | None) -> tuple[Path, int]:
     models = sorted((dataset / "models").glob("obj_*.ply"))
     if not models:
         raise ValueError(f"--dataset: {dataset / 'models'} holds no obj_XXXXXX.ply meshes")
     if object_id is None:
         if len(models) > 1:
             raise ValueError(f"--dataset: {len(models)} objects in {dataset / 'models'}; choose one with --object-id")
-        return models[0]
+        return models[0], int(models[0].stem.split("_")[1])
     path = dataset / "models" / f"obj_{object_id:06d}.ply"
     if not path.exists():
         raise ValueError(f"--object-id: {path} does not exist")
-    return path
+    return path, object_id
 
 
 def run(args: argparse.Namespace) -> int:
@@ -302,12 +338,14 @@ def run(args: argparse.Namespace) -> int:
         if args.steps <= 0:
             raise ValueError(f"--steps: expected a positive number of steps, got {args.steps}")
         config = replace(config, steps=args.steps)
+    object_id = 1
     if args.dataset is not None:
-        mesh, scale = _dataset_mesh(args.dataset, args.object_id), 0.001
+        (mesh, object_id), scale = _dataset_mesh(args.dataset, args.object_id), 0.001
     else:
         mesh, scale = args.mesh, args.scale
     if not np.isfinite(scale) or scale <= 0:
         raise ValueError(f"--scale: expected a positive factor to metres, got {scale}")
-    summary = train_aae(mesh, args.out, config, scale, args.seed, args.workers, args.platform)
+    summary = train_aae(mesh, args.out, config, scale, args.seed, args.workers, args.platform,
+                        dataset=args.dataset, object_id=object_id, split=args.split, pair_fraction=args.pair_fraction)
     print(json.dumps(summary, indent=2))
     return 0

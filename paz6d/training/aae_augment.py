@@ -67,12 +67,26 @@ class Augmentation:
                 raise ValueError(f"Augmentation.{name}: expected >= 0, got {getattr(self, name)}")
 
 
+def _stripes(size: int, rng: np.random.Generator) -> np.ndarray:
+    """Two-colour sinusoidal stripes of random period (3-40 px) and orientation, ``(size, size, 3)`` float32."""
+    angle = rng.uniform(0, np.pi)
+    period = np.exp(rng.uniform(np.log(3), np.log(40)))
+    grid = np.arange(size, dtype=np.float32)
+    phase = (np.cos(angle) * grid[None, :] + np.sin(angle) * grid[:, None]) * (2 * np.pi / period)
+    weight = (0.5 + 0.5 * np.sin(phase))[..., None]
+    first, second = rng.uniform(0, 255, (2, 3)).astype(np.float32)
+    return weight * first + (1 - weight) * second
+
+
 def procedural_background(size: int, rng: np.random.Generator) -> np.ndarray:
-    """``(size, size, 3)`` uint8 clutter: a smooth colour field, random shapes and fine noise texture."""
-    cells = int(rng.integers(2, 7))
-    field = rng.uniform(0, 255, (cells, cells, 3)).astype(np.float32)
-    background = cv2.resize(field, (size, size), interpolation=cv2.INTER_CUBIC)
-    for _ in range(int(rng.integers(3, 10))):
+    """``(size, size, 3)`` uint8 clutter: a smooth colour field or stripes, random shapes, noise texture."""
+    if rng.random() < 0.35:
+        background = _stripes(size, rng)
+    else:
+        cells = int(rng.integers(2, 9))
+        field = rng.uniform(0, 255, (cells, cells, 3)).astype(np.float32)
+        background = cv2.resize(field, (size, size), interpolation=cv2.INTER_CUBIC)
+    for _ in range(int(rng.integers(0, 8))):
         color = rng.uniform(0, 255, 3).tolist()
         kind = rng.integers(3)
         if kind == 0:
@@ -87,8 +101,8 @@ def procedural_background(size: int, rng: np.random.Generator) -> np.ndarray:
             points = rng.uniform(0, size, (2, 2)).astype(int)
             cv2.line(background, tuple(points[0].tolist()), tuple(points[1].tolist()), color,
                      int(rng.integers(1, max(2, size // 16))))
-    texture = cv2.GaussianBlur(rng.normal(0, 1, (size, size)).astype(np.float32), (0, 0), float(rng.uniform(0.5, 2)))
-    background += (rng.uniform(0, 25) * texture)[..., None]
+    texture = cv2.GaussianBlur(rng.normal(0, 1, (size, size)).astype(np.float32), (0, 0), float(rng.uniform(0.3, 2)))
+    background += (rng.uniform(0, 40) * texture)[..., None]
     return np.clip(background, 0, 255).astype(np.uint8)
 
 
@@ -104,14 +118,24 @@ class ViewSampler:
         augmentation: input augmentation strengths.
         seed: base seed of the data stream.
         background_bank: number of procedural backgrounds made once and reused (random crops/flips).
+        pairs: optional :class:`~paz6d.training.aae_dataset.CropPairs` from a data set (input crops of real
+            or generated images, clean rendered targets); drawn with probability ``pair_fraction`` and
+            then occluded and colour-jittered like the rendered views.
+        pair_fraction: share of samples taken from ``pairs``.
     """
 
     def __init__(self, rgb: np.ndarray, alpha: np.ndarray, K: np.ndarray, crop_size: int, padding: float,
-                 augmentation: Augmentation = Augmentation(), seed: int = 0, background_bank: int = 128):
+                 augmentation: Augmentation = Augmentation(), seed: int = 0, background_bank: int = 128,
+                 pairs=None, pair_fraction: float = 0.5):
         if rgb.ndim != 4 or rgb.shape[-1] != 3 or alpha.shape != rgb.shape[:3]:
             raise ValueError(f"rgb/alpha: expected (V, S, S, 3) and (V, S, S), got {rgb.shape} and {alpha.shape}")
         if len(rgb) == 0:
             raise ValueError("rgb: the view pool is empty")
+        if pairs is not None and pairs.inputs.shape[1:3] != (crop_size, crop_size):
+            raise ValueError(f"pairs: expected {crop_size}x{crop_size} crops, got {pairs.inputs.shape[1:3]}")
+        if not 0.0 <= pair_fraction <= 1.0:
+            raise ValueError(f"pair_fraction: expected a fraction in [0, 1], got {pair_fraction}")
+        self.pairs, self.pair_fraction = pairs, (pair_fraction if pairs is not None else 0.0)
         self.rgb, self.alpha, self.K = rgb, alpha, np.asarray(K, dtype=np.float64)
         self.crop_size, self.padding, self.augmentation, self.seed = int(crop_size), float(padding), augmentation, seed
         bank_rng = np.random.default_rng([seed, 7919])
@@ -179,6 +203,11 @@ class ViewSampler:
     def sample(self, rng: np.random.Generator, view: int | None = None,
                angle: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """One ``(input, target)`` pair of uint8 crops ``(crop_size, crop_size, 3)``."""
+        if view is None and angle is None and self.pair_fraction and rng.random() < self.pair_fraction:
+            index = int(rng.integers(len(self.pairs)))
+            augmented = self.pairs.inputs[index].copy()
+            self._occlude(augmented, rng)
+            return self._jitter(augmented, rng), self.pairs.targets[index]
         view = int(rng.integers(len(self.rgb))) if view is None else view
         angle = float(rng.uniform(0, 2 * np.pi)) if angle is None else angle
         rgb, alpha = rotate_view(self.rgb[view], self.alpha[view], angle, self.K)

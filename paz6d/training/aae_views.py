@@ -105,40 +105,40 @@ def _start_worker(mesh_path: str, mesh_scale: float, render_size: int, platform:
     _WORKER["renderer"] = Renderer(render_size, render_size, platform=platform)
 
 
-def _render_chunk(rotations: np.ndarray, K: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+def _render_chunk(Ks: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     renderer, mesh = _WORKER["renderer"], _WORKER["mesh"]
     size = renderer.width
-    rgb = np.empty((len(rotations), size, size, 3), np.uint8)
-    alpha = np.empty((len(rotations), size, size), np.uint8)
-    for index, rotation in enumerate(rotations):
-        T = np.eye(4)
-        T[:3, :3] = rotation
-        T[2, 3] = distance
+    rgb = np.empty((len(poses), size, size, 3), np.uint8)
+    alpha = np.empty((len(poses), size, size), np.uint8)
+    for index, (K, T) in enumerate(zip(Ks, poses)):
         output = renderer.render(K, [(mesh, T)], masks=False)
         rgb[index], alpha[index] = output.rgb, output.alpha
     return rgb, alpha
 
 
-def render_views(mesh_path: str | Path, mesh_scale: float, rotations, geometry: ViewGeometry, workers: int = 2,
-                 platform: str | None = None, chunk: int = 32, progress: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Renders the object at each rotation on the optical axis.
+def render_poses(mesh_path: str | Path, mesh_scale: float, Ks, poses, size: int, workers: int = 2,
+                 platform: str | None = None, chunk: int = 32, progress: bool = True,
+                 description: str = "render") -> tuple[np.ndarray, np.ndarray]:
+    """Renders the object alone (black background, default lighting) once per ``(K, pose)``.
 
     Args:
         mesh_path: mesh file (PLY/OBJ/GLB...).
         mesh_scale: factor to metres (0.001 for BOP millimetre meshes).
-        rotations: ``(V, 3, 3)`` ``R_model2cam``.
-        geometry: camera and distance (:class:`ViewGeometry`).
+        Ks: ``(N, 3, 3)`` intrinsics of ``size × size`` images.
+        poses: ``(N, 4, 4)`` ``T_model2cam`` (metres).
+        size: image side in pixels.
         workers: rendering processes (``spawn``); 0 renders in this process, after loading TensorFlow
             through the RTLD_LOCAL guard so that the two can share it.
         platform: ``"egl"``, ``"osmesa"`` or None (auto).
-        chunk: views per task.
+        chunk: renderings per task.
 
     Returns:
-        ``rgb (V, S, S, 3)`` uint8 on black and ``alpha (V, S, S)`` uint8 coverage (255 = object).
+        ``rgb (N, size, size, 3)`` uint8 on black and ``alpha (N, size, size)`` uint8 coverage (255 = object).
     """
     from tqdm.auto import tqdm
 
-    rotations = as_array(rotations, "rotations", (3, 3)).reshape(-1, 3, 3)
+    poses = as_array(poses, "poses", (4, 4)).reshape(-1, 4, 4)
+    Ks = np.broadcast_to(as_array(Ks, "Ks", (3, 3)), (len(poses), 3, 3))
     if int(workers) < 0:
         raise ValueError(f"workers: expected 0 (this process) or more rendering processes, got {workers}")
     mesh_path = str(Path(mesh_path).resolve())
@@ -146,24 +146,33 @@ def render_views(mesh_path: str | Path, mesh_scale: float, rotations, geometry: 
         from paz6d.backend.tensorflow_guard import import_tensorflow
 
         import_tensorflow()
-        _start_worker(mesh_path, float(mesh_scale), geometry.render_size, platform)
+        _start_worker(mesh_path, float(mesh_scale), size, platform)
         try:
-            return _render_chunk(rotations, geometry.K, geometry.distance)
+            return _render_chunk(Ks, poses)
         finally:
             _WORKER.pop("renderer").close()
             _WORKER.clear()
-    chunks = [rotations[start:start + chunk] for start in range(0, len(rotations), chunk)]
-    results: list = [None] * len(chunks)
+    starts = range(0, len(poses), chunk)
+    results: list = [None] * len(starts)
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(int(workers), len(chunks)), mp_context=context,
-                             initializer=_start_worker,
-                             initargs=(mesh_path, float(mesh_scale), geometry.render_size, platform)) as pool:
-        futures = {pool.submit(_render_chunk, part, geometry.K, geometry.distance): index
-                   for index, part in enumerate(chunks)}
-        with tqdm(total=len(rotations), desc="render views", unit="view", disable=not progress,
-                  dynamic_ncols=True) as bar:
+    with ProcessPoolExecutor(max_workers=min(int(workers), len(starts)), mp_context=context,
+                             initializer=_start_worker, initargs=(mesh_path, float(mesh_scale), size, platform)) as pool:
+        futures = {pool.submit(_render_chunk, Ks[start:start + chunk], poses[start:start + chunk]): index
+                   for index, start in enumerate(starts)}
+        with tqdm(total=len(poses), desc=description, unit="view", disable=not progress, dynamic_ncols=True) as bar:
             for future in as_completed(futures):
                 index = futures[future]
                 results[index] = future.result()
-                bar.update(len(chunks[index]))
+                bar.update(len(results[index][0]))
     return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
+
+
+def render_views(mesh_path: str | Path, mesh_scale: float, rotations, geometry: ViewGeometry, workers: int = 2,
+                 platform: str | None = None, progress: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Renders the object at each rotation ``(V, 3, 3)`` on the optical axis (see :func:`render_poses`)."""
+    rotations = as_array(rotations, "rotations", (3, 3)).reshape(-1, 3, 3)
+    poses = np.tile(np.eye(4), (len(rotations), 1, 1))
+    poses[:, :3, :3] = rotations
+    poses[:, 2, 3] = geometry.distance
+    return render_poses(mesh_path, mesh_scale, geometry.K, poses, geometry.render_size, workers, platform,
+                        progress=progress, description="render views")

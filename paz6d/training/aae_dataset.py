@@ -1,0 +1,72 @@
+"""AAE training pairs streamed from a BOP data set (e.g. ``paz6d generate`` output).
+
+Each annotated instance of the object gives one pair: the input is the square crop of the image around
+its ground-truth box (:func:`paz6d.models.aae.crop_object`, the crop the pipeline makes at test time)
+and the target is a clean rendering of the object at the ground-truth pose seen through that same
+crop (the crop's intrinsics, :func:`paz6d.backend.square_crop.crop_intrinsics`), rendered in worker
+processes that never import TensorFlow.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from paz6d.backend.square_crop import crop_intrinsics, square_window
+
+
+@dataclass(frozen=True)
+class CropPairs:
+    """``inputs`` and ``targets``: ``(N, S, S, 3)`` uint8 crops; ``poses``: ``(N, 4, 4)`` ``T_model2cam``."""
+
+    inputs: np.ndarray
+    targets: np.ndarray
+    poses: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.inputs)
+
+
+def dataset_crops(root: str | Path, obj_id: int, crop_size: int, padding: float, split: str = "train",
+                  min_visible_fraction: float = 0.1, progress: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Crops ``(N, S, S, 3)``, crop intrinsics ``(N, 3, 3)`` and poses ``(N, 4, 4)`` of every instance of
+    ``obj_id`` with a ground-truth box and visible fraction >= ``min_visible_fraction``."""
+    from tqdm.auto import tqdm
+
+    from paz6d.datasets.bop import BOPDataset
+    from paz6d.models.aae import crop_object
+
+    dataset = BOPDataset(root, split=split)
+    crops, Ks, poses = [], [], []
+    for sample in tqdm(dataset, total=len(dataset), desc="read data set", unit="img", disable=not progress,
+                       dynamic_ncols=True):
+        for instance in sample.objects:
+            info = instance.info or {}
+            if instance.obj_id != obj_id or "bbox_obj" not in info or sample.image is None:
+                continue
+            if info.get("visib_fract", 1.0) < min_visible_fraction:
+                continue
+            x, y, width, height = info["bbox_obj"]
+            if width <= 0 or height <= 0:
+                continue
+            box = (x, y, x + width, y + height)
+            crops.append(crop_object(sample.image, box, crop_size, padding))
+            Ks.append(crop_intrinsics(sample.K, square_window(box, padding), crop_size))
+            poses.append(instance.T_model2cam)
+    if not crops:
+        raise ValueError(f"--dataset: {root} ({split} split) has no visible annotated instance of object {obj_id}")
+    return np.stack(crops), np.stack(Ks), np.stack(poses)
+
+
+def dataset_pairs(root: str | Path, obj_id: int, mesh_path: str | Path, mesh_scale: float, crop_size: int,
+                  padding: float, split: str = "train", workers: int = 2, platform: str | None = None,
+                  progress: bool = True) -> CropPairs:
+    """Input crops from the data set and clean targets rendered through the same crop windows."""
+    from paz6d.training.aae_views import render_poses
+
+    inputs, Ks, poses = dataset_crops(root, obj_id, crop_size, padding, split, progress=progress)
+    targets, _ = render_poses(mesh_path, mesh_scale, Ks, poses, crop_size, workers, platform, progress=progress,
+                              description="render targets")
+    return CropPairs(inputs, targets, poses)
