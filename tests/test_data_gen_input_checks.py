@@ -122,3 +122,14 @@ def test_paz6d_generate_command_prints_a_summary_and_exits_2_on_bad_input(tmp_pa
     assert main(["generate", "--mesh", str(tmp_path / "nope.ply"), "--out", str(tmp_path / "x"),
                  "--num-images", "1"]) == 2
     assert "nope.ply: mesh file not found" in capsys.readouterr().err
+
+
+def test_command_modules_import_no_gl_or_tensorflow():
+    import subprocess
+    import sys
+
+    code = ("import sys, data_gen.cli, renderers, paz6d.datasets.bop; "
+            "print([m for m in ('pyrender', 'OpenGL', 'tensorflow') if m in sys.modules])")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                            cwd=Path(__file__).resolve().parents[1])
+    assert result.stdout.strip() == "[]"
