@@ -80,6 +80,8 @@ class BopSettings:
         for name in ("vsd_delta", "add_threshold", "auc_max_threshold"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: expected a positive value, got {getattr(self, name)}")
+        if not (self.workers == -1 or self.workers >= 1):
+            raise ValueError(f"workers: expected -1 (all cores) or a positive thread count, got {self.workers}")
         for name in ("vsd_taus", "correct_thresholds", "mspd_thresholds"):
             values = np.asarray(getattr(self, name), dtype=np.float64)
             if values.ndim != 1 or values.size == 0 or np.any(values <= 0):
