@@ -33,6 +33,7 @@ from data_gen.generator import generate, render_indices  # noqa: E402
 from data_gen.producer import ImageProducer, image_generator  # noqa: E402
 from data_gen.scene import sample_scene  # noqa: E402
 from renderers import select_platform  # noqa: E402
+from renderers.conventions import FLIP_YZ  # noqa: E402
 
 DEFAULT_MESHES = [REPO.parent / "shared" / "data" / "bop_lmo" / "models" / f"obj_{i:06d}.ply" for i in (1, 5)]
 
@@ -46,7 +47,7 @@ def bare_loop(config: GenerationConfig, producer: ImageProducer, count: int) -> 
     import pyrender
 
     K = np.asarray(config.K)
-    flip = np.diag([1.0, -1.0, -1.0, 1.0])
+    flip = FLIP_YZ  # the OpenCV -> OpenGL camera axes
     scene = pyrender.Scene(ambient_light=[0.3, 0.3, 0.3])
     scene.add(pyrender.IntrinsicsCamera(K[0, 0], K[1, 1], K[0, 2], K[1, 2], znear=0.01, zfar=10.0))
     scene.add(pyrender.DirectionalLight(intensity=3.0))
