@@ -134,6 +134,21 @@ class FaceRegion:
         return cls(center, float(scale * np.max(high - low)), float(angle))
 
 
+def _tflite_interpreter_class():
+    """TensorFlow's TFLite interpreter, or LiteRT's (``ai-edge-litert``) where TensorFlow dropped it."""
+    from paz6d.backend.tensorflow_guard import import_tensorflow
+
+    interpreter = getattr(getattr(import_tensorflow(), "lite", None), "Interpreter", None)
+    if interpreter is not None:
+        return interpreter
+    try:
+        from ai_edge_litert.interpreter import Interpreter
+    except ImportError as error:
+        raise ValueError("model_path: this TensorFlow has no tf.lite.Interpreter; install `ai-edge-litert` "
+                         "to run the face-mesh model") from error
+    return Interpreter
+
+
 class FaceMeshLandmarks(Processor):
     """MediaPipe face mesh: ``(image, region) -> Keypoints2D`` of 468 landmarks, or None without a face.
 
@@ -157,13 +172,10 @@ class FaceMeshLandmarks(Processor):
             raise ValueError(f"max_refinements: expected a non-negative integer, got {max_refinements}")
         if not 0.0 <= min_score <= 1.0:
             raise ValueError(f"min_score: expected a probability in [0, 1], got {min_score}")
-        from paz6d.backend.tensorflow_guard import import_tensorflow
-
-        tensorflow = import_tensorflow()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # tf.lite.Interpreter's deprecation notice
             try:
-                self.interpreter = tensorflow.lite.Interpreter(model_path=str(path))
+                self.interpreter = _tflite_interpreter_class()(model_path=str(path))
                 self.interpreter.allocate_tensors()
             except (ValueError, RuntimeError) as error:
                 raise ValueError(f"model_path: {path} is not a loadable TFLite model ({error})") from error
