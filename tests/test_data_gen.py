@@ -300,9 +300,17 @@ def test_procedural_backgrounds_are_seeded_and_varied():
     assert first.std() > 5
 
 
-def test_jpg_rgb_is_read_back_and_listed_in_coco(lmo_meshes, tmp_path):
-    config = tiny_config(lmo_meshes, tmp_path / "jpg", num_images=1, rgb_format="jpg", crop_size=0)
+def test_jpg_rgb_and_symmetries_are_written(lmo_meshes, tmp_path):
+    symmetries = tmp_path / "symmetries.json"
+    symmetries.write_text(json.dumps({"5": {"symmetries_continuous": [{"axis": [0, 0, 1], "offset": [0, 0, 10]}]}}))
+    config = tiny_config(lmo_meshes, tmp_path / "jpg", num_images=1, rgb_format="jpg", crop_size=0,
+                         symmetries=symmetries)
     generate(config, show_progress=False)
+    info = load_models_info(config.output / "models" / "models_info.json")
+    assert info[1].symmetries_continuous == [] and len(info[5].symmetries_continuous) == 1
+    axis, offset = info[5].symmetries_continuous[0]
+    np.testing.assert_allclose(axis, [0, 0, 1])
+    np.testing.assert_allclose(offset, [0, 0, 0.01])  # mm in the file, metres from the reader
     folder = config.output / "train" / "000000"
     assert (folder / "rgb" / "000000.jpg").is_file() and not (folder / "rgb" / "000000.png").exists()
     sample = next(iter(BOPDataset(config.output, split="train")))
