@@ -130,3 +130,12 @@ def test_augmentation_keeps_grey_faces_and_is_reproducible():
     assert first.shape == (48, 48) and first.dtype == np.uint8
     np.testing.assert_array_equal(first, second)
     assert not np.array_equal(first, build_augmentation(seed=4)(face))
+
+
+def test_train_emotion_command_reports_bad_data(tmp_path, capsys):
+    from paz6d.cli import main
+
+    assert main(["train", "emotion", "--data", str(tmp_path / "absent"), "--out", str(tmp_path / "run")]) == 2
+    assert "neither a FER-2013 CSV file nor an image folder" in capsys.readouterr().err
+    assert main(["train", "emotion", "--data", str(tmp_path), "--out", str(tmp_path / "run"), "--epochs", "0"]) == 2
+    assert "--epochs" in capsys.readouterr().err

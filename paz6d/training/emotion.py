@@ -39,7 +39,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", required=True, type=Path, help="FER-2013 CSV file or image folder DIR/<class>/*")
     parser.add_argument("--out", required=True, type=Path, help="run folder (created; an existing run resumes)")
     parser.add_argument("--epochs", type=int, default=30, help="passes over the training set (default 30)")
-    parser.add_argument("--batch-size", type=int, default=32)
+    parser.add_argument("--batch-size", type=int, default=32, help="faces per step (default 32)")
     parser.add_argument("--learning-rate", type=float, default=1e-3, help="Adam learning rate")
     parser.add_argument("--input-size", type=int, default=48, help="square network input side in pixels")
     parser.add_argument("--val-fraction", type=float, default=0.1,
@@ -229,16 +229,16 @@ def _append_validation_row(run_dir: Path, step: int, accuracy: float) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Trains, then writes ``model.keras``, ``classes.json``, ``metrics.json`` and ``confusion_matrix.png``."""
+    for name in ("epochs", "batch_size", "input_size", "checkpoint_every"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name.replace('_', '-')}: expected a positive integer, got {getattr(args, name)}")
+    data = load_emotion_data(args.data, args.val_fraction, args.seed)  # before TensorFlow: bad data fails fast
     from paz6d.backend.tensorflow_guard import import_keras
     from paz6d.models.xception import mini_xception, preprocess_faces
     from paz6d.training.trainer import Trainer
 
-    for name in ("epochs", "batch_size", "input_size", "checkpoint_every"):
-        if getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')}: expected a positive integer, got {getattr(args, name)}")
     keras = import_keras()
     keras.utils.set_random_seed(args.seed)
-    data = load_emotion_data(args.data, args.val_fraction, args.seed)
     class_names = data["class_names"]
     train_faces = resize_faces(data["train"][0], args.input_size)
     validation_faces = resize_faces(data["validation"][0], args.input_size)
