@@ -82,7 +82,8 @@ def end_to_end(config: GenerationConfig, workers: int) -> tuple[float, float]:
     shards = config.output / ".paz6d-generate" / "shards"
     finished = sorted(path.stat().st_mtime for path in shards.rglob("*.json"))
     skip = 2 * workers
-    running = (len(finished) - skip) / (finished[-1] - finished[skip - 1])
+    span = finished[-1] - finished[skip - 1] if len(finished) > skip + 1 else 0.0
+    running = (len(finished) - skip) / span if span > 0 else float("nan")  # too few images to tell
     return summary.images_rendered / summary.seconds, running
 
 
