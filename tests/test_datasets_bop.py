@@ -60,6 +60,18 @@ def test_lmo_poses_are_metres_and_match_the_gt_boxes(lmo):
     assert checked > 10
 
 
+def test_stored_rotations_can_be_kept_unsnapped(lmo):
+    path = lmo / "test" / "000002" / "scene_gt.json"
+    raw = json.loads(path.read_text())
+    stored = load_scene_gt(path, snap_rotations=False)
+    snapped = load_scene_gt(path)
+    for im_id, entries in list(raw.items())[:5]:
+        for entry, kept, fixed in zip(entries, stored[int(im_id)], snapped[int(im_id)]):
+            np.testing.assert_array_equal(kept.T_model2cam[:3, :3].ravel(), entry["cam_R_m2c"])
+            np.testing.assert_allclose(fixed.T_model2cam[:3, :3], kept.T_model2cam[:3, :3], atol=2e-3)
+            np.testing.assert_array_equal(fixed.T_model2cam[:3, 3], kept.T_model2cam[:3, 3])
+
+
 def test_models_info_in_metres_with_symmetries(lmo):
     info = load_models_info(lmo / "models" / "models_info.json")
     assert sorted(info) == [1, 5, 6, 8, 9, 10, 11, 12]

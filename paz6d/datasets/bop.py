@@ -83,13 +83,16 @@ def nearest_rotation(matrix: np.ndarray, where: str = "rotation") -> np.ndarray:
     return left @ right
 
 
-def pose_from_bop(R_values, t_millimetres, where: str = "cam_R_m2c") -> np.ndarray:
+def pose_from_bop(R_values, t_millimetres, where: str = "cam_R_m2c", snap_rotation: bool = True) -> np.ndarray:
     """``T_model2cam`` ``(4, 4)`` in metres from BOP ``cam_R_m2c`` (9, row-major) and ``cam_t_m2c`` (mm).
 
-    Rotations rounded in the file are snapped to the nearest rotation (see :func:`nearest_rotation`).
+    With ``snap_rotation`` a slightly non-orthonormal stored rotation is replaced by the nearest
+    rotation (see :func:`nearest_rotation`); without it the stored matrix is kept as is (what
+    bop_toolkit's evaluation uses).
     """
     T = np.eye(4)
-    T[:3, :3] = nearest_rotation(np.asarray(R_values, dtype=np.float64).reshape(3, 3), where)
+    rotation = np.asarray(R_values, dtype=np.float64).reshape(3, 3)
+    T[:3, :3] = nearest_rotation(rotation, where) if snap_rotation else rotation
     T[:3, 3] = np.asarray(t_millimetres, dtype=np.float64).reshape(3) * MILLIMETRES_TO_METRES
     return T
 
@@ -102,8 +105,11 @@ class GroundTruthPose:
     T_model2cam: np.ndarray
 
 
-def load_scene_gt(path: str | Path) -> dict[int, list[GroundTruthPose]]:
-    """``scene_gt.json`` → ``{im_id: [GroundTruthPose, ...]}`` (instance order kept)."""
+def load_scene_gt(path: str | Path, snap_rotations: bool = True) -> dict[int, list[GroundTruthPose]]:
+    """``scene_gt.json`` → ``{im_id: [GroundTruthPose, ...]}`` (instance order kept).
+
+    ``snap_rotations``: see :func:`pose_from_bop` (``False`` keeps the stored matrices).
+    """
     path = Path(path)
     result = {}
     for im_id, entries in _image_entries(path).items():
@@ -114,7 +120,8 @@ def load_scene_gt(path: str | Path) -> dict[int, list[GroundTruthPose]]:
             where = f"{path}: image {im_id}, instance {index}"
             R = _field(entry, "cam_R_m2c", where, 9)
             t = _field(entry, "cam_t_m2c", where, 3)
-            poses.append(GroundTruthPose(int(_field(entry, "obj_id", where)), pose_from_bop(R, t, where)))
+            T = pose_from_bop(R, t, where, snap_rotations)
+            poses.append(GroundTruthPose(int(_field(entry, "obj_id", where)), T))
         result[im_id] = poses
     return result
 
