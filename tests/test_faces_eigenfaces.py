@@ -69,6 +69,21 @@ def test_full_face_space_reconstructs_training_images_exactly(small_faces):
     assert errors[-1] < 1e-9
 
 
+def test_snapshot_pca_matches_direct_svd_and_survives_rank_deficiency(small_faces):
+    from paz6d.models.eigenfaces import principal_components
+
+    images, _ = small_faces
+    data = images.reshape(12, -1).astype(np.float64)
+    _, components, variances = principal_components(data, 11)  # N < D: Gram-matrix path
+    _, singular_values, right_vectors = np.linalg.svd(data - data.mean(axis=0), full_matrices=False)
+    np.testing.assert_allclose(variances, singular_values[:11] ** 2 / 11, rtol=1e-10)
+    np.testing.assert_allclose(np.abs(np.sum(components * right_vectors[:11], axis=1)), 1.0, atol=1e-10)
+    repeated = np.repeat(data[:3], 4, axis=0)  # rank 2 after centring
+    _, components, variances = principal_components(repeated, 6)
+    np.testing.assert_allclose(components @ components.T, np.eye(6), atol=1e-10)
+    assert variances[1] > 1.0 and np.all(variances[2:] < 1e-9)
+
+
 def test_distance_from_face_space_equals_orthogonal_residual(small_faces):
     images, labels = small_faces
     model = EigenFaces(3).fit(images, labels)
