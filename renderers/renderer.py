@@ -17,16 +17,18 @@ from __future__ import annotations
 import functools
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
-import trimesh
 
 from paz6d.backend.checks import as_camera_matrix
 from paz6d.backend.transform import as_pose_matrix
 from renderers import conventions
 from renderers.lights import Lighting
 from renderers.platform import select_platform
+
+if TYPE_CHECKING:  # trimesh costs ~1 s to import; only needed once meshes are rendered
+    import trimesh
 
 
 @dataclass
@@ -51,7 +53,9 @@ class RenderOutput:
     visible_masks: np.ndarray | None
 
 
-def _as_mesh(mesh, index: int) -> trimesh.Trimesh:
+def _as_mesh(mesh, index: int) -> "trimesh.Trimesh":
+    import trimesh
+
     if not isinstance(mesh, trimesh.Trimesh):
         raise ValueError(f"objects[{index}]: expected a trimesh.Trimesh, got {type(mesh).__name__}")
     if len(mesh.faces) == 0:
@@ -275,9 +279,11 @@ class Renderer:
     def _projected_boxes(self, K, objects) -> np.ndarray:
         """``(N, 4)`` conservative pixel boxes ``(u_min, v_min, u_max, v_max)`` of each object's
         projected 3D bounding box (1 px margin); NaN rows for objects reaching the near plane."""
+        from paz6d.backend.mesh import bounding_box_corners
+
         boxes = np.full((len(objects), 4), np.nan)
         for index, (mesh, T) in enumerate(objects):
-            corners = trimesh.bounds.corners(mesh.bounds) @ T[:3, :3].T + T[:3, 3]
+            corners = bounding_box_corners(mesh.bounds) @ T[:3, :3].T + T[:3, 3]
             if np.all(corners[:, 2] > self.znear):
                 pixels = corners[:, :2] / corners[:, 2:3] @ K[:2, :2].T + K[:2, 2]
                 boxes[index] = [*(pixels.min(axis=0) - 1), *(pixels.max(axis=0) + 1)]
