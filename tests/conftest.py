@@ -19,14 +19,13 @@ def shared_data() -> Path:
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
-    """Imports TensorFlow (through the guard) before any test runs when a collected test uses it.
+    """Imports TensorFlow (through the guard) before any test runs.
 
     Mesa's llvmpipe and TensorFlow's LLVM crash together unless TensorFlow is loaded first; a
-    test that imports TensorFlow lazily after a renderer test created a GL context would
-    segfault the whole session.
+    test that imports TensorFlow lazily (directly or through a model/pipeline module) after a
+    renderer test created a GL context would segfault the whole session. Importing it up front
+    costs a few seconds once per session and removes the ordering hazard entirely.
     """
-    files = {Path(str(item.fspath)) for item in session.items}
-    if any("tensorflow_guard" in path.read_text(errors="ignore") for path in files if path.suffix == ".py"):
-        from paz6d.backend.tensorflow_guard import import_tensorflow
+    from paz6d.backend.tensorflow_guard import import_tensorflow
 
-        import_tensorflow()
+    import_tensorflow()
