@@ -106,6 +106,10 @@ def test_astronaut_head_pose_and_landmarks(reference, astronaut):
     assert changed.sum() > 100 and not changed[300:].any()  # axes drawn on the face only
     origin = CAMERA.project(pose.translation[None])[0]
     assert np.linalg.norm(origin - (landmarks[33] + landmarks[263]) / 2) < 3.0
+    all_points = HeadPose6D(CAMERA, rigid_only=False)
+    assert len(all_points.face_model.points) == 10
+    with_mouth_and_chin = all_points.detect(astronaut)[0]
+    assert rotation_error_degrees(with_mouth_and_chin.pose.rotation_matrix, pose.rotation_matrix) < 10.0
 
 
 @needs_landmarks
