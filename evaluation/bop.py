@@ -412,8 +412,13 @@ def compute_errors(data: BopEvaluationData, results: PoseResults, pairs: Evaluat
 
 
 def _render_depth_mm(renderer, data: BopEvaluationData, obj_id: int, T_mm: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Rendered depth (mm) of the error mesh; a rounded (not exactly orthonormal) rotation, as BOP
+    ground truth stores them, is rendered with its nearest rotation (the renderer needs a rigid pose)."""
     T = T_mm.copy()
     T[:3, 3] /= 1000.0
+    if np.abs(T[:3, :3].T @ T[:3, :3] - np.eye(3)).max() > 1e-9:
+        left, _, right = np.linalg.svd(T[:3, :3])
+        T[:3, :3] = left @ right
     depth = renderer.render(K, [(data.render_mesh(obj_id), T)], rgb=False, masks=False).depth
     return depth.astype(np.float64) * 1000.0
 

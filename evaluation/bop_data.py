@@ -2,10 +2,10 @@
 
 Cameras, visibilities and models info are read with :mod:`paz6d.datasets.bop` (which returns
 metres) and converted back to millimetres here, so errors, thresholds and reports use BOP's
-units. Ground-truth poses are read here as stored: ``paz6d.datasets.bop`` snaps rounded rotations
-to the nearest rotation, while the BOP toolkit evaluates with the stored matrices (LM-O's
-differ from rotations by up to 0.0094), and so do we. Error meshes come from ``models_eval/``
-when the data set has it (as the BOP toolkit does), else ``models/``.
+units. Ground-truth rotations are kept as stored (``snap_rotations=False``): the BOP toolkit
+evaluates with the stored matrices (LM-O's differ from rotations by up to 0.0094), and so do we.
+Error meshes come from ``models_eval/`` when the data set has it (as the BOP toolkit does), else
+``models/``.
 """
 
 from __future__ import annotations
@@ -163,49 +163,18 @@ def _models_folder(root: Path) -> Path:
     raise ValueError(f"{root}: no models_eval/models_info.json or models/models_info.json")
 
 
-def _numbers(entry, name: str, where: str, count: int) -> np.ndarray:
-    value = entry.get(name) if isinstance(entry, dict) else None
-    try:
-        array = np.asarray(value, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
-        array = np.zeros(0)
-    if value is None or array.size != count or not np.all(np.isfinite(array)):
-        raise ValueError(f"{where}: field {name!r} must hold {count} finite numbers")
-    return array
-
-
-def read_scene_gt(path: Path) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-    """``scene_gt.json`` as stored: ``{im_id: (obj_ids (G,), T_model2cam (G, 4, 4) in mm)}``."""
-    data = bop_files.load_json(path)
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected an object keyed by image id")
-    images = {}
-    for key, instances in data.items():
-        if not str(key).isdigit() or not isinstance(instances, list):
-            raise ValueError(f"{path}: entry {key!r}: expected an image id with a list of instances")
-        poses = np.tile(np.eye(4), (len(instances), 1, 1))
-        obj_ids = np.zeros(len(instances), dtype=np.int64)
-        for index, entry in enumerate(instances):
-            where = f"{path}: image {key}, instance {index}"
-            poses[index, :3, :3] = _numbers(entry, "cam_R_m2c", where, 9).reshape(3, 3)
-            poses[index, :3, 3] = _numbers(entry, "cam_t_m2c", where, 3)
-            obj_id = entry.get("obj_id")
-            if not isinstance(obj_id, int) or obj_id < 0:
-                raise ValueError(f"{where}: field 'obj_id' must be a non-negative integer, got {obj_id!r}")
-            obj_ids[index] = obj_id
-        images[int(key)] = (obj_ids, poses)
-    return images
-
-
 def _scene_images(scene_folder: Path, scene_id: int) -> dict[tuple[int, int], ImageGroundTruth]:
-    gt = read_scene_gt(scene_folder / "scene_gt.json")
+    gt = bop_files.load_scene_gt(scene_folder / "scene_gt.json", snap_rotations=False)
     cameras = bop_files.load_scene_camera(scene_folder / "scene_camera.json")
     info_path = scene_folder / "scene_gt_info.json"
     if not info_path.is_file():
         raise ValueError(f"{info_path}: file not found (the visible fractions of the GT are needed)")
     infos = bop_files.load_scene_gt_info(info_path)
     images = {}
-    for im_id, (obj_ids, poses) in gt.items():
+    for im_id, instances in gt.items():
+        obj_ids = np.array([instance.obj_id for instance in instances], dtype=np.int64)
+        poses = np.array([instance.T_model2cam for instance in instances]).reshape(-1, 4, 4)
+        poses[:, :3, 3] *= METRES_TO_MILLIMETRES
         if im_id not in cameras:
             raise ValueError(f"{scene_folder / 'scene_camera.json'}: no entry for image {im_id}")
         info = infos.get(im_id, [])

@@ -278,6 +278,9 @@ def rendered(tmp_path_factory):
             T_m[:3, 3] /= 1000
             depth[im_id] = renderer.render(K, [(box_m, T_m)], rgb=False, masks=False).depth.astype(np.float64) * 1000
     root = tmp_path_factory.mktemp("vsd")
+    for T in poses.values():  # stored rounded, as BOP ground truth is (not exactly orthonormal)
+        T[:3, :3] = np.round(T[:3, :3], 3)
+    assert max(np.abs(T[:3, :3].T @ T[:3, :3] - np.eye(3)).max() for T in poses.values()) > 1e-4
     images = {im_id: [(1, T, 1.0)] for im_id, T in poses.items()}
     write_dataset(root / "data", {1: box_mm}, {1: diameter}, set(), images, [(1, 1, 1), (2, 1, 1)], depth,
                   width, height)
