@@ -48,7 +48,8 @@ def read_targets(path: str | Path) -> list[Target]:
         for name in ("scene_id", "im_id", "obj_id", "inst_count"):
             value = entry.get(name) if isinstance(entry, dict) else None
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
-                raise ValueError(f"{path}: target {index}: field {name!r} must be a non-negative integer, got {value!r}")
+                raise ValueError(f"{path}: target {index}: field {name!r} must be a non-negative integer, "
+                                 f"got {value!r}")
             values.append(value)
         if values[3] == 0:
             raise ValueError(f"{path}: target {index}: field 'inst_count' must be positive")

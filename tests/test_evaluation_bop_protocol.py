@@ -240,7 +240,8 @@ def test_cli_rejects_vsd_without_depth_and_bad_rows(tiny, tmp_path, capsys):
                  "--metrics", "vsd,mssd", "--quiet"])
     assert code == 2 and "VSD needs depth images" in capsys.readouterr().err and not out.exists()
     broken = tmp_path / "broken.csv"
-    broken.write_text(tiny[1].read_text() + "1,1,1,0.5,1 0 0 0 1 0 0 0 1,0 0 nan,-1\n1,1,9,0.5,1 0 0 0 1 0 0 0 1,0 0 1,-1\n")
+    broken.write_text(tiny[1].read_text() + "1,1,1,0.5,1 0 0 0 1 0 0 0 1,0 0 nan,-1\n"
+                      "1,1,9,0.5,1 0 0 0 1 0 0 0 1,0 0 1,-1\n")
     code = main(["evaluate", "bop", "--dataset", str(tiny[0]), "--results", str(broken), "--out", str(out),
                  "--metrics", "mssd", "--quiet"])
     assert code == 2 and f"{broken}:9: field 't'" in capsys.readouterr().err

@@ -56,7 +56,8 @@ def pair(lmo, row):
     im_id, obj_id = int(row["im_id"]), int(row["obj_id"])
     estimate = lmo["estimates"][(im_id, obj_id)]
     (gt,) = [g for g in lmo["gt"][str(im_id)] if g["obj_id"] == obj_id]
-    symmetries = [np.eye(4)] + [np.array(s).reshape(4, 4) for s in lmo["info"][str(obj_id)].get("symmetries_discrete", [])]
+    discrete = lmo["info"][str(obj_id)].get("symmetries_discrete", [])
+    symmetries = [np.eye(4)] + [np.array(s).reshape(4, 4) for s in discrete]
     return (lmo["points"][obj_id], np.array(estimate["R"].split(), float).reshape(3, 3),
             np.array(estimate["t"].split(), float), np.array(gt["cam_R_m2c"]).reshape(3, 3),
             np.array(gt["cam_t_m2c"], float), np.array(lmo["camera"][str(im_id)]["cam_K"]).reshape(3, 3), symmetries)
