@@ -21,7 +21,7 @@ import numpy as np
 from data_gen.assets import Assets
 from data_gen.coco import bbox_xywh, encode_rle
 from data_gen.config import GenerationConfig
-from data_gen.files import json_bytes, write_bytes_atomically, write_json_atomically
+from paz6d.backend.files import json_bytes, write_bytes_atomically, write_json_atomically
 from paz6d.backend.mesh import bounding_box
 
 STATE_FOLDER = ".paz6d-generate"

@@ -10,7 +10,8 @@ import numpy as np
 from data_gen import bop_writer
 from data_gen.assets import ZNEAR, Assets, load_assets
 from data_gen.config import GenerationConfig
-from data_gen.files import image_bytes, write_bytes_atomically
+from data_gen.files import image_bytes
+from paz6d.backend.files import write_bytes_atomically
 from data_gen.randomization import (background_image, composite, degrade, random_colors, random_lighting,
                                     random_tints)
 from data_gen.scene import sample_scene

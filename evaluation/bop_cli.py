@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
     from evaluation import bop
     from evaluation.bop_data import load_evaluation_data
     from evaluation.bop_results import read_pose_results
-    from evaluation.cli import write_json_atomic
+    from paz6d.backend.files import write_json_atomically
 
     data = load_evaluation_data(args.dataset, args.split, args.targets)
     metrics, skipped_metrics = _choose_metrics(args.metrics, data)
@@ -154,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
                **evaluation.to_dict(),
                "skipped_rows": [{"line": line, "reason": reason}
                                 for line, reason in results.skipped[:SKIPPED_ROWS_IN_JSON]]}
-    write_json_atomic(summary, args.out)
+    write_json_atomically(args.out, summary, indent=2)
     print(f"wrote {args.out}")
     if args.errors is not None:
         print(f"wrote {write_errors_csv(evaluation, results, args.errors)}")

@@ -14,10 +14,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
-import json
 import math
-import os
 from pathlib import Path
+
+from paz6d.backend.files import write_json_atomically
 
 _BOP_MODULE = "evaluation.bop_cli"
 
@@ -79,16 +79,6 @@ def _json_value(value):
     return value
 
 
-def write_json_atomic(data: dict, path: Path) -> None:
-    """Writes ``data`` as JSON to ``path`` via a temporary file and ``os.replace``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(temporary, "w", encoding="utf-8") as file:
-        json.dump(data, file, indent=2)
-        file.write("\n")
-    os.replace(temporary, path)
-
-
 def _run_coco(args: argparse.Namespace) -> int:
     from evaluation import coco
 
@@ -100,9 +90,9 @@ def _run_coco(args: argparse.Namespace) -> int:
     print(f"  {'class':<24s} {'AP':>7s}")
     for name, value in per_class.items():
         print(f"  {name:<24s} {'-' if value is None else f'{value:.3f}':>7s}")
-    write_json_atomic({"iou_type": args.iou_type, "ground_truth": str(args.gt), "results": str(args.results),
+    write_json_atomically(args.out, {"iou_type": args.iou_type, "ground_truth": str(args.gt), "results": str(args.results),
                        "stat_names": list(coco.STAT_NAMES), "stats": [float(v) for v in evaluation.stats],
-                       "per_class_ap": per_class}, args.out)
+                       "per_class_ap": per_class}, indent=2)
     print(f"wrote {args.out}")
     if args.plots is not None:
         from evaluation import detection_plots
@@ -130,9 +120,9 @@ def _run_voc(args: argparse.Namespace) -> int:
                            "false_positives": result.false_positives}
     mean = _json_value(evaluation.mean_average_precision)
     print(f"  {'mAP':<20s} {'-' if mean is None else f'{mean:.4f}':>8s}")
-    write_json_atomic({"annotations": str(args.annotations), "detections": str(args.detections),
+    write_json_atomically(args.out, {"annotations": str(args.annotations), "detections": str(args.detections),
                        "iou_threshold": args.iou, "method": args.method, "box_format": args.box_format,
-                       "plus_one": not args.no_plus_one, "per_class": per_class, "mAP": mean}, args.out)
+                       "plus_one": not args.no_plus_one, "per_class": per_class, "mAP": mean}, indent=2)
     print(f"wrote {args.out}")
     if args.plots is not None:
         from evaluation import detection_plots

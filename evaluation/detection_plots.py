@@ -7,31 +7,15 @@ importing this module stays cheap.
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.files import new_figure, save_figure_atomically
+
 from evaluation.coco import RECALL_THRESHOLDS, CocoEvaluation
 from evaluation.voc import VocEvaluation
-
-
-def _new_figure(width: float, height: float):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    figure = Figure(figsize=(width, height), dpi=100)
-    FigureCanvasAgg(figure)
-    return figure
-
-
-def _save(figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    figure.savefig(temporary, format="png")
-    os.replace(temporary, path)
-    return path
 
 
 def _safe_name(name: str) -> str:
@@ -49,7 +33,7 @@ def plot_precision_recall(curves: dict[str, tuple[np.ndarray, np.ndarray]], path
     Returns:
         The written path.
     """
-    figure = _new_figure(7, 5.5)
+    figure = new_figure(7, 5.5)
     axes = figure.add_subplot(1, 1, 1)
     for label, (recall, precision) in curves.items():
         axes.plot(recall, precision, label=label, linewidth=1.5)
@@ -62,14 +46,14 @@ def plot_precision_recall(curves: dict[str, tuple[np.ndarray, np.ndarray]], path
     if curves:
         axes.legend(loc="lower left", fontsize="small", ncol=2 if len(curves) > 10 else 1)
     figure.tight_layout()
-    return _save(figure, Path(path))
+    return save_figure_atomically(figure, path)
 
 
 def plot_average_precision_bars(values: dict[str, float | None], path: str | Path, title: str) -> Path:
     """Writes a horizontal bar chart of AP per class (classes without a value are drawn as gaps)."""
     names = list(values)
     heights = [np.nan if values[n] is None else values[n] for n in names]
-    figure = _new_figure(7, max(3.0, 0.22 * len(names) + 1.2))
+    figure = new_figure(7, max(3.0, 0.22 * len(names) + 1.2))
     axes = figure.add_subplot(1, 1, 1)
     axes.barh(np.arange(len(names)), np.nan_to_num(heights, nan=0.0), color="tab:blue")
     axes.set_yticks(np.arange(len(names)), names, fontsize="small")
@@ -79,7 +63,7 @@ def plot_average_precision_bars(values: dict[str, float | None], path: str | Pat
     axes.set_title(title)
     axes.grid(True, axis="x", alpha=0.3)
     figure.tight_layout()
-    return _save(figure, Path(path))
+    return save_figure_atomically(figure, path)
 
 
 def plot_coco(evaluation: CocoEvaluation, directory: str | Path) -> list[Path]:

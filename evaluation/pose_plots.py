@@ -6,33 +6,17 @@ Figures are drawn on matplotlib's Agg canvas (no display, no pyplot state) and w
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
+
+from paz6d.backend.files import new_figure, save_figure_atomically
 
 from evaluation.bop import BopEvaluation, MetricRecalls
 
 _AXIS_LABELS = {"mssd": "threshold (fraction of the object diameter)", "mspd": "threshold (px at 640 px width)",
                 "vsd": "correctness threshold theta (mean over tau)", "add": "threshold (fraction of the diameter)"}
 _TITLES = {"mssd": "MSSD", "mspd": "MSPD", "vsd": "VSD", "add": "ADD(-S)"}
-
-
-def _figure():
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    figure = Figure(figsize=(7, 5), dpi=100)
-    FigureCanvasAgg(figure)
-    return figure
-
-
-def _save(figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    figure.savefig(temporary, format="png")
-    os.replace(temporary, path)
-    return path
 
 
 def _curve(metric: MetricRecalls, name: str, taus: int) -> tuple[np.ndarray, np.ndarray, dict[int, np.ndarray]]:
@@ -49,7 +33,7 @@ def plot_recall_curve(evaluation: BopEvaluation, name: str, path: str | Path) ->
     """Writes the recall-vs-threshold curve of metric ``name`` (all instances and each object)."""
     metric = evaluation.metrics[name]
     x, overall, objects = _curve(metric, name, len(evaluation.settings.vsd_taus))
-    figure = _figure()
+    figure = new_figure(7, 5)
     axes = figure.add_subplot(1, 1, 1)
     marker = "o" if len(x) > 1 else "s"
     for obj_id, values in sorted(objects.items()):
@@ -63,14 +47,14 @@ def plot_recall_curve(evaluation: BopEvaluation, name: str, path: str | Path) ->
     axes.grid(True, alpha=0.3)
     axes.legend(fontsize=7, ncol=2, loc="lower right")
     figure.tight_layout()
-    return _save(figure, Path(path))
+    return save_figure_atomically(figure, path)
 
 
 def plot_accuracy_curves(evaluation: BopEvaluation, path: str | Path) -> Path:
     """Writes the YCB-Video accuracy-threshold curves of ADD, ADD-S and ADD(-S) with their AUCs."""
     limit = evaluation.settings.auc_max_threshold
     thresholds = np.linspace(0.0, limit, 201)
-    figure = _figure()
+    figure = new_figure(7, 5)
     axes = figure.add_subplot(1, 1, 1)
     for label, errors in evaluation.auc_errors.items():
         accuracy = (errors[None, :] <= thresholds[:, None]).mean(axis=1) if errors.size else np.zeros_like(thresholds)
@@ -83,7 +67,7 @@ def plot_accuracy_curves(evaluation: BopEvaluation, path: str | Path) -> Path:
     axes.grid(True, alpha=0.3)
     axes.legend(loc="lower right")
     figure.tight_layout()
-    return _save(figure, Path(path))
+    return save_figure_atomically(figure, path)
 
 
 def plot_evaluation(evaluation: BopEvaluation, folder: str | Path) -> list[Path]:

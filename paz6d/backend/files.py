@@ -1,0 +1,66 @@
+"""Crash-safe file output: a file appears complete (temporary name, then ``os.replace``) or not at all.
+
+Every writer in paz6d (data sets, run directories, reports, plots) goes through these functions,
+so a killed job never leaves a half-written file behind, only stale temporaries named
+``TEMPORARY_PREFIX*`` that a resumed job may delete.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+TEMPORARY_PREFIX = ".paz6d-tmp-"
+
+
+def write_bytes_atomically(path: str | Path, data: bytes) -> Path:
+    """Writes ``data`` to ``path`` through a temporary file in the same folder and ``os.replace``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=TEMPORARY_PREFIX + path.name + ".")
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(data)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def json_bytes(data: Any, indent: int | None = None) -> bytes:
+    """Deterministic JSON encoding (key order as given; NaN/inf are rejected)."""
+    text = json.dumps(data, allow_nan=False, indent=indent, separators=None if indent else (", ", ": "))
+    return (text + "\n").encode() if indent else text.encode()
+
+
+def write_json_atomically(path: str | Path, data: Any, indent: int | None = None) -> Path:
+    """Writes ``data`` as JSON (``indent`` spaces, compact when None) atomically."""
+    return write_bytes_atomically(path, json_bytes(data, indent))
+
+
+def write_text_atomically(path: str | Path, text: str) -> Path:
+    """Writes UTF-8 ``text`` atomically."""
+    return write_bytes_atomically(path, text.encode("utf-8"))
+
+
+def new_figure(width: float, height: float, dpi: int = 100):
+    """A matplotlib ``Figure`` (``width × height`` inches) on the Agg canvas, without pyplot state."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(width, height), dpi=dpi)
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def save_figure_atomically(figure, path: str | Path) -> Path:
+    """Saves a matplotlib figure as PNG atomically and returns the path."""
+    import io
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png")
+    return write_bytes_atomically(path, buffer.getvalue())
