@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
+from paz6d.backend.files import save_figure_atomically
+
 FORMAT_VERSION = 1
 SNAPSHOT_RELATIVE_SINGULAR_VALUE = 1e-6
 
@@ -339,11 +341,9 @@ def save_eigenface_grid(model: EigenFaces, path, count: int = 15, columns: int =
         axis.imshow(vector.reshape(model.image_shape), cmap="gray")
         axis.set_title(title, fontsize=8)
     figure.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=100)
+    save_figure_atomically(figure, path)
     plt.close(figure)
-    return path
+    return Path(path)
 
 
 def reconstruction_errors(model: EigenFaces, images, component_counts) -> np.ndarray:
@@ -373,8 +373,6 @@ def save_reconstruction_error_plot(component_counts, error_series: dict[str, np.
     axis.grid(True, alpha=0.3)
     axis.legend()
     figure.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=100)
+    save_figure_atomically(figure, path)
     plt.close(figure)
-    return path
+    return Path(path)

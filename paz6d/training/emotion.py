@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
+import io
 import os
 from pathlib import Path
 
@@ -27,6 +27,7 @@ import numpy as np
 
 from paz6d.abstract import SequentialProcessor
 from paz6d.abstract.processor import random_processors
+from paz6d.backend.files import save_figure_atomically, write_json_atomically, write_text_atomically
 from paz6d.datasets.fer2013 import FER2013_CLASSES, load_fer2013_csv, load_image_folder
 from paz6d.processors.affine import RandomAffine
 from paz6d.processors.image import ConvertColorSpace, RandomBrightness, RandomContrast, RandomFlipLeftRight
@@ -198,11 +199,9 @@ def save_confusion_matrix_plot(matrix: np.ndarray, class_names, path, title: str
     axis.set_title(f"{title} accuracy {accuracy:.1%} (n={matrix.sum()})".strip())
     figure.colorbar(image, ax=axis, fraction=0.046, label="fraction of true class")
     figure.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=100)
+    save_figure_atomically(figure, path)
     plt.close(figure)
-    return path
+    return Path(path)
 
 
 def predict_classes(model, inputs: np.ndarray, batch_size: int = 256) -> np.ndarray:
@@ -219,12 +218,11 @@ def _append_validation_row(run_dir: Path, step: int, accuracy: float) -> None:
         with path.open(newline="") as handle:
             rows = [row for row in csv.DictReader(handle) if int(row["step"]) < step]
     rows.append({"step": step, "accuracy": f"{accuracy:.6f}"})
-    temporary = path.with_name(path.name + ".tmp")
-    with temporary.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=["step", "accuracy"])
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(temporary, path)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=["step", "accuracy"])
+    writer.writeheader()
+    writer.writerows(rows)
+    write_text_atomically(path, text.getvalue())
 
 
 def run(args: argparse.Namespace) -> int:
@@ -275,13 +273,11 @@ def run(args: argparse.Namespace) -> int:
     temporary = run_dir / "model.tmp.keras"
     model.save(temporary)
     os.replace(temporary, run_dir / "model.keras")
-    (run_dir / "classes.json").write_text(json.dumps(list(class_names)))
+    write_json_atomically(run_dir / "classes.json", list(class_names))
     metrics = {"step": summary.final_step, "validation_accuracy": float(np.trace(matrix) / matrix.sum()),
                "validation_count": int(matrix.sum()), "confusion_matrix": matrix.tolist(),
                "class_names": list(class_names), "train_metrics": summary.metrics}
-    temporary = run_dir / "metrics.json.tmp"
-    temporary.write_text(json.dumps(metrics, indent=2))
-    os.replace(temporary, run_dir / "metrics.json")
+    write_json_atomically(run_dir / "metrics.json", metrics, indent=2)
     print(f"emotion: step {summary.final_step}, validation accuracy {metrics['validation_accuracy']:.3f} "
           f"on {metrics['validation_count']} faces; model in {run_dir / 'model.keras'}")
     return 0
