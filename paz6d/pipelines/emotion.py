@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from paz6d.abstract import Box2D, Processor
+from paz6d.backend.square_crop import crop_square, square_window
 from paz6d.pipelines.haar import HaarCascadeDetector, to_grey
 
 FER_CLASS_NAMES = ("angry", "disgust", "fear", "happy", "sad", "surprise", "neutral")
@@ -115,23 +116,6 @@ class EmotionClassifier(Processor):
         return np.asarray(self.model.predict_on_batch(preprocess_faces(resized)), dtype=np.float32)
 
 
-def square_crop_box(box: Box2D, margin: float) -> tuple[int, int, int]:
-    """Integer ``(x_min, y_min, side)`` of the square around ``box`` grown by ``margin`` times its side on each side."""
-    side = max(box.width, box.height) * (1.0 + 2.0 * margin)
-    center_x, center_y = box.center
-    side_pixels = max(int(round(side)), 1)
-    return int(round(center_x - side / 2.0)), int(round(center_y - side / 2.0)), side_pixels
-
-
-def crop_square(grey: np.ndarray, box: Box2D, margin: float) -> np.ndarray:
-    """Square crop around ``box`` (see :func:`square_crop_box`); parts outside the image replicate the border."""
-    x_min, y_min, side = square_crop_box(box, margin)
-    height, width = grey.shape
-    pad = max(0, -x_min, -y_min, x_min + side - width, y_min + side - height)
-    padded = cv2.copyMakeBorder(grey, pad, pad, pad, pad, cv2.BORDER_REPLICATE) if pad else grey
-    return padded[y_min + pad:y_min + pad + side, x_min + pad:x_min + pad + side]
-
-
 class DetectEmotion(Processor):
     """``image -> list of (Box2D, label, scores)``: faces found by a Haar cascade, classified by mini-Xception.
 
@@ -163,8 +147,9 @@ class DetectEmotion(Processor):
         faces = self.face_detector(image)
         if not faces:
             return []
-        crops = np.stack([cv2.resize(crop_square(grey, face, self.margin), self.classifier.input_size,
-                                     interpolation=cv2.INTER_AREA) for face in faces])
+        size = self.classifier.input_size[0]
+        crops = np.stack([crop_square(grey, square_window(face.to_array(), 1.0 + 2.0 * self.margin), size)
+                          for face in faces])
         probabilities = self.classifier(crops)
         results = []
         for face, scores in zip(faces, probabilities):
