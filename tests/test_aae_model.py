@@ -20,8 +20,9 @@ def test_shapes_and_nested_encoder():
     assert np.all((output >= 0) & (output <= 1))  # sigmoid reconstruction
 
 
-def test_save_load_round_trip_gives_identical_outputs(tmp_path):
-    model = aae.build_autoencoder(**TINY)
+@pytest.mark.parametrize("batch_norm", [False, True])
+def test_save_load_round_trip_gives_identical_outputs(tmp_path, batch_norm):
+    model = aae.build_autoencoder(**TINY, batch_norm=batch_norm)
     path = aae.save_model(model, tmp_path / "model.keras")
     assert not list(tmp_path.glob("*.tmp.keras"))
     loaded = aae.load_model(path)

@@ -45,6 +45,7 @@ class AAEConfig:
         latent_size: length of the latent code.
         filters: encoder channels per strided convolution (the decoder mirrors them).
         kernel_size: convolution kernel size.
+        batch_norm: batch normalisation after every convolution (not in the paper; trains faster).
         padding: crop side / longest side of the object box.
         render_size: side of the on-axis renderings the crops are cut from.
         views: view-sphere directions rendered (training views and codebook share them).
@@ -61,6 +62,7 @@ class AAEConfig:
     latent_size: int = 64
     filters: tuple[int, ...] = (32, 64, 64, 128)
     kernel_size: int = 5
+    batch_norm: bool = False
     padding: float = 1.2
     render_size: int = 96
     views: int = 1000
@@ -263,7 +265,8 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
                           config.augmentation, seed=seed, pairs=pairs, pair_fraction=pair_fraction)
     loader_speed = measure_loader(sampler, config.batch_size)
     keras.utils.set_random_seed(seed)
-    model = build_autoencoder(config.crop_size, config.latent_size, config.filters, config.kernel_size)
+    model = build_autoencoder(config.crop_size, config.latent_size, config.filters, config.kernel_size,
+                              config.batch_norm)
     optimizer = keras.optimizers.Adam(config.learning_rate)
 
     def loss_fn(model, batch):
