@@ -12,8 +12,10 @@ from paz6d.backend.camera import Camera, transform_and_project
 from paz6d.backend.draw import draw_box, draw_cube, draw_keypoints, image_grid, keypoint_colors
 from paz6d.backend.farthest_points import farthest_point_sampling
 from paz6d.backend.pnp import PnPError
-from paz6d.backend.square_crop import crop_intrinsics, crop_square, crop_transform, square_window, to_full_image
-from paz6d.pipelines.keypoint_pose import keypoint_spread, lift_keypoints, read_keypoints, write_keypoints
+from paz6d.backend.square_crop import (crop_intrinsics, crop_square, crop_transform, projected_box, square_window,
+                                      to_full_image)
+from paz6d.pipelines.keypoint_pose import (depth_from_box, keypoint_spread, lift_keypoints, read_keypoints,
+                                          read_object, write_keypoints, write_object)
 
 K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
 
@@ -168,6 +170,7 @@ def run_dir(tmp_path_factory):
     (folder / "config.json").write_text(json.dumps({"input_size": 32, "margin": 1.25, "downsample": 2}))
     cube = np.array([[x, y, z] for x in (-0.04, 0.04) for y in (-0.03, 0.03) for z in (-0.02, 0.02)])
     write_keypoints(folder, cube, np.ones(8, bool), "farthest-point")
+    write_object(folder, float(np.linalg.norm(cube[0] - cube[-1])), cube)
     return folder
 
 
@@ -236,3 +239,64 @@ def test_corrupt_or_incomplete_run_directory_is_a_clear_error(run_dir, tmp_path)
     (tmp_path / "model.keras").write_bytes(b"PK\x03\x04 truncated")
     with pytest.raises(ValueError, match="model.keras"):
         KeypointPose6D(tmp_path, K)
+
+
+def test_local_expectation_ignores_mass_far_from_the_peak():
+    from paz6d.pipelines.keypoint_pose import local_expectation
+
+    probabilities = np.zeros((1, 8, 8, 2))
+    probabilities[0, 2, 1, 0], probabilities[0, 2, 2, 0] = 0.3, 0.1  # a weaker mode far from the peak
+    probabilities[0, 6, 6, 0], probabilities[0, 7, 7, 0] = 0.4, 0.2  # the peak and a neighbour
+    probabilities[0, 5, 3, 1] = 1.0
+    uv = local_expectation(probabilities, stride=4, radius=1)
+    # map 0: the 3x3 window around cell (6, 6) holds 0.4 at (6, 6) and 0.2 at (7, 7): cell 6 + 1/3;
+    # stride-4 cell c is centred at pixel 4 c + 1.5
+    np.testing.assert_allclose(uv[0, 0], [4 * (6 + 1 / 3) + 1.5] * 2)
+    np.testing.assert_allclose(uv[0, 1], [3 * 4 + 1.5, 5 * 4 + 1.5])
+
+
+def test_triangulate_keypoints_recovers_points_and_drops_outlier_views():
+    from paz6d.pipelines.keypoint_pose import triangulate_keypoints
+
+    points_model = np.random.default_rng(4).uniform(-0.05, 0.05, (5, 3))
+    uv, _, intrinsics, poses = _views(points_model, 12, seed=2)
+    points, rms = triangulate_keypoints(uv, intrinsics, poses)
+    np.testing.assert_allclose(points, points_model, atol=1e-9)
+    np.testing.assert_allclose(rms, 0.0, atol=1e-6)
+    noisy = uv + np.random.default_rng(0).normal(0.0, 0.5, uv.shape)
+    noisy[[1, 5], 2] += [60.0, -45.0]  # two wild detections of keypoint 2
+    points, rms = triangulate_keypoints(noisy, intrinsics, poses)
+    assert np.linalg.norm(points - points_model, axis=1).max() < 1.5e-3  # 0.5 px noise at 0.6 m, f = 500
+    assert rms.max() < 1.5
+    with pytest.raises(ValueError, match="at least 2 views"):
+        triangulate_keypoints(uv[:1], intrinsics[:1], poses[:1])
+
+
+def test_depth_from_box_moves_the_object_to_fit_its_box(run_dir):
+    hull = read_object(run_dir)["hull_points"]
+    T = _pose([0.3, 0.5, -0.2], [0.05, -0.03, 0.6])
+    box = projected_box(hull, T, K)
+    too_far = T.copy()
+    too_far[:3, 3] *= 1.08
+    fitted = depth_from_box(Pose6D.from_matrix(too_far), hull, box, K)
+    np.testing.assert_allclose(fitted.to_matrix()[:3, :3], T[:3, :3], atol=1e-9)  # rotation unchanged
+    # three fixed-point steps on a perspective projection: close, not exact
+    np.testing.assert_allclose(fitted.translation, T[:3, 3], rtol=2e-3)
+    with pytest.raises(ValueError, match="hull_points"):
+        (run_dir.parent / "bad").mkdir(exist_ok=True)
+        (run_dir.parent / "bad" / "object.json").write_text(json.dumps({"diameter": 1, "hull_points": [[0, 0, 0]]}))
+        read_object(run_dir.parent / "bad")
+
+
+def test_estimator_with_depth_from_box_uses_the_box(run_dir):
+    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+
+    estimator = KeypointPose6D(run_dir, K, depth_from_box=True)
+    T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
+    keypoints = Keypoints2D(transform_and_project(estimator.points_model, T, K), np.ones(8))
+    box = projected_box(estimator.hull_points, T, K)
+    shrunk = Keypoints2D((keypoints.points - keypoints.points.mean(0)) * 0.95 + keypoints.points.mean(0), np.ones(8))
+    plain = KeypointPose6D(run_dir, K)._estimate(shrunk, box)
+    fitted = estimator._estimate(shrunk, box)
+    assert abs(plain.translation[2] - 0.5) > 0.015  # a 5 % smaller constellation reads as 5 % farther
+    assert abs(fitted.translation[2] - 0.5) < 0.003

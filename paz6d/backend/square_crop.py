@@ -23,6 +23,21 @@ import numpy as np
 from paz6d.backend.checks import as_array, as_camera_matrix
 
 
+def projected_box(points, T_model2cam, K) -> np.ndarray:
+    """``xyxy`` box (pixel ``i`` covers ``[i, i + 1)``) of the projection of ``(N, 3)`` model points.
+
+    For an object's vertices (or their convex hull) this is the box of its silhouette.
+    """
+    points = as_array(points, "points", (3,))
+    T_model2cam = as_array(T_model2cam, "T_model2cam", (4, 4))
+    K = as_camera_matrix(K)
+    camera_points = points @ T_model2cam[:3, :3].T + T_model2cam[:3, 3]
+    if np.any(camera_points[:, 2] <= 0):
+        raise ValueError("T_model2cam: part of the object is behind the camera (z <= 0)")
+    pixels = camera_points[:, :2] / camera_points[:, 2:] @ K[:2, :2].T + K[:2, 2]
+    return np.concatenate([pixels.min(axis=0) + 0.5, pixels.max(axis=0) + 0.5])
+
+
 def square_window(box, margin: float = 1.25) -> tuple[int, int, int]:
     """Integer square ``(x_min, y_min, side)`` centred on ``xyxy`` ``box``, ``side = margin * max(w, h)``.
 

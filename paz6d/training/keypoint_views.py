@@ -2,9 +2,10 @@
 
 Every view ``i`` of a set is drawn from ``numpy.random.default_rng([seed, i])``: a uniformly random
 rotation, a distance of ``distance`` object diameters and an image position inside the central part
-of a ``camera`` image, plus random lights. Training views are rendered directly as the
-``input_size``² square crop around the object's silhouette box (``margin`` × its longer side), with
-the crop's own intrinsics ``K_crop`` (see :mod:`paz6d.backend.square_crop`); test views are whole
+of a ``camera`` image, plus random lights. Training views are the ``input_size``² square
+crops around the object's silhouette box (``margin`` × its longer side) with their own intrinsics
+``K_crop`` (see :mod:`paz6d.backend.square_crop`): only the crop window is rendered, at about its
+resolution in the camera image, then resampled like a crop of a whole image; test views are whole
 camera images over random backgrounds with their ground-truth boxes.
 
 Rendering runs in ``multiprocessing`` *spawn* worker processes that never import TensorFlow
@@ -33,7 +34,7 @@ from paz6d.backend import image as image_backend
 from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera
 from paz6d.backend.mesh import diameter, load_mesh
-from paz6d.backend.square_crop import crop_intrinsics, square_window
+from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_box, square_window
 
 #: LINEMOD-like 640×480 camera used when no camera is given.
 DEFAULT_CAMERA = Camera(np.array([[572.4114, 0.0, 325.2611], [0.0, 573.5704, 242.0490], [0.0, 0.0, 1.0]]), 640, 480)
@@ -150,7 +151,7 @@ class TestImages:
 
 # ------------------------------------------------------------------------------- pose sampling
 
-def _hull_vertices(vertices: np.ndarray) -> np.ndarray:
+def hull_points(vertices: np.ndarray) -> np.ndarray:
     """Convex hull vertices (the projected bounding box of a point set is that of its hull)."""
     from scipy.spatial import ConvexHull, QhullError
 
@@ -174,15 +175,6 @@ def sample_pose(rng: np.random.Generator, vertices: np.ndarray, object_diameter:
     T[:3, :3] = rotation
     T[:3, 3] = centre_cam - rotation @ centre_model
     return T
-
-
-def silhouette_box(vertices: np.ndarray, T_model2cam: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """``xyxy`` box (pixel ``i`` covers ``[i, i+1)``) of the projection of ``vertices (N, 3)``."""
-    points = vertices @ T_model2cam[:3, :3].T + T_model2cam[:3, 3]
-    if np.any(points[:, 2] <= 0):
-        raise ValueError("T_model2cam: part of the object is behind the camera")
-    pixels = points[:, :2] / points[:, 2:] @ K[:2, :2].T + K[:2, 2]
-    return np.concatenate([pixels.min(axis=0) + 0.5, pixels.max(axis=0) + 0.5])
 
 
 def random_lighting(rng: np.random.Generator):
@@ -221,17 +213,36 @@ def random_background(height: int, width: int, rng: np.random.Generator) -> np.n
 _WORKER: dict = {}
 
 
-def _init_worker(mesh_path: str, mesh_scale: float, width: int, height: int) -> None:
-    """Spawn-worker initializer: loads the mesh and opens one renderer (no TensorFlow here)."""
-    from renderers import Renderer
+#: Resolutions at which crop windows are rendered before being resampled to the input size
+#: (the nearest to the window's side in the camera image).
+RENDER_SIZES = (64, 96, 128, 192, 256, 384)
 
+
+def _init_worker(mesh_path: str, mesh_scale: float) -> None:
+    """Worker initializer: loads the mesh (renderers are opened on first use; no TensorFlow here)."""
     mesh = load_mesh(mesh_path, mesh_scale)
-    _WORKER.update(mesh=mesh, renderer=Renderer(width, height), hull=_hull_vertices(np.asarray(mesh.vertices)),
+    _WORKER.update(mesh=mesh, renderers={}, hull=hull_points(np.asarray(mesh.vertices)),
                    diameter=diameter(np.asarray(mesh.vertices)))
 
 
+def _renderer(width: int, height: int):
+    from renderers import Renderer
+
+    renderers = _WORKER["renderers"]
+    if (width, height) not in renderers:
+        renderers[(width, height)] = Renderer(width, height)
+    return renderers[(width, height)]
+
+
+def _close_renderers() -> None:
+    for renderer in _WORKER.pop("renderers", {}).values():
+        renderer.close()
+
+
 def _render_crops(indices: list[int], seed: int, sampling: ViewSampling) -> dict[str, np.ndarray]:
-    mesh, renderer, hull, object_diameter = (_WORKER[key] for key in ("mesh", "renderer", "hull", "diameter"))
+    """Renders each view's crop window at about its resolution in the camera image, then resamples it
+    to ``input_size`` with :func:`crop_square`, exactly as test crops are cut from whole images."""
+    mesh, hull, object_diameter = (_WORKER[key] for key in ("mesh", "hull", "diameter"))
     size = sampling.input_size
     out = {"rgb": np.zeros((len(indices), size, size, 3), np.uint8), "alpha": np.zeros((len(indices), size, size), np.uint8),
            "masks": np.zeros((len(indices), size, size), bool), "K": np.zeros((len(indices), 3, 3)),
@@ -239,17 +250,22 @@ def _render_crops(indices: list[int], seed: int, sampling: ViewSampling) -> dict
     for row, index in enumerate(indices):
         rng = np.random.default_rng([seed, index])
         T = sample_pose(rng, hull, object_diameter, sampling)
-        window = square_window(silhouette_box(hull, T, sampling.camera.K), sampling.margin)
-        K_crop = crop_intrinsics(sampling.camera.K, window, size)
-        rendered = renderer.render(K_crop, [(mesh, T)], lighting=random_lighting(rng))
-        out["rgb"][row], out["alpha"][row], out["masks"][row] = rendered.rgb, rendered.alpha, rendered.masks[0]
-        out["K"][row], out["T_model2cam"][row] = K_crop, T
+        window = square_window(projected_box(hull, T, sampling.camera.K), sampling.margin)
+        resolution = min(RENDER_SIZES, key=lambda candidate: abs(np.log(candidate / window[2])))
+        rendered = _renderer(resolution, resolution).render(crop_intrinsics(sampling.camera.K, window, resolution),
+                                                            [(mesh, T)], lighting=random_lighting(rng))
+        whole = (0, 0, resolution)
+        out["rgb"][row] = crop_square(rendered.rgb, whole, size)
+        out["alpha"][row] = crop_square(rendered.alpha, whole, size)
+        out["masks"][row] = crop_square(rendered.masks[0].astype(np.uint8) * 255, whole, size) > 127
+        out["K"][row], out["T_model2cam"][row] = crop_intrinsics(sampling.camera.K, window, size), T
     return out
 
 
 def _render_full(indices: list[int], seed: int, sampling: ViewSampling) -> dict[str, np.ndarray]:
-    mesh, renderer, hull, object_diameter = (_WORKER[key] for key in ("mesh", "renderer", "hull", "diameter"))
+    mesh, hull, object_diameter = (_WORKER[key] for key in ("mesh", "hull", "diameter"))
     camera = sampling.camera
+    renderer = _renderer(camera.width, camera.height)
     images, boxes, poses, masks = [], [], [], []
     for index in indices:
         rng = np.random.default_rng([seed, index])
@@ -282,23 +298,21 @@ def _render(kind: str, mesh_path: Path, mesh_scale: float, count: int, seed: int
     mesh_path = Path(mesh_path)
     if not mesh_path.is_file():
         raise ValueError(f"{mesh_path}: mesh file not found")
-    width, height = ((sampling.input_size, sampling.input_size) if kind == "crops"
-                     else (sampling.camera.width, sampling.camera.height))
     jobs = [(kind, list(range(start, min(start + chunk, count))), seed, sampling) for start in range(0, count, chunk)]
     parts: list[dict[str, np.ndarray]] = []
     bar = tqdm(total=count, desc=description, disable=not progress, dynamic_ncols=True)
     if workers <= 0:
-        _init_worker(str(mesh_path), mesh_scale, width, height)
+        _init_worker(str(mesh_path), mesh_scale)
         try:
             for job in jobs:
                 parts.append(_run_job(job))
                 bar.update(len(job[1]))
         finally:
-            _WORKER.pop("renderer").close()
+            _close_renderers()
     else:
         context = multiprocessing.get_context("spawn")
         with context.Pool(min(workers, len(jobs)), initializer=_init_worker,
-                          initargs=(str(mesh_path), mesh_scale, width, height)) as pool:
+                          initargs=(str(mesh_path), mesh_scale)) as pool:
             for job, part in zip(jobs, pool.imap(_run_job, jobs)):
                 parts.append(part)
                 bar.update(len(job[1]))

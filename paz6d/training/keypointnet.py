@@ -31,19 +31,27 @@ import numpy as np
 
 CONFIGS: dict[str, dict] = {
     # Demo budget: about 10 minutes of training on 2 CPU cores.
-    "quick": {"num_keypoints": 10, "input_size": 128, "filters": 32, "downsample": 4,
-              "dilations": (1, 2, 4, 8, 1, 2, 4), "views": 1500, "validation_views": 100, "lift_views": 200,
-              "steps": 1200, "pairs": 8, "learning_rate": 2e-3, "checkpoint_every": 200, "sample_every": 200},
+    "quick": {"num_keypoints": 10, "input_size": 128, "filters": 48, "downsample": 8,
+              "dilations": (1, 2, 4, 1, 2, 4), "views": 1200, "validation_views": 100, "lift_views": 300,
+              "steps": 1500, "pairs": 8, "learning_rate": 5e-3, "checkpoint_every": 250, "sample_every": 250,
+              "lifting": "triangulate"},
     # Paper-sized network and schedule, for a GPU or a long CPU run.
     "full": {"num_keypoints": 10, "input_size": 128, "filters": 64, "downsample": 2,
              "dilations": (1, 1, 2, 4, 8, 16, 1, 2, 4, 8, 16, 1), "views": 20000, "validation_views": 200,
              "lift_views": 1000, "steps": 60000, "pairs": 16, "learning_rate": 1e-3, "checkpoint_every": 2000,
-             "sample_every": 2000},
+             "sample_every": 2000, "lifting": "triangulate"},
 }
 MODES = ("discovery", "supervised")
+LIFTINGS = ("triangulate", "median")
+#: A lifted keypoint is usable when its median re-projection error over the lifting views is below
+#: this fraction of the crop side.
+MAX_LIFTING_ERROR = 0.1
 #: Discovery loss weights (coordinates normalised to [-1, 1] as in the paper, 3D in object diameters).
-DISCOVERY_WEIGHTS = {"consistency": 1.0, "pose": 0.2, "separation": 1.0, "silhouette": 1.0, "variance": 0.1}
-SEPARATION_DELTA = 0.1  # object diameters
+#: The separation hinge keeps keypoints ``separation_delta`` object diameters apart; with a weaker
+#: hinge (0.1 diameter, weight 1) every keypoint collapsed onto the object centre, which satisfies
+#: the consistency loss trivially.
+DISCOVERY_WEIGHTS = {"consistency": 1.0, "pose": 0.2, "separation": 5.0, "silhouette": 1.0, "variance": 0.1}
+SEPARATION_DELTA = 0.25  # object diameters
 #: Supervised loss weights (heatmap cross-entropy, coordinates in [-1, 1] units, depth code).
 SUPERVISED_WEIGHTS = {"heatmap": 1.0, "coordinates": 2.0, "depth": 1.0}
 
@@ -188,12 +196,13 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
                                               K_unit[:pairs], K_unit[pairs:], T_a2b)
             points = kp.unproject(outputs["uv"], depth, K) / object_diameter
             pose = kp.relative_pose_loss(points[:pairs], points[pairs:], T_a2b[:, :3, :3])
-            separation = kp.separation_loss(points, SEPARATION_DELTA)
+            separation = kp.separation_loss(points, settings.get("separation_delta", SEPARATION_DELTA))
             silhouette = kp.silhouette_loss(outputs["probabilities"], batch["masks"])
             variance = kp.variance_loss(outputs["probabilities"], uv_unit, grid_unit)
             terms = {"consistency": consistency, "pose": pose, "separation": separation, "silhouette": silhouette,
                      "variance": variance}
-            loss = tf.add_n([DISCOVERY_WEIGHTS[name] * value for name, value in terms.items()])
+            weights = {**DISCOVERY_WEIGHTS, **settings.get("discovery_weights", {})}
+            loss = tf.add_n([weights[name] * value for name, value in terms.items()])
             return {"loss": loss, **terms}
 
         return loss_fn
@@ -239,9 +248,12 @@ def fixed_crops(views, seed: int, count: int | None = None):
 
 def predict_crops(model, images: np.ndarray, batch_size: int = 32) -> dict[str, np.ndarray]:
     """Runs the model over ``(V, S, S, 3)`` crops in batches; numpy outputs."""
+    from paz6d.models.keypointnet import inference_function
+
+    infer = inference_function(model)
     parts: dict[str, list] = {}
     for start in range(0, len(images), batch_size):
-        outputs = model(images[start:start + batch_size].astype(np.float32), training=False)
+        outputs = infer(images[start:start + batch_size].astype(np.float32))
         for name, value in outputs.items():
             parts.setdefault(name, []).append(np.asarray(value))
     return {name: np.concatenate(values) for name, values in parts.items()}
@@ -301,6 +313,45 @@ def _sample_drawer(images: np.ndarray, targets: np.ndarray | None):
 
 # ------------------------------------------------------------------------------- training
 
+def lift_run_keypoints(model, views, settings: dict, object_diameter: float, out: Path, seed: int,
+                       targets: np.ndarray | None = None) -> dict:
+    """Writes ``out/keypoints.json``: the 3D keypoints (object frame, metres) that PnP will use.
+
+    The trained network's keypoints on ``settings["lift_views"]`` plain crops of ``views`` (known
+    poses) are lifted to 3D, by ``settings["lifting"]``:
+
+    - ``"triangulate"``: 2D-only least-squares triangulation with outlier views dropped
+      (:func:`~paz6d.pipelines.keypoint_pose.triangulate_keypoints`); systematic 2D biases of the
+      network are absorbed into the 3D model, so they cancel in PnP;
+    - ``"median"``: per-view 3D points from the predicted depths, median over views (the paper's
+      lifting, :func:`~paz6d.pipelines.keypoint_pose.lift_keypoints`).
+
+    Keypoints whose median re-projection error exceeds :data:`MAX_LIFTING_ERROR` × crop side are
+    marked unusable.
+    ``targets`` (supervised mode: the farthest-point keypoints) are stored alongside for reference.
+    """
+    from paz6d.models.keypointnet import depth_to_metres
+    from paz6d.pipelines.keypoint_pose import (decode_keypoints, lift_keypoints, triangulate_keypoints,
+                                               write_keypoints)
+
+    method = settings.get("lifting", "triangulate")
+    if method not in LIFTINGS:
+        raise ValueError(f"lifting: expected one of {LIFTINGS}, got {method!r}")
+    images, K, T = fixed_crops(views, seed, settings["lift_views"])
+    outputs = predict_crops(model, images)
+    uv = decode_keypoints(outputs, settings["downsample"])
+    if method == "median":
+        depth = np.asarray(depth_to_metres(outputs["depth"], object_diameter, K, settings["input_size"]))
+        points, _ = lift_keypoints(uv, depth, K, T)
+    else:
+        points, _ = triangulate_keypoints(uv, K, T)
+    error = np.median(model_reprojection_errors(uv, K, T, points, np.ones(len(points), bool)), axis=0)
+    usable = error <= MAX_LIFTING_ERROR * settings["input_size"]
+    name = {"triangulate": "triangulated", "median": "lifted-median"}[method]
+    write_keypoints(out, points, usable, name, error, targets)
+    return {"lifting": name, "lifting_error_px": error.tolist(), "usable_keypoints": int(usable.sum())}
+
+
 def supervised_keypoints(mesh, count: int, seed: int) -> np.ndarray:
     """``(count, 3)`` farthest-point samples (metres) of 5000 points drawn on the mesh surface."""
     from paz6d.backend.farthest_points import farthest_point_sampling
@@ -318,16 +369,19 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         views: optional pre-built :class:`~paz6d.training.keypoint_views.ViewSet` (e.g. from a BOP set);
             by default views of ``job.mesh_path`` are rendered in worker processes.
     Returns:
-        A summary dict (also written to ``job.out/metrics.json``): training time, final losses,
-        keypoint consistency (px) on held-out views.
+        A summary dict (also written to ``job.out/metrics.json``): training time, final losses and,
+        on held-out views (crop pixels, ``input_size`` wide): ``reprojection_px_median`` (detected
+        keypoint vs its lifted 3D keypoint projected with the true pose) and ``cross_view_px_median``
+        (a keypoint moved to the other view of a pair with its predicted depth and the true relative
+        pose, vs the keypoint detected there, as in the consistency loss).
     """
     from paz6d.backend.tensorflow_guard import import_tensorflow
 
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
-    from paz6d.pipelines.keypoint_pose import (MODEL_FILE, keypoint_spread, lift_keypoints, read_keypoints,
-                                               write_keypoints)
-    from paz6d.training.keypoint_views import ViewSampling, render_views, training_batch
+    from paz6d.pipelines.keypoint_pose import (DECODERS, MODEL_FILE, decode_keypoints, keypoint_spread,
+                                               read_keypoints, write_object)
+    from paz6d.training.keypoint_views import ViewSampling, hull_points, render_views, training_batch
 
     settings = job.settings()
     started = time.perf_counter()
@@ -336,6 +390,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     sampling = ViewSampling(input_size=settings["input_size"])
     _prepare_run_dir(job, settings, object_diameter, sampling)
     out = job.out
+    write_object(out, object_diameter, hull_points(np.asarray(mesh.vertices)))
 
     def render(count, seed):
         return lambda: render_views(job.mesh_path, count, seed, sampling, job.mesh_scale, job.workers,
@@ -348,7 +403,6 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     keypoints_model = None
     if job.mode == "supervised":
         keypoints_model = supervised_keypoints(mesh, settings["num_keypoints"], job.seed)
-        write_keypoints(out, keypoints_model, np.ones(len(keypoints_model), bool), "farthest-point")
 
     from paz6d.models import keypointnet as kp
     from paz6d.training.prefetch import PrefetchedBatches
@@ -380,30 +434,26 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     kp.save_keypointnet(model, out / MODEL_FILE)
     train_seconds = time.perf_counter() - started - render_seconds
 
-    if job.mode == "discovery":
-        images, K, T = fixed_crops(train_views, job.seed + 1, settings["lift_views"])
-        outputs = predict_crops(model, images)
-        depth = kp.depth_to_metres(outputs["depth"], object_diameter, K, settings["input_size"]).numpy()
-        points, spread = lift_keypoints(outputs["uv"], depth, K, T)
-        write_keypoints(out, points, spread <= 0.1 * object_diameter, "lifted-median", spread)
+    lifting = lift_run_keypoints(model, train_views, settings, object_diameter, out, job.seed + 1, keypoints_model)
     points_model, usable = read_keypoints(out)
 
     images, K, T = fixed_crops(validation_views, job.seed + 2)
     outputs = predict_crops(model, images)
     depth = np.asarray(kp.depth_to_metres(outputs["depth"], object_diameter, K, settings["input_size"]))
-    consistency = cross_view_errors(outputs["uv"], depth, K, T)
-    reprojection = model_reprojection_errors(outputs["uv"], K, T, points_model, usable)
-    spread = keypoint_spread(outputs["probabilities"], outputs["uv"], downsample)
     summary = {"mode": job.mode, "config": job.config, "steps": training.final_step,
                "train_seconds": round(train_seconds, 1), "render_seconds": round(render_seconds, 1),
                "final_losses": training.metrics,
                "loader_samples_per_second": round(training.loader_samples_per_second, 1),
                "model_samples_per_second": round(training.model_samples_per_second, 1),
-               "consistency_px_median": float(np.median(consistency)),
-               "consistency_px_mean": float(np.mean(consistency)),
-               "reprojection_px_median": float(np.median(reprojection)) if reprojection.size else None,
-               "spread_px_median": float(np.median(spread)),
-               "usable_keypoints": int(usable.sum()), "validation_views": len(images),
-               "input_size": settings["input_size"]}
+               **lifting, "validation_views": len(images), "input_size": settings["input_size"]}
+    for method in DECODERS:  # "local" is what KeypointPose6D uses by default
+        uv = decode_keypoints(outputs, downsample, method)
+        consistency = cross_view_errors(uv, depth, K, T)
+        reprojection = model_reprojection_errors(uv, K, T, points_model, usable)
+        suffix = "" if method == "local" else "_global"
+        summary[f"cross_view_px_median{suffix}"] = float(np.median(consistency))
+        summary[f"cross_view_px_mean{suffix}"] = float(np.mean(consistency))
+        summary[f"reprojection_px_median{suffix}"] = float(np.median(reprojection)) if reprojection.size else None
+    summary["spread_px_median"] = float(np.median(keypoint_spread(outputs["probabilities"], outputs["uv"], downsample)))
     _write_json(out / "metrics.json", summary)
     return summary

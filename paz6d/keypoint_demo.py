@@ -1,0 +1,186 @@
+"""Keypoint demo: train KeypointNet (quick config) on a mesh, estimate 6D poses on held-out synthetic
+images with ground-truth boxes, score them with ``evaluation.pose_errors`` and write a report.
+
+Meant to be called by ``paz6d demo --keypoints``::
+
+    report = run_keypoint_demo(Path("demo_output"), Path("demo_output/mesh/obj_000001.ply"), mesh_scale=0.001)
+
+Outputs in ``out_dir``: ``keypointnet_<mode>/`` (run directories that
+:class:`~paz6d.pipelines.keypoint_pose.KeypointPose6D` loads), ``keypoint_report.json`` (every number),
+``keypoint_recall.png`` (ADD(-S) recall against threshold) and ``keypoint_<mode>_examples.png``
+(crops with predicted keypoints, the ground-truth 3D box in green and the estimate in red).
+Each mode is scored twice: plain PnP (``pnp``) and PnP with the depth fitted to the ground-truth
+box (``pnp_depth_from_box``, see :class:`~paz6d.pipelines.keypoint_pose.KeypointPose6D`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+TEST_SEED_OFFSET = 1_000_003  # test images never share a seed with training/validation views
+
+
+def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object_diameter: float, camera,
+                           symmetric: bool = False, depth_from_box: bool = False, chunk: int = 25) -> tuple[dict, list]:
+    """Scores :class:`KeypointPose6D` on rendered test images with their ground-truth boxes.
+
+    Args:
+        test: :class:`~paz6d.training.keypoint_views.TestImages`.
+        points: ``(N, 3)`` model points in metres (for ADD / ADD-S).
+        symmetric: score with ADD-S (ADI) instead of ADD.
+        depth_from_box: the :class:`KeypointPose6D` option of that name.
+    Returns:
+        ``(metrics, poses)``: recall of ADD(-S) < 0.1·d, AUC (0–10 cm), median rotation (deg) and
+        translation (m) errors, PnP failures, milliseconds per crop; poses are ``Pose6D`` or ``None``.
+    """
+    from evaluation.pose_errors import accuracy_auc, add_error, adi_error, rotation_error_deg, translation_error
+    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+
+    estimator = KeypointPose6D(run_dir, camera, depth_from_box=depth_from_box)
+    poses: list = []
+    started = time.perf_counter()
+    for start in range(0, len(test.images), chunk):
+        poses.extend(estimator.estimate_batch(list(test.images[start:start + chunk]),
+                                              list(test.boxes[start:start + chunk])))
+    milliseconds = 1000.0 * (time.perf_counter() - started) / len(test.images)
+    found = np.array([pose is not None for pose in poses])
+    T_est = np.stack([pose.to_matrix() if pose is not None else np.eye(4) for pose in poses])
+    errors = np.full(len(poses), np.inf)
+    rotation = np.full(len(poses), np.inf)
+    translation = np.full(len(poses), np.inf)
+    if found.any():
+        error_function = adi_error if symmetric else add_error
+        errors[found] = error_function(T_est[found], test.T_model2cam[found], points)
+        rotation[found] = rotation_error_deg(T_est[found, :3, :3], test.T_model2cam[found, :3, :3])
+        translation[found] = translation_error(T_est[found, :3, 3], test.T_model2cam[found, :3, 3])
+    metrics = {"metric": "ADD-S" if symmetric else "ADD", "images": len(poses),
+               "recall_0.1d": float(np.mean(errors < 0.1 * object_diameter)),
+               "recall_0.05d": float(np.mean(errors < 0.05 * object_diameter)),
+               "auc_10cm": accuracy_auc(errors, 0.1),
+               "median_error_m": float(np.median(errors)),
+               "median_rotation_error_deg": float(np.median(rotation)),
+               "median_translation_error_m": float(np.median(translation)),
+               "pnp_failures": int((~found).sum()), "milliseconds_per_crop": round(milliseconds, 2),
+               "errors_m": [None if not np.isfinite(value) else float(value) for value in errors]}
+    return metrics, poses
+
+
+def _examples_png(path: Path, run_dir: Path, test, poses, camera, points: np.ndarray, count: int = 12) -> Path:
+    from paz6d.backend.camera import transform_and_project
+    from paz6d.backend.draw import draw_cube, draw_keypoints, image_grid
+    from paz6d.backend.image import save_image
+    from paz6d.backend.mesh import bounding_box_corners
+    from paz6d.backend.square_crop import crop_square, crop_transform, square_window
+    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+
+    estimator = KeypointPose6D(run_dir, camera)
+    corners = bounding_box_corners(points)
+    tiles = []
+    for index in range(min(count, len(test.images))):
+        window = square_window(test.boxes[index], estimator.margin * 1.2)
+        A = crop_transform(window, 192)
+
+        def to_crop(pixels):
+            return pixels @ A[:2, :2].T + A[:2, 2]
+
+        tile = crop_square(test.images[index], window, 192)
+        tile = draw_cube(tile, to_crop(transform_and_project(corners, test.T_model2cam[index], camera.K)), (0, 255, 0))
+        if poses[index] is not None:
+            tile = draw_cube(tile, to_crop(transform_and_project(corners, poses[index].to_matrix(), camera.K)),
+                             (255, 0, 0))
+        keypoints = estimator.detect(test.images[index], test.boxes[index])
+        tiles.append(draw_keypoints(tile, to_crop(keypoints.points), radius=3))
+    return save_image(path, image_grid(tiles, columns=4))
+
+
+def _recall_png(path: Path, curves: dict[str, np.ndarray], object_diameter: float, metric: str) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    thresholds = np.linspace(0.0, 0.2, 101)
+    figure, axis = plt.subplots(figsize=(5, 4), dpi=120)
+    for name, errors in curves.items():
+        recall = [(errors < threshold * object_diameter).mean() for threshold in thresholds]
+        axis.plot(thresholds, recall, label=name)
+    axis.axvline(0.1, color="grey", linestyle="--", linewidth=0.8)
+    axis.set_xlabel(f"{metric} threshold (fraction of the diameter)")
+    axis.set_ylabel("recall")
+    axis.set_ylim(0, 1)
+    axis.grid(alpha=0.3)
+    axis.legend()
+    axis.set_title(f"KeypointPose6D, {metric} recall")
+    figure.tight_layout()
+    temporary = path.with_name(path.stem + ".tmp.png")
+    figure.savefig(temporary)
+    plt.close(figure)
+    os.replace(temporary, path)
+    return path
+
+
+def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
+                      modes: tuple[str, ...] = ("supervised",), config: str = "quick",
+                      test_images: int = 200, seed: int = 0, workers: int = 2, steps: int | None = None,
+                      symmetric: bool = False, progress: bool = True) -> dict:
+    """Trains each mode in ``modes`` and evaluates it on ``test_images`` held-out synthetic images.
+
+    Args:
+        out_dir: output folder (created); re-running resumes training and redoes the evaluation.
+        mesh_path: the object mesh; ``mesh_scale`` converts its units to metres (0.001 for BOP mm).
+        steps: override the config's training steps.
+        symmetric: the object is symmetric (score with ADD-S).
+    Returns:
+        The report (also written to ``out_dir/keypoint_report.json``).
+    """
+    from paz6d.backend.tensorflow_guard import import_tensorflow
+
+    import_tensorflow()
+    from paz6d.backend.mesh import diameter, load_mesh
+    from paz6d.training.keypoint_views import ViewSampling, render_test_images
+    from paz6d.training.keypointnet import KeypointTraining, train_keypointnet
+
+    started = time.perf_counter()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    mesh = load_mesh(mesh_path, mesh_scale)
+    points = np.asarray(mesh.vertices)
+    object_diameter = diameter(points)
+    sampling = ViewSampling()
+    report: dict = {"mesh": str(mesh_path), "mesh_scale": mesh_scale, "diameter_m": object_diameter,
+                    "config": config, "seed": seed, "test_images": test_images, "modes": {}}
+    runs = {}
+    for mode in modes:
+        run_dir = out_dir / f"keypointnet_{mode}"
+        runs[mode] = run_dir
+        report["modes"][mode] = {"training": train_keypointnet(
+            KeypointTraining(run_dir, Path(mesh_path), mesh_scale, config, mode, seed, workers, steps, progress))}
+    render_started = time.perf_counter()
+    test = render_test_images(mesh_path, test_images, seed + TEST_SEED_OFFSET, sampling, mesh_scale, workers,
+                              progress=progress)
+    report["test_render_seconds"] = round(time.perf_counter() - render_started, 1)
+    curves = {}
+    for mode, run_dir in runs.items():
+        evaluations = {}
+        for variant, from_box in (("pnp", False), ("pnp_depth_from_box", True)):
+            metrics, poses = evaluate_keypoint_pose(run_dir, test, points, object_diameter, sampling.camera,
+                                                    symmetric, depth_from_box=from_box)
+            curves[f"{mode}, {variant}"] = np.array([np.inf if value is None else value for value in metrics["errors_m"]])
+            report["modes"][mode][variant] = {key: value for key, value in metrics.items() if key != "errors_m"}
+            evaluations[variant] = metrics
+            if not from_box:
+                _examples_png(out_dir / f"keypoint_{mode}_examples.png", run_dir, test, poses, sampling.camera, points)
+        metrics_path = run_dir / "evaluation.json"
+        metrics_path.with_name("evaluation.json.tmp").write_text(json.dumps(evaluations, indent=2))
+        os.replace(metrics_path.with_name("evaluation.json.tmp"), metrics_path)
+    _recall_png(out_dir / "keypoint_recall.png", curves, object_diameter, "ADD-S" if symmetric else "ADD")
+    report["total_seconds"] = round(time.perf_counter() - started, 1)
+    path = out_dir / "keypoint_report.json"
+    path.with_name(path.name + ".tmp").write_text(json.dumps(report, indent=2))
+    os.replace(path.with_name(path.name + ".tmp"), path)
+    return report
