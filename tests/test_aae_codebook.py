@@ -96,3 +96,22 @@ def test_save_load_round_trip_and_corrupt_files(tmp_path):
         cb.Codebook.load(tmp_path / "partial.npz")
     with pytest.raises(ValueError, match="not found"):
         cb.Codebook.load(tmp_path / "absent.npz")
+
+
+def test_neighbour_average_refines_between_entries():
+    base = Rotation.from_rotvec([0.3, -0.2, 0.9])
+    offsets = Rotation.from_rotvec([[0, 0, 0], [0.05, 0, 0], [-0.05, 0, 0], [0, 0.05, 0], [0, -0.05, 0], [2.0, 0, 0]])
+    rotations = (offsets * base).as_matrix()  # a centre, four neighbours ~2.9 deg around it, one far away
+    book = cb.Codebook(np.eye(6), rotations, np.tile([0.0, 0.0, 5.0, 5.0], (6, 1)), np.eye(3), 1.0)
+    # best match is the +x neighbour; the four neighbours (equal weights) average back to the centre,
+    # the far entry (2 rad away) is outside the 15 degree radius and ignored
+    indices = np.array([[1, 2, 3, 4, 5]])
+    similarities = np.array([[0.9, 0.9, 0.9, 0.9, 0.9]])
+    mean = book.neighbour_average(indices, similarities, radius_deg=15.0, temperature=0.02)[0]
+    np.testing.assert_allclose(mean, base.as_matrix(), atol=2e-3)  # chordal mean of a symmetric cross
+    # with one clearly better match the average stays at it
+    sharp = book.neighbour_average(indices, np.array([[0.9, 0.5, 0.5, 0.5, 0.5]]), temperature=0.02)[0]
+    np.testing.assert_allclose(sharp, rotations[1], atol=1e-6)
+    np.testing.assert_allclose(book.neighbour_average([[5]], [[1.0]])[0], rotations[5], atol=1e-12)
+    with pytest.raises(ValueError, match="radius_deg"):
+        book.neighbour_average(indices, similarities, radius_deg=0)

@@ -78,7 +78,7 @@ def test_rendering_at_a_codebook_rotation_returns_that_rotation(toy_run):
     root, mesh_path, _ = toy_run
     run = root / "run"
     codebook = Codebook.load(run / "codebook.npz")
-    estimator = ImplicitPose6D(run, codebook.render_K)
+    estimator = ImplicitPose6D(run, codebook.render_K, neighbours=1)
     mesh = load_mesh(mesh_path, 0.001)
     with Renderer(TOY.render_size, TOY.render_size) as renderer:
         for view in (0, 5, 11, 23):

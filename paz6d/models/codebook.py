@@ -155,6 +155,31 @@ class Codebook:
             indices = np.take_along_axis(indices, order, axis=1)
         return indices, np.take_along_axis(similarities, indices, axis=1)
 
+    def neighbour_average(self, indices, similarities, radius_deg: float = 15.0,
+                          temperature: float = 0.02) -> np.ndarray:
+        """Rotations ``(B, 3, 3)`` refined below the codebook's spacing: per query, the mean (chordal L2,
+        scipy ``Rotation.mean``) of its matched rotations within ``radius_deg`` of the best one, weighted by
+        ``exp((similarity - best) / temperature)``.
+
+        Args:
+            indices / similarities: ``(B, k)`` from :meth:`nearest`, best first.
+        """
+        from scipy.spatial.transform import Rotation
+
+        indices, similarities = np.atleast_2d(indices), np.atleast_2d(similarities)
+        if radius_deg <= 0 or temperature <= 0:
+            raise ValueError(f"radius_deg/temperature: expected positive values, got {radius_deg}, {temperature}")
+        cosine_limit = np.cos(np.radians(radius_deg))
+        output = np.empty((len(indices), 3, 3))
+        for row, (chosen, values) in enumerate(zip(indices, similarities)):
+            rotations = self.rotations[chosen]
+            # cos(angle to the best) = (trace(R_best^T R) - 1) / 2
+            cosines = (np.einsum("ij,kij->k", rotations[0], rotations) - 1) / 2
+            keep = cosines >= cosine_limit
+            weights = np.exp((values[keep] - values[0]) / temperature)
+            output[row] = Rotation.from_matrix(rotations[keep]).mean(weights=weights).as_matrix()
+        return output
+
     def save(self, path: str | Path) -> Path:
         """Writes an ``.npz`` (temp file, then atomic rename)."""
         path = Path(path)

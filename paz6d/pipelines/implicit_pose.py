@@ -171,6 +171,10 @@ class ImplicitPose6D(Processor):
         run_dir: folder written by ``paz6d train aae`` (config.json, model.keras, codebook.npz, object.npz).
         camera: :class:`~paz6d.backend.camera.Camera` or a ``(3, 3)`` intrinsics matrix ``K``.
         refine: depth-free translation refinement (box fitting), see module docstring.
+        neighbours: codebook matches averaged into the rotation (within ``neighbour_radius_deg`` of the best,
+            weighted by similarity, :meth:`~paz6d.models.codebook.Codebook.neighbour_average`), which refines
+            it below the codebook's spacing; 1 uses the best match alone.
+        neighbour_radius_deg: only matches this close to the best one are averaged.
         top_k: codebook candidates kept; with a depth image the candidate ICP fits best wins.
         class_name: written into the returned poses.
 
@@ -180,8 +184,8 @@ class ImplicitPose6D(Processor):
         >>> pose.translation                                          # metres  # doctest: +SKIP
     """
 
-    def __init__(self, run_dir: str | Path, camera, refine: bool = True, top_k: int = 1,
-                 class_name: str | None = None):
+    def __init__(self, run_dir: str | Path, camera, refine: bool = True, neighbours: int = 10,
+                 neighbour_radius_deg: float = 15.0, top_k: int = 1, class_name: str | None = None):
         super().__init__()
         from paz6d.models.aae import encode_function, encoder_of, load_model
         from paz6d.models.codebook import Codebook
@@ -202,9 +206,10 @@ class ImplicitPose6D(Processor):
             self.K = camera.K
         else:
             self.camera, self.K = None, as_camera_matrix(camera)
-        if int(top_k) < 1:
-            raise ValueError(f"top_k: expected at least 1, got {top_k}")
+        if int(top_k) < 1 or int(neighbours) < 1:
+            raise ValueError(f"top_k/neighbours: expected at least 1, got {top_k}, {neighbours}")
         self.refine, self.top_k, self.class_name = refine, int(top_k), class_name
+        self.neighbours, self.neighbour_radius_deg = int(neighbours), float(neighbour_radius_deg)
         self.autoencoder = load_model(run_dir / "model.keras")
         self.encoder = encoder_of(self.autoencoder)
         self._encode = encode_function(self.encoder)
@@ -251,20 +256,35 @@ class ImplicitPose6D(Processor):
         output = np.asarray(self.autoencoder(to_model_input(crops), training=False))
         return np.clip(np.rint(output * 255), 0, 255).astype(np.uint8)
 
-    def _pose(self, index: int, box: np.ndarray, similarity: float) -> Pose6D:
+    def _pose(self, index: int, box: np.ndarray, similarity: float, R_codebook: np.ndarray | None = None) -> Pose6D:
+        """Pose from codebook entry ``index`` (its rotation replaced by ``R_codebook`` when given)."""
         codebook = self.codebook
-        R, t = pose_from_codebook_view(codebook.rotations[index], box, self.K, codebook.render_boxes[index],
-                                       codebook.render_K, codebook.render_distance, self.hull_points, self.refine)
+        R_codebook = codebook.rotations[index] if R_codebook is None else R_codebook
+        R, t = pose_from_codebook_view(R_codebook, box, self.K, codebook.render_boxes[index], codebook.render_K,
+                                       codebook.render_distance, self.hull_points, self.refine)
         return Pose6D.from_rotation_matrix(R, t, class_name=self.class_name, score=float(similarity))
+
+    def _lookup(self, codes: np.ndarray, top_k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``indices (B, k)``, ``similarities (B, k)`` and the refined best rotations ``(B, 3, 3)``."""
+        k = min(max(top_k, self.neighbours), len(self.codebook))
+        indices, similarities = self.codebook.nearest(codes, k)
+        if self.neighbours > 1:
+            best = self.codebook.neighbour_average(indices[:, :self.neighbours], similarities[:, :self.neighbours],
+                                                   self.neighbour_radius_deg)
+        else:
+            best = self.codebook.rotations[indices[:, 0]]
+        return indices[:, :top_k], similarities[:, :top_k], best
 
     # -- public API -----------------------------------------------------------------------------
     def candidates(self, image, box, top_k: int | None = None) -> list[Pose6D]:
-        """The ``top_k`` codebook matches as poses, best first (``score`` = cosine similarity)."""
+        """The ``top_k`` codebook matches as poses, best first (``score`` = cosine similarity); the first
+        one carries the neighbour-averaged rotation."""
         image = self._check_image(image)
         box = _as_box(box, image.shape)
         code = self.encode(self.crop(image, box)[None])
-        indices, similarities = self.codebook.nearest(code, top_k or self.top_k)
-        return [self._pose(int(i), box, float(s)) for i, s in zip(indices[0], similarities[0])]
+        indices, similarities, best = self._lookup(code, top_k or self.top_k)
+        return [self._pose(int(i), box, float(s), best[0] if rank == 0 else None)
+                for rank, (i, s) in enumerate(zip(indices[0], similarities[0]))]
 
     def call(self, image, box, depth=None) -> Pose6D:
         """Pose of the object in ``box``: ``Box2D`` or ``(x_min, y_min, x_max, y_max)`` pixels.
@@ -297,8 +317,8 @@ class ImplicitPose6D(Processor):
         from paz6d.models.aae import crop_object
 
         crops = np.stack([crop_object(image, box, self.crop_size, self.padding) for image, box in zip(checked, boxes)])
-        indices, similarities = self.codebook.nearest(self.encode(crops), 1)
-        return [self._pose(int(i[0]), box, float(s[0])) for i, s, box in zip(indices, similarities, boxes)]
+        indices, similarities, best = self._lookup(self.encode(crops), 1)
+        return [self._pose(int(i[0]), box, float(s[0]), R) for i, s, box, R in zip(indices, similarities, boxes, best)]
 
     def refine_with_depth(self, candidates: Sequence[Pose6D], depth, box, max_iterations: int = 30) -> Pose6D:
         """ICP (open3d, point-to-point) of the depth points inside ``box`` onto the object's surface points,
