@@ -36,17 +36,26 @@ def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object
         depth_from_box: the :class:`KeypointPose6D` option of that name.
     Returns:
         ``(metrics, poses)``: recall of ADD(-S) < 0.1·d, AUC (0–10 cm), median rotation (deg) and
-        translation (m) errors, PnP failures, milliseconds per crop; poses are ``Pose6D`` or ``None``.
+        translation (m) errors, PnP failures, milliseconds per crop, ``error`` (why no image could be
+        estimated, e.g. too few usable keypoints, else ``None``); poses are ``Pose6D`` or ``None``.
     """
     from evaluation.pose_errors import accuracy_auc, add_error, adi_error, rotation_error_deg, translation_error
     from paz6d.pipelines.keypoint_pose import KeypointPose6D
 
-    estimator = KeypointPose6D(run_dir, camera, depth_from_box=depth_from_box)
-    poses: list = []
+    from paz6d.backend.pnp import PnPError
+
+    poses: list = [None] * len(test.images)
+    problem = None
     started = time.perf_counter()
-    for start in range(0, len(test.images), chunk):
-        poses.extend(estimator.estimate_batch(list(test.images[start:start + chunk]),
-                                              list(test.boxes[start:start + chunk])))
+    try:
+        estimator = KeypointPose6D(run_dir, camera, depth_from_box=depth_from_box)
+    except PnPError as error:  # e.g. too few usable lifted keypoints: every image is a miss
+        problem = str(error)
+    else:
+        poses = []
+        for start in range(0, len(test.images), chunk):
+            poses.extend(estimator.estimate_batch(list(test.images[start:start + chunk]),
+                                                  list(test.boxes[start:start + chunk])))
     milliseconds = 1000.0 * (time.perf_counter() - started) / len(test.images)
     found = np.array([pose is not None for pose in poses])
     T_est = np.stack([pose.to_matrix() if pose is not None else np.eye(4) for pose in poses])
@@ -65,7 +74,7 @@ def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object
                "median_error_m": float(np.median(errors)),
                "median_rotation_error_deg": float(np.median(rotation)),
                "median_translation_error_m": float(np.median(translation)),
-               "pnp_failures": int((~found).sum()), "milliseconds_per_crop": round(milliseconds, 2),
+               "pnp_failures": int((~found).sum()), "milliseconds_per_crop": round(milliseconds, 2), "error": problem,
                "errors_m": [None if not np.isfinite(value) else float(value) for value in errors]}
     return metrics, poses
 
@@ -127,7 +136,7 @@ def _recall_png(path: Path, curves: dict[str, np.ndarray], object_diameter: floa
 def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
                       modes: tuple[str, ...] = ("supervised",), config: str = "quick",
                       test_images: int = 200, seed: int = 0, workers: int = 2, steps: int | None = None,
-                      symmetric: bool = False, progress: bool = True) -> dict:
+                      symmetric: bool = False, progress: bool = True, overrides: dict | None = None) -> dict:
     """Trains each mode in ``modes`` and evaluates it on ``test_images`` held-out synthetic images.
 
     Args:
@@ -135,6 +144,7 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
         mesh_path: the object mesh; ``mesh_scale`` converts its units to metres (0.001 for BOP mm).
         steps: override the config's training steps.
         symmetric: the object is symmetric (score with ADD-S).
+        overrides: replace settings of the config (e.g. a smaller network for tests).
     Returns:
         The report (also written to ``out_dir/keypoint_report.json``).
     """
@@ -159,7 +169,8 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
         run_dir = out_dir / f"keypointnet_{mode}"
         runs[mode] = run_dir
         report["modes"][mode] = {"training": train_keypointnet(
-            KeypointTraining(run_dir, Path(mesh_path), mesh_scale, config, mode, seed, workers, steps, progress))}
+            KeypointTraining(run_dir, Path(mesh_path), mesh_scale, config, mode, seed, workers, steps, progress,
+                             dict(overrides or {})))}
     render_started = time.perf_counter()
     test = render_test_images(mesh_path, test_images, seed + TEST_SEED_OFFSET, sampling, mesh_scale, workers,
                               progress=progress)
@@ -173,7 +184,7 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
             curves[f"{mode}, {variant}"] = np.array([np.inf if value is None else value for value in metrics["errors_m"]])
             report["modes"][mode][variant] = {key: value for key, value in metrics.items() if key != "errors_m"}
             evaluations[variant] = metrics
-            if not from_box:
+            if not from_box and metrics["error"] is None:
                 _examples_png(out_dir / f"keypoint_{mode}_examples.png", run_dir, test, poses, sampling.camera, points)
         metrics_path = run_dir / "evaluation.json"
         metrics_path.with_name("evaluation.json.tmp").write_text(json.dumps(evaluations, indent=2))

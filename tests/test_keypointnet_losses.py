@@ -114,6 +114,8 @@ def test_separation_loss_hand_computed():
     points = np.array([[[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [5.0, 0.0, 0.0]]])
     assert _value(kp.separation_loss(points, delta=0.2)) == pytest.approx(2 * 0.03 / 9, rel=1e-5)
     assert _value(kp.separation_loss(points, delta=0.05)) == pytest.approx(0.0, abs=1e-9)
+    image_points = np.array([[[0.0, 0.0], [0.0, 0.3]]])  # 2D: one pair 0.3 apart, delta 0.5 -> 2 * 0.16 / 4
+    assert _value(kp.separation_loss(image_points, delta=0.5)) == pytest.approx(2 * 0.16 / 4, rel=1e-5)
 
 
 def test_silhouette_loss_hand_computed():

@@ -291,7 +291,8 @@ def relative_pose_loss(points_a, points_b, R_a2b):
 
 def separation_loss(points, delta: float):
     """Separation loss (paper eq. 3): mean over the batch of
-    ``1/N^2 sum_{i != j} max(0, delta^2 - ||X_i - X_j||^2)`` for ``(B, N, 3)`` points."""
+    ``1/N^2 sum_{i != j} max(0, delta^2 - ||X_i - X_j||^2)`` for ``(B, N, D)`` points (3D keypoints,
+    or 2D image keypoints)."""
     points = tf.convert_to_tensor(points, tf.float32)
     difference = points[:, :, None, :] - points[:, None, :, :]
     squared = tf.reduce_sum(tf.square(difference), axis=-1)
