@@ -37,6 +37,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=int, default=None, help="training steps (default: the quick config's)")
     parser.add_argument("--workers", type=int, default=2, help="rendering processes")
     parser.add_argument("--platform", choices=("egl", "osmesa"), default=None, help="OpenGL platform")
+    parser.add_argument("--keypoints", action="store_true",
+                        help="also train and score KeypointNet (supervised, quick config; ~15 more minutes on 2 "
+                             "CPU cores) on the same object into OUT/keypoints")
 
 
 def _stage(message: str) -> None:
@@ -258,5 +261,10 @@ def run(args: argparse.Namespace) -> int:
         if args.steps <= 0:
             raise ValueError(f"--steps: expected a positive number of steps, got {args.steps}")
         config = replace(QUICK, steps=args.steps)
-    run_demo(args.out, config, args.test_images, args.workers, args.platform)
+    report = run_demo(args.out, config, args.test_images, args.workers, args.platform)
+    if args.keypoints:
+        from paz6d.keypoint_demo import run_keypoint_demo
+
+        run_keypoint_demo(Path(args.out) / "keypoints", Path(report["files"]["mesh"]), mesh_scale=0.001,
+                          test_images=args.test_images, workers=args.workers)
     return 0

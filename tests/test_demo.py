@@ -73,3 +73,25 @@ def test_demo_smoke_run(tmp_path):
 
     K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
     assert ImplicitPose6D(tmp_path / "model", K).crop_size == 16
+
+
+def test_demo_keypoints_option_runs_the_keypoint_demo_on_the_demo_mesh(tmp_path, monkeypatch):
+    import paz6d.demo as demo
+    import paz6d.keypoint_demo as keypoint_demo
+    from paz6d.cli import build_parser
+
+    calls = {}
+    mesh = tmp_path / "mesh" / "obj_000001.ply"
+    monkeypatch.setattr(demo, "run_demo", lambda out, config, test_images, workers, platform:
+                        calls.setdefault("aae", (out, test_images)) and {"files": {"mesh": str(mesh)}})
+    monkeypatch.setattr(keypoint_demo, "run_keypoint_demo",
+                        lambda out_dir, mesh_path, **options: calls.setdefault("keypoints", (out_dir, mesh_path, options)))
+    args = build_parser().parse_args(["demo", "--out", str(tmp_path), "--test-images", "7", "--keypoints"])
+    assert args._run(args) == 0
+    out_dir, mesh_path, options = calls["keypoints"]
+    assert out_dir == tmp_path / "keypoints" and mesh_path == mesh
+    assert options["mesh_scale"] == 0.001 and options["test_images"] == 7
+    args = build_parser().parse_args(["demo", "--out", str(tmp_path / "plain")])
+    calls.clear()
+    args._run(args)
+    assert "keypoints" not in calls
