@@ -411,7 +411,6 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         keypoints_model = supervised_keypoints(mesh, settings["num_keypoints"], job.seed)
 
     from paz6d.models import keypointnet as kp
-    from paz6d.training.prefetch import PrefetchedBatches
     from paz6d.training.trainer import Trainer
 
     keras = kp.keras
@@ -431,12 +430,12 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         from paz6d.backend.camera import transform_and_project
 
         sample_targets = np.stack([transform_and_project(keypoints_model, T, K) for T, K in zip(sample_T, sample_K)])
-    with PrefetchedBatches(make_batch) as data:
-        trainer = Trainer(model, optimizer, _loss_function(job.mode, settings, object_diameter, keypoints_model),
-                          data, out, settings["steps"], checkpoint_every=settings["checkpoint_every"], log_every=10,
-                          sample_every=settings["sample_every"],
-                          sample_callback=_sample_drawer(sample_images, sample_targets), progress=job.progress)
-        training = trainer.fit()
+    trainer = Trainer(model, optimizer, _loss_function(job.mode, settings, object_diameter, keypoints_model),
+                      make_batch, out, settings["steps"], checkpoint_every=settings["checkpoint_every"], log_every=10,
+                      sample_every=settings["sample_every"],
+                      sample_callback=_sample_drawer(sample_images, sample_targets), progress=job.progress,
+                      prefetch=1)
+    training = trainer.fit()
     kp.save_keypointnet(model, out / MODEL_FILE)
     train_seconds = time.perf_counter() - started - render_seconds
 
