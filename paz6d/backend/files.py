@@ -64,3 +64,19 @@ def save_figure_atomically(figure, path: str | Path) -> Path:
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png")
     return write_bytes_atomically(path, buffer.getvalue())
+
+
+def save_keras_model_atomically(model, path: str | Path) -> Path:
+    """Saves a Keras model in the native ``.keras`` format through a temporary ``.keras`` file."""
+    path = Path(path)
+    if path.suffix != ".keras":
+        raise ValueError(f"path: expected a file name ending in .keras, got {path}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(TEMPORARY_PREFIX + path.stem + ".keras")
+    try:
+        model.save(temporary)
+        os.replace(temporary, path)
+    except BaseException:
+        temporary.unlink(missing_ok=True)
+        raise
+    return path

@@ -15,7 +15,6 @@ layers are used, so loading never executes arbitrary code. TensorFlow is importe
 
 from __future__ import annotations
 
-import os
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.square_crop import crop_square, square_window
+from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.tensorflow_guard import import_keras
 
 ENCODER_NAME = "encoder"
@@ -160,14 +160,7 @@ def to_model_input(crops) -> np.ndarray:
 
 def save_model(model, path: str | Path) -> Path:
     """Saves ``model`` in the native ``.keras`` format (temp file, then atomic rename)."""
-    path = Path(path)
-    if path.suffix != ".keras":
-        raise ValueError(f"path: expected a file name ending in .keras, got {path}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(path.stem + ".tmp.keras")
-    model.save(temporary)
-    os.replace(temporary, path)
-    return path
+    return save_keras_model_atomically(model, path)
 
 
 def load_model(path: str | Path):

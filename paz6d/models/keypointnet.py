@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow
 
 tf = import_tensorflow()
@@ -151,14 +152,7 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
 
 def save_keypointnet(model, path: str | Path) -> Path:
     """Saves ``model`` to a ``.keras`` file (written to a temporary file, then renamed)."""
-    path = Path(path)
-    if path.suffix != ".keras":
-        raise ValueError(f"path: expected a .keras file name, got {path}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(path.stem + ".tmp.keras")
-    model.save(temporary)
-    temporary.replace(path)
-    return path
+    return save_keras_model_atomically(model, path)
 
 
 def load_keypointnet(path: str | Path):

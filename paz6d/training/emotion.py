@@ -20,14 +20,14 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import os
 from pathlib import Path
 
 import numpy as np
 
 from paz6d.abstract import SequentialProcessor
 from paz6d.abstract.processor import random_processors
-from paz6d.backend.files import save_figure_atomically, write_json_atomically, write_text_atomically
+from paz6d.backend.files import (save_figure_atomically, save_keras_model_atomically, write_json_atomically,
+                                 write_text_atomically)
 from paz6d.datasets.fer2013 import FER2013_CLASSES, load_fer2013_csv, load_image_folder
 from paz6d.processors.affine import RandomAffine
 from paz6d.processors.image import ConvertColorSpace, RandomBrightness, RandomContrast, RandomFlipLeftRight
@@ -270,9 +270,7 @@ def run(args: argparse.Namespace) -> int:
                       progress=not args.no_progress, compile_step=not args.eager)
     summary = trainer.fit()
     matrix = validate(model, summary.final_step, run_dir / "confusion_matrix.png")
-    temporary = run_dir / "model.tmp.keras"
-    model.save(temporary)
-    os.replace(temporary, run_dir / "model.keras")
+    save_keras_model_atomically(model, run_dir / "model.keras")
     write_json_atomically(run_dir / "classes.json", list(class_names))
     metrics = {"step": summary.final_step, "validation_accuracy": float(np.trace(matrix) / matrix.sum()),
                "validation_count": int(matrix.sum()), "confusion_matrix": matrix.tolist(),
