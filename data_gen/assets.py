@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from dataclasses import dataclass
@@ -14,6 +13,7 @@ import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
 from data_gen.config import GenerationConfig, list_backgrounds
+from paz6d.backend.files import load_json
 from paz6d.backend.mesh import MeshError, diameter, load_mesh
 
 #: Camera near plane (metres) used by the generator's renderers.
@@ -138,11 +138,9 @@ def _load_symmetries(path: Path | None, object_ids: list[int]) -> dict[int, dict
         return {}
     path = Path(path)
     try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError as error:
-        raise ValueError(f"symmetries: {path} not found") from error
-    except json.JSONDecodeError as error:
-        raise ValueError(f"symmetries: {path} is not valid JSON ({error})") from error
+        data = load_json(path)
+    except ValueError as error:
+        raise ValueError(f"symmetries: {error}") from error
     if not isinstance(data, dict):
         raise ValueError(f"symmetries: {path}: expected an object keyed by object id")
     symmetries = {}

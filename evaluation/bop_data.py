@@ -18,6 +18,7 @@ import numpy as np
 
 from evaluation.pose_errors import MAX_SYMMETRY_STEP, ObjectModel, symmetry_transformations
 from paz6d.backend.camera import Camera
+from paz6d.backend.files import load_json
 from paz6d.backend.mesh import load_mesh
 from paz6d.datasets import bop as bop_files
 
@@ -39,7 +40,7 @@ class Target:
 def read_targets(path: str | Path) -> list[Target]:
     """Reads ``test_targets_bop19.json`` (a list of ``{scene_id, im_id, obj_id, inst_count}``)."""
     path = Path(path)
-    data = bop_files.load_json(path)
+    data = load_json(path)
     if not isinstance(data, list):
         raise ValueError(f"{path}: expected a list of targets")
     targets = []

@@ -191,13 +191,12 @@ class Camera:
         """Loads a BOP ``camera.json`` (fx, fy, cx, cy, width, height) or, with ``image_id``, a
         ``scene_camera.json`` entry (``cam_K``; width/height from the sibling dataset's camera.json
         when present, else inferred as ``2 * (cx, cy)``)."""
+        from paz6d.backend.files import load_json
+
         path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError as error:
-            raise ValueError(f"{path}: camera file not found") from error
-        except json.JSONDecodeError as error:
-            raise ValueError(f"{path}: invalid JSON ({error})") from error
+        if not path.is_file():
+            raise ValueError(f"{path}: camera file not found")
+        data = load_json(path)
         if image_id is None:
             try:
                 K = np.array([[data["fx"], 0.0, data["cx"]], [0.0, data["fy"], data["cy"]], [0.0, 0.0, 1.0]])

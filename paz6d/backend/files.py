@@ -37,6 +37,17 @@ def json_bytes(data: Any, indent: int | None = None) -> bytes:
     return (text + "\n").encode() if indent else text.encode()
 
 
+def load_json(path: str | Path) -> Any:
+    """Parses a JSON file; ``ValueError`` naming the file when it is missing or malformed."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError as error:
+        raise ValueError(f"{path}: file not found") from error
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise ValueError(f"{path}: invalid JSON ({error})") from error
+
+
 def write_json_atomically(path: str | Path, data: Any, indent: int | None = None) -> Path:
     """Writes ``data`` as JSON (``indent`` spaces, compact when None) atomically."""
     return write_bytes_atomically(path, json_bytes(data, indent))

@@ -13,7 +13,6 @@ Example:
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -22,21 +21,11 @@ import cv2
 import numpy as np
 
 from paz6d.backend.camera import Camera
+from paz6d.backend.files import load_json
 from paz6d.backend.image import load_image
 
 MILLIMETRES_TO_METRES = 0.001
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif")
-
-
-def load_json(path: str | Path) -> dict | list:
-    """Parses a JSON file; ``ValueError`` naming the file when missing or malformed."""
-    path = Path(path)
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError as error:
-        raise ValueError(f"{path}: file not found") from error
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: invalid JSON ({error})") from error
 
 
 def _field(entry, name: str, where: str, size: int | None = None):
