@@ -1,7 +1,7 @@
 """AAE inference speed on the CPU: encoding + codebook lookup per crop, single and batched.
 
-Measures, for the quick (64x64, latent 64) and the paper's (128x128, latent 128) encoders with a
-10,000-entry codebook:
+Measures, for the encoders of the quick config (64x64, latent 128, batch norm) and of the full, paper
+config (128x128, latent 128) with a 10,000-entry codebook:
 
 * single crop: ``ImplicitPose6D.encode`` + ``Codebook.nearest`` per crop (target <= 20 ms);
 * batched: 64 crops per call;
@@ -31,7 +31,7 @@ def _best_of(function, repeats: int) -> float:
     return float(np.median(times))
 
 
-def measure(crop_size: int, latent_size: int, filters: tuple[int, ...], entries: int, batch: int, repeats: int) -> dict:
+def measure(config, entries: int, batch: int, repeats: int) -> dict:
     from scipy.spatial.distance import cdist
 
     from paz6d.backend.tensorflow_guard import import_keras
@@ -40,7 +40,9 @@ def measure(crop_size: int, latent_size: int, filters: tuple[int, ...], entries:
 
     keras = import_keras()
     keras.utils.set_random_seed(0)
-    encoder = encode_function(build_encoder(crop_size, latent_size, filters))  # as ImplicitPose6D runs it
+    crop_size, latent_size = config.crop_size, config.latent_size
+    encoder = encode_function(build_encoder(crop_size, latent_size, config.filters, config.kernel_size,
+                                            config.batch_norm))  # as ImplicitPose6D runs it
     rng = np.random.default_rng(0)
     codebook = Codebook(rng.normal(size=(entries, latent_size)), np.broadcast_to(np.eye(3), (entries, 3, 3)),
                         np.tile([0.0, 0.0, 10.0, 10.0], (entries, 1)), np.eye(3), 1.0)
@@ -64,9 +66,11 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20)
     args = parser.parse_args()
     print(f"CPU cores: {os.cpu_count()}, load average (1 min) at start: {os.getloadavg()[0]:.1f}")
-    for name, crop, latent, filters in (("quick", 64, 64, (32, 64, 64, 128)), ("paper", 128, 128, (128, 256, 256, 512))):
-        r = measure(crop, latent, filters, args.entries, args.batch, args.repeats)
-        print(f"{name:5s} {crop}x{crop} latent {latent}, {r['entries']} entries: "
+    from paz6d.training.aae import FULL, QUICK
+
+    for name, config in (("quick", QUICK), ("full", FULL)):
+        r = measure(config, args.entries, args.batch, args.repeats)
+        print(f"{name:5s} {r['crop']}x{r['crop']} latent {r['latent']}, {r['entries']} entries: "
               f"single crop {r['single_ms']:.2f} ms (encode {r['encode_single_ms']:.2f} ms), "
               f"batch of {args.batch} {r['batched_ms_per_crop']:.2f} ms/crop "
               f"({r['single_ms'] / r['batched_ms_per_crop']:.1f}x faster than single); "

@@ -28,6 +28,7 @@ TRAIN_SEED = 0
 TEST_SEED = 1000
 MIN_VISIBLE_FRACTION = 0.1  # BOP's rule for evaluation targets
 AUC_MAX_THRESHOLD = 0.1  # metres (PoseCNN's ADD(-S) AUC)
+VISIBILITY_BINS = ((0.1, 0.7), (0.7, 0.95), (0.95, 1.01))  # breakdown by visible fraction (occlusion)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -65,7 +66,8 @@ def _test_targets(dataset_root: Path) -> list[dict]:
             x, y, width, height = info["bbox_obj"]
             targets.append({"image": sample.image, "camera": sample.camera, "T_gt": instance.T_model2cam,
                             "box": (float(x), float(y), float(x + width), float(y + height)),
-                            "scene_id": sample.scene_id, "im_id": sample.im_id})
+                            "scene_id": sample.scene_id, "im_id": sample.im_id,
+                            "visible_fraction": float(info.get("visib_fract", 1.0))})
     return targets
 
 
@@ -170,6 +172,10 @@ def _print_table(report: dict) -> None:
                                              f"{100 * metrics['rotation_error_deg']['below_10']:.1f} %"),
              ("median translation error", f"{1000 * metrics['translation_error_m']['median']:.1f} mm"),
              ("median |z| error", f"{1000 * metrics['z_error_m_median']:.1f} mm"),
+             *[(f"  visible {name}: n / ADD / median rot",
+                f"{b['count']} / " + ("-" if b["count"] == 0 else
+                                      f"{100 * b['add_recall_0.1d']:.1f} % / {b['median_rotation_error_deg']:.1f} deg"))
+               for name, b in metrics["by_visible_fraction"].items()],
              ("training steps", f"{report['training']['steps']}"),
              ("loader samples/s (1 thread)", f"{report['training']['loader_samples_per_second_one_thread']:.0f}"),
              ("model samples/s", f"{report['training']['model_samples_per_second']:.0f}"),
@@ -232,6 +238,14 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     diameter = load_models_info(out / "mesh" / "models_info.json")[OBJECT_ID].diameter
     metrics = score(poses, targets, points, diameter)
     add, rotation = metrics.pop("_add"), metrics.pop("_rotation")
+    visible = np.array([target["visible_fraction"] for target in targets])
+    metrics["by_visible_fraction"] = {}
+    for low, high in VISIBILITY_BINS:
+        chosen = (visible >= low) & (visible < high)
+        metrics["by_visible_fraction"][f"{low}-{min(high, 1.0)}"] = {
+            "count": int(chosen.sum()),
+            "add_recall_0.1d": float(np.mean(add[chosen] < 0.1 * diameter)) if chosen.any() else None,
+            "median_rotation_error_deg": float(np.median(rotation[chosen])) if chosen.any() else None}
     _plot_recall(out / "recall_curves.png", add, rotation, diameter)
     _plot_grid(out / "estimates_grid.png", estimator, targets, poses, mesh_path, grid_rows)
     timings["total_seconds"] = time.perf_counter() - started
@@ -242,7 +256,8 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
               "targets": {"instances_evaluated": len(targets), "min_visible_fraction": MIN_VISIBLE_FRACTION},
               "estimates": [{"scene_id": t["scene_id"], "im_id": t["im_id"], "box": list(t["box"]),
                              "T_est": p.to_matrix().tolist(), "T_gt": t["T_gt"].tolist(),
-                             "add_m": float(a), "rotation_error_deg": float(r)}
+                             "add_m": float(a), "rotation_error_deg": float(r),
+                             "visible_fraction": t["visible_fraction"]}
                             for t, p, a, r in zip(targets, poses, add, rotation)],
               "files": {"model": str(out / "model"), "mesh": str(mesh_path),
                         "recall_curves": str(out / "recall_curves.png"), "grid": str(out / "estimates_grid.png")}}

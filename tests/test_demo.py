@@ -61,6 +61,7 @@ def test_demo_smoke_run(tmp_path):
     rotation = np.array([e["rotation_error_deg"] for e in estimates])
     assert metrics["add_recall_0.1d"] == pytest.approx(np.mean(add < 0.1 * metrics["diameter_m"]))
     assert metrics["rotation_error_deg"]["median"] == pytest.approx(np.median(rotation))
+    assert sum(b["count"] for b in metrics["by_visible_fraction"].values()) == metrics["count"]
     # the stored ADD agrees with a direct computation from the stored poses and the mesh vertices
     vertices = load_mesh(tmp_path / "mesh" / "obj_000001.ply", 0.001).vertices
     first = estimates[0]
