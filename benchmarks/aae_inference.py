@@ -52,11 +52,12 @@ def measure(config, entries: int, batch: int, repeats: int) -> dict:
     batched = _best_of(lambda: codebook.nearest(encoder(to_model_input(crops))), max(3, repeats // 4)) / batch
     encode_single = _best_of(lambda: encoder(to_model_input(crops[:1])), repeats)
     codes = np.asarray(encoder(to_model_input(crops)))
+    lookup_single = _best_of(lambda: codebook.nearest(codes[:1]), repeats)
     lookup_matrix = _best_of(lambda: codebook.nearest(codes), repeats) / batch
     lookup_cdist = _best_of(lambda: np.argmin(cdist(codes, codebook.codes, "cosine"), axis=1), repeats) / batch
     return {"crop": crop_size, "latent": latent_size, "entries": entries,
             "single_ms": 1000 * single, "batched_ms_per_crop": 1000 * batched, "encode_single_ms": 1000 * encode_single,
-            "lookup_matrix_us_per_crop": 1e6 * lookup_matrix, "lookup_cdist_us_per_crop": 1e6 * lookup_cdist}
+            "lookup_single_us": 1e6 * lookup_single, "lookup_matrix_us_per_crop": 1e6 * lookup_matrix, "lookup_cdist_us_per_crop": 1e6 * lookup_cdist}
 
 
 def main() -> None:
@@ -71,7 +72,8 @@ def main() -> None:
     for name, config in (("quick", QUICK), ("full", FULL)):
         r = measure(config, args.entries, args.batch, args.repeats)
         print(f"{name:5s} {r['crop']}x{r['crop']} latent {r['latent']}, {r['entries']} entries: "
-              f"single crop {r['single_ms']:.2f} ms (encode {r['encode_single_ms']:.2f} ms), "
+              f"single crop {r['single_ms']:.2f} ms (encode {r['encode_single_ms']:.2f} ms, "
+              f"lookup {r['lookup_single_us']:.0f} us), "
               f"batch of {args.batch} {r['batched_ms_per_crop']:.2f} ms/crop "
               f"({r['single_ms'] / r['batched_ms_per_crop']:.1f}x faster than single); "
               f"lookup {r['lookup_matrix_us_per_crop']:.1f} us/crop vs cdist {r['lookup_cdist_us_per_crop']:.1f} us/crop "

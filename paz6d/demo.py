@@ -126,13 +126,17 @@ def _plot_recall(path: Path, add: np.ndarray, rotation: np.ndarray, diameter: fl
     plt.close(figure)
 
 
-def _overlay(image: np.ndarray, mask_gt: np.ndarray, mask_est: np.ndarray) -> np.ndarray:
+def _overlay(image: np.ndarray, mask_gt: np.ndarray, mask_est: np.ndarray, box, size: int) -> np.ndarray:
+    """``size``² crop around ``box`` with the outlines of the ground truth (green) and the estimate (red)."""
     import cv2
 
-    canvas = image.copy()
+    from paz6d.models.aae import crop_object
+
+    canvas = crop_object(image, box, size, padding=1.5)
     for mask, color in ((mask_gt, (0, 255, 0)), (mask_est, (255, 40, 40))):
-        contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        cv2.drawContours(canvas, contours, -1, color, 1)
+        resized = crop_object(mask.astype(np.uint8) * 255, box, size, padding=1.5) > 127
+        contours, _ = cv2.findContours(resized.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        cv2.drawContours(canvas, contours, -1, color, 2)
     return canvas
 
 
@@ -154,8 +158,7 @@ def _plot_grid(path: Path, estimator, targets, poses, mesh_path: Path, rows: int
             crop = estimator.crop(target["image"], target["box"])
             reconstruction = estimator.reconstruct(crop[None])[0]
             masks = renderer.render(camera.K, [(mesh, target["T_gt"]), (mesh, pose.to_matrix())], rgb=False).masks
-            overlay = _overlay(target["image"], masks[0], masks[1])
-            view = crop_object(overlay, target["box"], size, padding=1.5)
+            view = _overlay(target["image"], masks[0], masks[1], target["box"], size)
             row = [crop_object(crop, (0, 0, crop.shape[1], crop.shape[0]), size, 1.0),
                    crop_object(reconstruction, (0, 0, crop.shape[1], crop.shape[0]), size, 1.0), view]
             tiles.append(np.concatenate(row, axis=1))
