@@ -58,7 +58,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="minimum visible fraction of a counted GT instance (default 0.1; -1 = the "
                              "inst_count most visible, the BOP toolkit script's rule)")
     parser.add_argument("--vsd-delta", type=float, default=15.0, help="VSD visibility tolerance in mm (default 15)")
-    parser.add_argument("--workers", type=int, default=1, help="threads for the ADD-S KD-tree queries (-1 = all)")
+    parser.add_argument("--workers", type=int, default=1, help="threads for the ADD-S search (-1 = all cores; results do not depend on it)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 

@@ -26,6 +26,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 from scipy.spatial.transform import Rotation
 
+from evaluation.point_tree import PointTree
 from paz6d.backend.checks import as_array, as_camera_matrix, as_points, as_rotation_matrix
 
 #: Largest number of 3D points transformed at once (bounds the memory of the batched errors).
@@ -130,26 +131,27 @@ def add_error(T_est, T_gt, points) -> np.ndarray:
     return errors
 
 
-def adi_error(T_est, T_gt, points, tree: cKDTree | None = None, workers: int = 1) -> np.ndarray:
+def adi_error(T_est, T_gt, points, tree: PointTree | None = None, workers: int = 1) -> np.ndarray:
     """ADI (ADD-S): mean over ground-truth posed points of the distance to the nearest estimated
     posed point, ``(E,)`` (length unit of inputs).
 
     Rigid motions preserve distances, so every query is mapped into the model frame of the
     estimate, ``x -> R_est^T (R_gt x + t_gt - t_est)``, and answered by one KD-tree on the model
-    points built once per object. An estimate whose rotation is not orthonormal to 1e-12 (where
-    that mapping would not preserve distances) gets its own KD-tree on its posed points instead.
+    points built once per object (:class:`evaluation.point_tree.PointTree`). An estimate whose
+    rotation is not orthonormal to 1e-12 (where that mapping would not preserve distances) gets
+    its own ``scipy`` KD-tree on its posed points instead.
 
     Args:
         T_est: ``(E, 4, 4)`` or ``(4, 4)`` estimated ``T_model2cam``.
         T_gt: ``(E, 4, 4)`` or ``(4, 4)`` ground-truth ``T_model2cam``.
         points: ``(N, 3)`` model points.
-        tree: ``cKDTree(points)`` to reuse (e.g. :attr:`ObjectModel.tree`); built when ``None``.
-        workers: threads for the KD-tree queries (-1 = all cores).
+        tree: ``PointTree(points)`` to reuse (e.g. :attr:`ObjectModel.tree`); built when ``None``.
+        workers: threads (-1 = all cores); results do not depend on it.
     """
     T_est, T_gt = _pose_batch(T_est, T_gt)
     points = as_points(points, "points")
     if tree is None:
-        tree = cKDTree(points)
+        tree = PointTree(points)
     elif tree.n != len(points):
         raise ValueError(f"tree: built on {tree.n} points, expected the {len(points)} given points")
     R_est_inverse = np.swapaxes(T_est[:, :3, :3], -1, -2)
@@ -157,12 +159,7 @@ def adi_error(T_est, T_gt, points, tree: cKDTree | None = None, workers: int = 1
     b = np.einsum("eij,ej->ei", R_est_inverse, T_gt[:, :3, 3] - T_est[:, :3, 3])
     orthonormal = np.abs(R_est_inverse @ T_est[:, :3, :3] - np.eye(3)).max(axis=(1, 2)) <= ORTHONORMAL_TO_MACHINE
     errors = np.empty(len(T_est))
-    rigid = np.flatnonzero(orthonormal)
-    for part in _chunks(len(rigid), len(points)):
-        rows = rigid[part]
-        queries = _transform(A[rows], b[rows], points)
-        distances, _ = tree.query(queries.reshape(-1, 3), k=1, workers=workers)
-        errors[rows] = distances.reshape(len(rows), len(points)).mean(axis=-1)
+    errors[orthonormal] = tree.mean_nearest_distance(A[orthonormal], b[orthonormal], workers=workers)
     for row in np.flatnonzero(~orthonormal):
         posed_est = _transform(T_est[row, :3, :3], T_est[row, :3, 3], points)
         posed_gt = _transform(T_gt[row, :3, :3], T_gt[row, :3, 3], points)
@@ -398,9 +395,9 @@ class ObjectModel:
         return len(self.symmetries) > 1
 
     @cached_property
-    def tree(self) -> cKDTree:
+    def tree(self) -> PointTree:
         """KD-tree on :attr:`points` for :func:`adi_error`."""
-        return cKDTree(self.points, leafsize=32, balanced_tree=False)
+        return PointTree(self.points)
 
     @cached_property
     def extreme_points(self) -> np.ndarray:
