@@ -9,7 +9,7 @@ For each image size it measures, in one process and run:
 * generator end to end with 1 and 2 worker processes: with start-up ("e2e") and once all
   workers run ("run", from the shard files' finishing times), for the 2-worker speed-up.
 
-Usage: ``.venv/bin/python benchmarks/generate.py [--images-small 200] [--images-large 40]``.
+Usage: ``.venv/bin/python benchmarks/generate.py [--images-small 200] [--images-large 120]``.
 Needs the LM-O meshes in ``../shared/data`` (or pass ``--mesh``).
 """
 
@@ -106,7 +106,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--mesh", action="append", type=Path, help="BOP mesh in mm (default: LM-O obj 1 and 5)")
     parser.add_argument("--images-small", type=int, default=200, help="images at 128x128")
-    parser.add_argument("--images-large", type=int, default=40, help="images at 640x480")
+    parser.add_argument("--images-large", type=int, default=120, help="images at 640x480")
     parser.add_argument("--platform", choices=("egl", "osmesa"))
     args = parser.parse_args()
     meshes = args.mesh or DEFAULT_MESHES

@@ -8,6 +8,7 @@ the files are byte-identical for any number of workers or backend.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -61,8 +62,12 @@ def render_indices(producer, indices: Iterable[int], output, on_image: Callable[
 _worker_producer = None
 
 
-def _start_worker(config: GenerationConfig) -> None:
+def _start_worker(config: GenerationConfig, raster_threads: int) -> None:
+    """Worker process set-up: Mesa llvmpipe rasterizes with one thread per core by default, so
+    ``workers`` processes would each start that many; ``raster_threads`` (cores / workers) keeps
+    the total at the core count. A ``LP_NUM_THREADS`` set by the user wins."""
     global _worker_producer
+    os.environ.setdefault("LP_NUM_THREADS", str(raster_threads))
     from data_gen.producer import ImageProducer
 
     _worker_producer = ImageProducer(config)
@@ -89,7 +94,8 @@ def _run_local(config: GenerationConfig, assets: Assets, pending: list[int], wor
     chunk = max(1, min(8, len(pending) // (4 * workers)))
     written = 0
     context = multiprocessing.get_context("spawn")  # fresh processes: one GL context each, no inherited state
-    with context.Pool(workers, initializer=_start_worker, initargs=(config,)) as pool:
+    raster_threads = max(1, (os.cpu_count() or 1) // workers)
+    with context.Pool(workers, initializer=_start_worker, initargs=(config, raster_threads)) as pool:
         for images, files in pool.imap_unordered(_work, _chunks(pending, chunk)):
             written += files
             progress.update(images)
