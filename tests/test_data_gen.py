@@ -332,3 +332,19 @@ def test_composite_matches_the_backend_alpha_blend():
     np.testing.assert_array_equal(result[:10], background[:10])
     np.testing.assert_array_equal(result[10:20], foreground[10:20])
     assert np.abs(result.astype(int) - alpha_blend(foreground, alpha, background).astype(int)).max() <= 1
+
+
+@pytest.mark.parametrize("preset", [None, "3"])
+def test_workers_split_the_llvmpipe_raster_threads(monkeypatch, preset):
+    """Each spawned worker gets cores / workers raster threads unless the user set LP_NUM_THREADS."""
+    import data_gen.generator as generator
+    import data_gen.producer as producer
+
+    if preset is None:
+        monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    else:
+        monkeypatch.setenv("LP_NUM_THREADS", preset)
+    seen = {}
+    monkeypatch.setattr(producer, "ImageProducer", lambda config: seen.setdefault("threads", os.environ["LP_NUM_THREADS"]))
+    generator._start_worker(GenerationConfig(meshes=(Path("unused.ply"),), output=Path("unused"), num_images=1), 1)
+    assert seen["threads"] == (preset or "1")
