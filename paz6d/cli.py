@@ -1,4 +1,4 @@
-"""The ``paz6d`` command: ``generate``, ``train``, ``evaluate`` and ``demo``.
+"""The ``paz6d`` command: ``generate``, ``train``, ``estimate``, ``evaluate`` and ``demo``.
 
 Each command lives in its own module exposing ``configure(parser)`` and ``run(args) -> int``;
 those modules import heavy libraries (TensorFlow, pyrender) only inside ``run``.
@@ -17,6 +17,7 @@ COMMANDS = {
                "emotion": ("paz6d.training.emotion", "mini-Xception emotion classifier")},
               "train a model"),
     "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
+    "estimate": ("paz6d.estimate", "run a trained pose model on a BOP data set (ground-truth boxes) -> BOP results CSV"),
     "demo": ("paz6d.demo", "end-to-end demo: generate data, train, estimate poses, evaluate"),
 }
 

@@ -226,3 +226,35 @@ def test_training_from_a_generated_data_set(toy_run, tmp_path):
         np.testing.assert_allclose(mask_box(target_mask), mask_box(mask), atol=1.0)  # the target sits on the object
     with pytest.raises(ValueError, match="--dataset"):
         train_aae(mesh, tmp_path / "run", TOY, mesh_scale=0.001, workers=0, progress=False)
+
+
+def test_estimate_command_writes_bop_results_that_evaluate_scores(toy_run, tmp_path, capsys):
+    """`paz6d estimate` on a small generated BOP set -> results CSV -> `paz6d evaluate bop`."""
+    from data_gen.config import GenerationConfig
+    from data_gen.generator import generate
+    from evaluation.bop_results import read_pose_results
+    from paz6d.cli import main
+    from paz6d.datasets.bop import BOPDataset
+
+    root, mesh, _ = toy_run
+    dataset = tmp_path / "set"
+    generate(GenerationConfig(meshes=(mesh,), output=dataset, num_images=3, width=160, height=120, seed=5,
+                              split="test", scale=0.001, objects_per_image=(1, 1), distractors=0,
+                              occluder_probability=0.0), workers=1, show_progress=False)
+    visible = [(sample.im_id, instance.T_model2cam) for sample in BOPDataset(dataset, "test")
+               for instance in sample.objects if instance.info["visib_fract"] >= 0.1]
+    results = tmp_path / "results.csv"
+    assert main(["estimate", "--run", str(root / "run"), "--dataset", str(dataset), "--object-id", "1",
+                 "--out", str(results)]) == 0
+    estimates = read_pose_results(results)
+    assert sorted(estimates.im_ids.tolist()) == sorted(im_id for im_id, _ in visible)
+    assert np.all(estimates.obj_ids == 1) and np.all(estimates.scores == 1.0)
+    scores = tmp_path / "scores.json"
+    assert main(["evaluate", "bop", "--dataset", str(dataset), "--results", str(results), "--metrics",
+                 "mssd,mspd,add", "--out", str(scores), "--quiet"]) == 0
+    report = json.loads(scores.read_text())
+    assert 0.0 <= report["AR_MSSD"] <= 1.0 and 0.0 <= report["ADD(-S)_recall"] <= 1.0
+    assert main(["estimate", "--run", str(root / "run"), "--dataset", str(dataset), "--object-id", "7",
+                 "--out", str(tmp_path / "none.csv")]) == 2
+    assert "no instance of object 7" in capsys.readouterr().err
+    assert not (tmp_path / "none.csv").exists()

@@ -1,0 +1,123 @@
+"""``paz6d estimate``: run a trained pose model on a BOP data set and write a BOP results CSV.
+
+The model gets each annotated instance of one object with its ground-truth 2D box (the setting of
+the AAE paper's and our demo's evaluations; no detector involved), and the estimates are written in
+the BOP'19 results format that ``paz6d evaluate bop`` scores::
+
+    paz6d estimate --run runs/aae_lmo5 --dataset ../shared/data/bop_lmo --object-id 5 --out lmo5.csv
+    paz6d evaluate bop --dataset ../shared/data/bop_lmo --results lmo5.csv --metrics mssd,mspd,add \\
+        --out lmo5.json
+
+Images without an RGB file are skipped (reported), as are instances below ``--min-visible``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+METHODS = ("aae", "keypoints")
+BOXES = {"obj": "bbox_obj", "visib": "bbox_visib"}
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--run", type=Path, required=True, help="run directory of `paz6d train aae|keypointnet`")
+    parser.add_argument("--method", choices=METHODS, default="aae", help="model type of --run")
+    parser.add_argument("--dataset", type=Path, required=True, help="BOP data set folder")
+    parser.add_argument("--split", default="test", help="split folder of --dataset")
+    parser.add_argument("--object-id", type=int, required=True, help="object the model was trained for")
+    parser.add_argument("--out", type=Path, required=True, help="results CSV to write")
+    parser.add_argument("--box", choices=sorted(BOXES), default="obj",
+                        help="ground-truth box given to the model: of the whole projected object (obj) or of "
+                             "its visible part (visib, what a detector would see)")
+    parser.add_argument("--min-visible", type=float, default=0.1,
+                        help="skip instances whose visible fraction is below this (BOP'19 uses 0.1)")
+
+
+def _estimator(method: str, run_dir: Path, camera):
+    if method == "aae":
+        from paz6d.pipelines.implicit_pose import ImplicitPose6D
+
+        return ImplicitPose6D(run_dir, camera)
+    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+
+    return KeypointPose6D(run_dir, camera)
+
+
+def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_id: int, box: str = "obj",
+                     min_visible: float = 0.1, progress: bool = True) -> dict:
+    """Estimates the pose of every visible-enough instance of ``obj_id`` from its ground-truth box.
+
+    Returns:
+        ``{"scene_ids", "im_ids", "rotations" (E, 3, 3), "translations_mm" (E, 3), "seconds" (E,),
+        "skipped_images", "failed"}``; an estimate that fails (e.g. PnP with too few keypoints) is
+        counted in ``failed`` and left out (BOP scores a missing estimate as a miss).
+    """
+    from tqdm.auto import tqdm
+
+    from paz6d.datasets.bop import BOPDataset
+
+    if box not in BOXES:
+        raise ValueError(f"box: expected one of {sorted(BOXES)}, got {box!r}")
+    data = BOPDataset(dataset, split=split)
+    estimators: dict[bytes, object] = {}  # one per distinct camera matrix
+    found = {"scene_ids": [], "im_ids": [], "rotations": [], "translations_mm": [], "seconds": []}
+    skipped_images, failed = 0, 0
+    for sample in tqdm(data, desc=f"estimate obj {obj_id}", unit="image", disable=not progress, dynamic_ncols=True):
+        instances = [instance for instance in sample.objects if instance.obj_id == obj_id
+                     and (instance.info or {}).get("visib_fract", 1.0) >= min_visible]
+        if not instances:
+            continue
+        if sample.image is None:
+            skipped_images += 1
+            continue
+        key = np.asarray(sample.K, dtype=np.float64).tobytes()
+        if key not in estimators:
+            estimators[key] = _estimator(method, run_dir, sample.camera)
+        for instance in instances:
+            if not instance.info or BOXES[box] not in instance.info:
+                raise ValueError(f"{dataset}: scene {sample.scene_id} image {sample.im_id} has no {BOXES[box]} in "
+                                 f"scene_gt_info.json (needed for the ground-truth box)")
+            x, y, width, height = instance.info[BOXES[box]]
+            started = time.perf_counter()
+            try:
+                pose = estimators[key](sample.image, (float(x), float(y), float(x + width), float(y + height)))
+            except ValueError:
+                pose = None
+            if pose is None:
+                failed += 1
+                continue
+            T = pose.to_matrix()
+            found["scene_ids"].append(sample.scene_id)
+            found["im_ids"].append(sample.im_id)
+            found["rotations"].append(T[:3, :3])
+            found["translations_mm"].append(1000.0 * T[:3, 3])
+            found["seconds"].append(time.perf_counter() - started)
+    result = {name: np.asarray(values) for name, values in found.items()}
+    result.update(skipped_images=skipped_images, failed=failed)
+    return result
+
+
+def run(args: argparse.Namespace) -> int:
+    from paz6d.backend.tensorflow_guard import import_tensorflow
+
+    import_tensorflow()
+    from evaluation.bop_results import write_pose_results
+
+    if not args.run.is_dir():
+        raise ValueError(f"--run: {args.run} is not a directory")
+    found = estimate_dataset(args.run, args.method, args.dataset, args.split, args.object_id, args.box,
+                             args.min_visible)
+    count = len(found["im_ids"])
+    if count == 0 and found["failed"] == 0:
+        raise ValueError(f"{args.dataset}: no instance of object {args.object_id} with an RGB image and visible "
+                         f"fraction >= {args.min_visible} in split {args.split!r}")
+    write_pose_results(args.out, found["scene_ids"], found["im_ids"], np.full(count, args.object_id),
+                       np.ones(count), found["rotations"].reshape(-1, 3, 3), found["translations_mm"].reshape(-1, 3),
+                       found["seconds"])
+    print(f"wrote {args.out}: {count} estimates of object {args.object_id} ({found['failed']} failed, "
+          f"{found['skipped_images']} images without RGB skipped)")
+    return 0
