@@ -5,6 +5,7 @@
     <out>/camera.json, models/obj_XXXXXX.ply (mm), models/models_info.json
     <out>/<split>/<scene>/rgb|depth|mask|mask_visib/..., scene_gt.json, scene_camera.json,
         scene_gt_info.json, scene_gt_coco.json [, crop_rgb/, crop_mask/, crops.json]
+    <out>/test_targets_bop19.json (split ``test`` only: instances with visib_fract >= 0.1)
     <out>/.paz6d-generate/config.json and shards/<split>/<scene>/<im>.json (one per finished image)
 
 A shard is written last for each image, so its presence means the image is complete; the scene
@@ -123,9 +124,24 @@ def image_shard(config: GenerationConfig, index: int, K: np.ndarray, object_ids:
                        "scene_gt_info": infos, "coco_annotations": annotations, "crops": crops})
 
 
+#: BOP'19 estimation targets are the instances at least this visible.
+TARGET_MIN_VISIBLE_FRACTION = 0.1
+
+
+def _targets(scene_id: int, im_id: int, gt: list[dict], infos: list[dict]) -> list[dict]:
+    """BOP'19 targets of one image: per object, the count of instances with visib_fract >= 0.1."""
+    counts: dict[int, int] = {}
+    for instance, info in zip(gt, infos):
+        if info["visib_fract"] >= TARGET_MIN_VISIBLE_FRACTION:
+            counts[instance["obj_id"]] = counts.get(instance["obj_id"], 0) + 1
+    return [{"scene_id": scene_id, "im_id": im_id, "obj_id": obj_id, "inst_count": count}
+            for obj_id, count in sorted(counts.items())]
+
+
 def merge_scenes(config: GenerationConfig, object_ids: list[int]) -> list[Path]:
-    """Rebuilds every scene's JSON files from the shards of images ``0..num_images-1``."""
-    written = []
+    """Rebuilds every scene's JSON files from the shards of images ``0..num_images-1``; for the
+    ``test`` split also the data set's ``test_targets_bop19.json`` (what ``paz6d evaluate bop`` reads)."""
+    written, targets = [], []
     scene_count = (config.num_images + config.images_per_scene - 1) // config.images_per_scene
     categories = [{"id": object_id, "name": f"obj_{object_id:06d}", "supercategory": "object"}
                   for object_id in sorted(object_ids)]
@@ -140,6 +156,7 @@ def merge_scenes(config: GenerationConfig, object_ids: list[int]) -> list[Path]:
             key = str(shard["im_id"])
             scene_gt[key], scene_camera[key] = shard["scene_gt"], shard["scene_camera"]
             scene_gt_info[key] = shard["scene_gt_info"]
+            targets += _targets(scene_id, shard["im_id"], shard["scene_gt"], shard["scene_gt_info"])
             coco["images"].append({"id": shard["im_id"], "file_name": f"rgb/{shard['im_id']:06d}.{config.rgb_format}",
                                    "width": config.width, "height": config.height})
             for annotation in shard["coco_annotations"]:
@@ -154,4 +171,7 @@ def merge_scenes(config: GenerationConfig, object_ids: list[int]) -> list[Path]:
         for name, data in outputs.items():
             write_json_atomically(folder / name, data)
             written.append(folder / name)
+    if config.split == "test":
+        write_json_atomically(config.output / "test_targets_bop19.json", targets)
+        written.append(config.output / "test_targets_bop19.json")
     return written

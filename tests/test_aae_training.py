@@ -243,6 +243,8 @@ def test_estimate_command_writes_bop_results_that_evaluate_scores(toy_run, tmp_p
                               occluder_probability=0.0), workers=1, show_progress=False)
     visible = [(sample.im_id, instance.T_model2cam) for sample in BOPDataset(dataset, "test")
                for instance in sample.objects if instance.info["visib_fract"] >= 0.1]
+    targets = json.loads((dataset / "test_targets_bop19.json").read_text())
+    assert sum(target["inst_count"] for target in targets) == len(visible)
     results = tmp_path / "results.csv"
     assert main(["estimate", "--run", str(root / "run"), "--dataset", str(dataset), "--object-id", "1",
                  "--out", str(results)]) == 0
