@@ -33,6 +33,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--box", choices=sorted(BOXES), default="obj",
                         help="ground-truth box given to the model: of the whole projected object (obj) or of "
                              "its visible part (visib, what a detector would see)")
+    parser.add_argument("--targets-out", type=Path, default=None,
+                        help="also write the BOP'19 targets of the images estimated (for `evaluate bop --targets` "
+                             "when only some images of the split have RGB files)")
     parser.add_argument("--min-visible", type=float, default=0.1,
                         help="skip instances whose visible fraction is below this (BOP'19 uses 0.1)")
 
@@ -53,7 +56,7 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
 
     Returns:
         ``{"scene_ids", "im_ids", "rotations" (E, 3, 3), "translations_mm" (E, 3), "seconds" (E,),
-        "skipped_images", "failed"}``; an estimate that fails (e.g. PnP with too few keypoints) is
+        "targets" (BOP'19 targets of the estimated images), "skipped_images", "failed"}``; an estimate that fails (e.g. PnP with too few keypoints) is
         counted in ``failed`` and left out (BOP scores a missing estimate as a miss).
     """
     from tqdm.auto import tqdm
@@ -65,7 +68,7 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
     data = BOPDataset(dataset, split=split)
     estimators: dict[bytes, object] = {}  # one per distinct camera matrix
     found = {"scene_ids": [], "im_ids": [], "rotations": [], "translations_mm": [], "seconds": []}
-    skipped_images, failed = 0, 0
+    skipped_images, failed, targets = 0, 0, []
     for sample in tqdm(data, desc=f"estimate obj {obj_id}", unit="image", disable=not progress, dynamic_ncols=True):
         instances = [instance for instance in sample.objects if instance.obj_id == obj_id
                      and (instance.info or {}).get("visib_fract", 1.0) >= min_visible]
@@ -74,6 +77,8 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
         if sample.image is None:
             skipped_images += 1
             continue
+        targets.append({"scene_id": sample.scene_id, "im_id": sample.im_id, "obj_id": obj_id,
+                        "inst_count": len(instances)})
         key = np.asarray(sample.K, dtype=np.float64).tobytes()
         if key not in estimators:
             estimators[key] = _estimator(method, run_dir, sample.camera)
@@ -97,7 +102,7 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
             found["translations_mm"].append(1000.0 * T[:3, 3])
             found["seconds"].append(time.perf_counter() - started)
     result = {name: np.asarray(values) for name, values in found.items()}
-    result.update(skipped_images=skipped_images, failed=failed)
+    result.update(targets=targets, skipped_images=skipped_images, failed=failed)
     return result
 
 
@@ -106,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
 
     import_tensorflow()
     from evaluation.bop_results import write_pose_results
+    from paz6d.backend.files import write_json_atomically
 
     if not args.run.is_dir():
         raise ValueError(f"--run: {args.run} is not a directory")
@@ -118,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
     write_pose_results(args.out, found["scene_ids"], found["im_ids"], np.full(count, args.object_id),
                        np.ones(count), found["rotations"].reshape(-1, 3, 3), found["translations_mm"].reshape(-1, 3),
                        found["seconds"])
+    if args.targets_out is not None:
+        write_json_atomically(args.targets_out, found["targets"])
     print(f"wrote {args.out}: {count} estimates of object {args.object_id} ({found['failed']} failed, "
           f"{found['skipped_images']} images without RGB skipped)")
     return 0

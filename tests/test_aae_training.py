@@ -247,7 +247,8 @@ def test_estimate_command_writes_bop_results_that_evaluate_scores(toy_run, tmp_p
     assert sum(target["inst_count"] for target in targets) == len(visible)
     results = tmp_path / "results.csv"
     assert main(["estimate", "--run", str(root / "run"), "--dataset", str(dataset), "--object-id", "1",
-                 "--out", str(results)]) == 0
+                 "--out", str(results), "--targets-out", str(tmp_path / "targets.json")]) == 0
+    assert json.loads((tmp_path / "targets.json").read_text()) == targets
     estimates = read_pose_results(results)
     assert sorted(estimates.im_ids.tolist()) == sorted(im_id for im_id, _ in visible)
     assert np.all(estimates.obj_ids == 1) and np.all(estimates.scores == 1.0)
