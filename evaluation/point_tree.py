@@ -13,7 +13,7 @@ point because:
 * estimates are spread over threads (``workers``), each estimate searched by one thread, so the
   result does not depend on the thread count.
 
-The kernels live in :mod:`evaluation.point_tree_kernels`, imported (and compiled, then cached on disk
+The kernels live in :mod:`evaluation.pose_error_kernels`, imported (and compiled, then cached on disk
 by numba) on first use, so ``import evaluation`` stays light.
 """
 
@@ -33,9 +33,9 @@ class PointTree:
             raise ValueError(f"points: expected a non-empty (N, 3) array, got shape {points.shape}")
         if not np.all(np.isfinite(points)):
             raise ValueError("points: expected finite coordinates, got NaN or inf")
-        from evaluation import point_tree_kernels
+        from evaluation import pose_error_kernels
 
-        order, self._start, self._end, self._left, self._right, self._low, self._high = point_tree_kernels.build_tree(
+        order, self._start, self._end, self._left, self._right, self._low, self._high = pose_error_kernels.build_tree(
             np.ascontiguousarray(points), int(leaf_size))
         self._points = np.ascontiguousarray(points[order])
 
@@ -62,14 +62,14 @@ class PointTree:
             return np.empty(0)
         import numba
 
-        from evaluation import point_tree_kernels
+        from evaluation import pose_error_kernels
 
         threads = numba.config.NUMBA_NUM_THREADS if workers == -1 else max(1, min(int(workers),
                                                                                numba.config.NUMBA_NUM_THREADS))
         previous = numba.get_num_threads()
         numba.set_num_threads(threads)
         try:
-            return point_tree_kernels.mean_nearest_distances(A, b, self._points, self._start, self._end, self._left, self._right,
+            return pose_error_kernels.mean_nearest_distances(A, b, self._points, self._start, self._end, self._left, self._right,
                                   self._low, self._high)
         finally:
             numba.set_num_threads(previous)

@@ -1,4 +1,5 @@
-"""numba kernels of :class:`evaluation.point_tree.PointTree`: KD-tree build and the seeded search.
+"""numba kernels of the pose errors: the KD-tree of :class:`evaluation.point_tree.PointTree` (build and
+seeded search, for ADI) and the MSSD maximum over points / minimum over symmetries.
 
 Tree layout (arrays indexed by node, root 0): ``start``/``end`` index the points of the node in
 tree order, ``left``/``right`` are the children (-1 for a leaf), ``low``/``high`` the tight
@@ -118,3 +119,26 @@ def mean_nearest_distances(A, b, points, start, end, left, right, low, high):
             total += np.sqrt(best)
         means[e] = total / count
     return means
+
+
+@numba.njit(cache=True)
+def min_max_distances(A, b, points):
+    """``(E,)``: ``min over s of max over n of |A[e, s] points[n] + b[e, s]|`` for ``A`` ``(E, S, 3, 3)``,
+    ``b`` ``(E, S, 3)`` (MSSD over symmetries). A symmetry is abandoned as soon as its running maximum
+    reaches the best one so far, which cannot change the result."""
+    estimates, symmetries, count = A.shape[0], A.shape[1], points.shape[0]
+    result = np.empty(estimates)
+    for e in range(estimates):
+        best = np.inf
+        for s in range(symmetries):
+            largest = 0.0
+            for n in range(count):
+                x = A[e, s, 0, 0] * points[n, 0] + A[e, s, 0, 1] * points[n, 1] + A[e, s, 0, 2] * points[n, 2] + b[e, s, 0]
+                y = A[e, s, 1, 0] * points[n, 0] + A[e, s, 1, 1] * points[n, 1] + A[e, s, 1, 2] * points[n, 2] + b[e, s, 1]
+                z = A[e, s, 2, 0] * points[n, 0] + A[e, s, 2, 1] * points[n, 1] + A[e, s, 2, 2] * points[n, 2] + b[e, s, 2]
+                largest = max(largest, x * x + y * y + z * z)
+                if largest >= best:
+                    break
+            best = min(best, largest)
+        result[e] = np.sqrt(best)
+    return result
