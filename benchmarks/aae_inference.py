@@ -15,20 +15,9 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 
 import numpy as np
-
-
-def _best_of(function, repeats: int) -> float:
-    """Median seconds of ``repeats`` calls (after one warm-up call)."""
-    function()
-    times = []
-    for _ in range(repeats):
-        started = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - started)
-    return float(np.median(times))
+from timing import median_seconds
 
 
 def measure(config, entries: int, batch: int, repeats: int) -> dict:
@@ -48,13 +37,13 @@ def measure(config, entries: int, batch: int, repeats: int) -> dict:
                         np.tile([0.0, 0.0, 10.0, 10.0], (entries, 1)), np.eye(3), 1.0)
     crops = rng.integers(0, 256, (batch, crop_size, crop_size, 3), dtype=np.uint8)
 
-    single = _best_of(lambda: codebook.nearest(encoder(to_model_input(crops[:1]))), repeats)
-    batched = _best_of(lambda: codebook.nearest(encoder(to_model_input(crops))), max(3, repeats // 4)) / batch
-    encode_single = _best_of(lambda: encoder(to_model_input(crops[:1])), repeats)
+    single = median_seconds(lambda: codebook.nearest(encoder(to_model_input(crops[:1]))), repeats)
+    batched = median_seconds(lambda: codebook.nearest(encoder(to_model_input(crops))), max(3, repeats // 4)) / batch
+    encode_single = median_seconds(lambda: encoder(to_model_input(crops[:1])), repeats)
     codes = np.asarray(encoder(to_model_input(crops)))
-    lookup_single = _best_of(lambda: codebook.nearest(codes[:1]), repeats)
-    lookup_matrix = _best_of(lambda: codebook.nearest(codes), repeats) / batch
-    lookup_cdist = _best_of(lambda: np.argmin(cdist(codes, codebook.codes, "cosine"), axis=1), repeats) / batch
+    lookup_single = median_seconds(lambda: codebook.nearest(codes[:1]), repeats)
+    lookup_matrix = median_seconds(lambda: codebook.nearest(codes), repeats) / batch
+    lookup_cdist = median_seconds(lambda: np.argmin(cdist(codes, codebook.codes, "cosine"), axis=1), repeats) / batch
     return {"crop": crop_size, "latent": latent_size, "entries": entries,
             "single_ms": 1000 * single, "batched_ms_per_crop": 1000 * batched, "encode_single_ms": 1000 * encode_single,
             "lookup_single_us": 1e6 * lookup_single, "lookup_matrix_us_per_crop": 1e6 * lookup_matrix, "lookup_cdist_us_per_crop": 1e6 * lookup_cdist}

@@ -44,7 +44,7 @@ def main() -> int:
     cases = (("Eigenfaces", lambda: EigenFaces(args.components),
               lambda: cv2.face.EigenFaceRecognizer_create(num_components=args.components)),
              ("Fisherfaces", lambda: FisherFaces(), lambda: cv2.face.FisherFaceRecognizer_create()))
-    print(f"| method | step | paz6d [s] | OpenCV [s] | OpenCV / paz6d |")
+    print("| method | step | paz6d [s] | OpenCV [s] | OpenCV / paz6d |")
     print("|---|---|---:|---:|---:|")
     for name, ours_factory, theirs_factory in cases:
         ours, theirs = ours_factory(), theirs_factory()

@@ -18,21 +18,10 @@ import argparse
 import json
 import os
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
-
-
-def _median_seconds(function, repeats: int) -> float:
-    """Median seconds of ``repeats`` calls after one warm-up call."""
-    function()
-    times = []
-    for _ in range(repeats):
-        started = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - started)
-    return float(np.median(times))
+from timing import median_seconds
 
 
 def _random_run(folder: Path, settings: dict) -> Path:
@@ -73,12 +62,12 @@ def measure(name: str, repeats: int, batch: int) -> dict:
             pass
 
     result = {"config": name, "input_size": size,
-              "end_to_end_ms": 1000 * _median_seconds(end_to_end, repeats),
-              "network_compiled_ms": 1000 * _median_seconds(lambda: estimator._infer(crop), repeats),
-              "network_eager_ms": 1000 * _median_seconds(lambda: estimator.model(crop, training=False), repeats),
-              "network_predict_ms": 1000 * _median_seconds(lambda: estimator.model.predict(crop, verbose=0), repeats)}
+              "end_to_end_ms": 1000 * median_seconds(end_to_end, repeats),
+              "network_compiled_ms": 1000 * median_seconds(lambda: estimator._infer(crop), repeats),
+              "network_eager_ms": 1000 * median_seconds(lambda: estimator.model(crop, training=False), repeats),
+              "network_predict_ms": 1000 * median_seconds(lambda: estimator.model.predict(crop, verbose=0), repeats)}
     images, boxes = [image] * batch, [box] * batch
-    result["batch_ms_per_crop"] = 1000 * _median_seconds(lambda: estimator.estimate_batch(images, boxes),
+    result["batch_ms_per_crop"] = 1000 * median_seconds(lambda: estimator.estimate_batch(images, boxes),
                                                          max(3, repeats // 4)) / batch
     return result
 

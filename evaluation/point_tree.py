@@ -35,8 +35,8 @@ class PointTree:
             raise ValueError("points: expected finite coordinates, got NaN or inf")
         from evaluation import pose_error_kernels
 
-        order, self._start, self._end, self._left, self._right, self._low, self._high = pose_error_kernels.build_tree(
-            np.ascontiguousarray(points), int(leaf_size))
+        tree = pose_error_kernels.build_tree(np.ascontiguousarray(points), int(leaf_size))
+        order, self._start, self._end, self._left, self._right, self._low, self._high = tree
         self._points = np.ascontiguousarray(points[order])
 
     @property
@@ -64,12 +64,12 @@ class PointTree:
 
         from evaluation import pose_error_kernels
 
-        threads = numba.config.NUMBA_NUM_THREADS if workers == -1 else max(1, min(int(workers),
-                                                                               numba.config.NUMBA_NUM_THREADS))
+        available = numba.config.NUMBA_NUM_THREADS
+        threads = available if workers == -1 else max(1, min(int(workers), available))
         previous = numba.get_num_threads()
         numba.set_num_threads(threads)
         try:
-            return pose_error_kernels.mean_nearest_distances(A, b, self._points, self._start, self._end, self._left, self._right,
-                                  self._low, self._high)
+            return pose_error_kernels.mean_nearest_distances(A, b, self._points, self._start, self._end,
+                                                             self._left, self._right, self._low, self._high)
         finally:
             numba.set_num_threads(previous)

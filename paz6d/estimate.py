@@ -56,8 +56,9 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
 
     Returns:
         ``{"scene_ids", "im_ids", "rotations" (E, 3, 3), "translations_mm" (E, 3), "seconds" (E,),
-        "targets" (BOP'19 targets of the estimated images), "skipped_images", "failed"}``; an estimate that fails (e.g. PnP with too few keypoints) is
-        counted in ``failed`` and left out (BOP scores a missing estimate as a miss).
+        "targets" (BOP'19 targets of the estimated images), "skipped_images", "failed"}``; an
+        estimate that fails (e.g. PnP with too few keypoints) is counted in ``failed`` and left out
+        (BOP scores a missing estimate as a miss).
     """
     from tqdm.auto import tqdm
 
