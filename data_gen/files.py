@@ -10,19 +10,26 @@ import numpy as np
 
 from paz6d.backend.files import TEMPORARY_PREFIX
 
-#: zlib level 1: several times faster than the default at ~10 % larger files; output is deterministic.
-PNG_PARAMETERS = [cv2.IMWRITE_PNG_COMPRESSION, 1]
+#: PNG settings (zlib level 1, run-length strategy; deterministic output). Measured on a 640x480
+#: rendered image with sensor noise: the "sub" row filter makes the RGB file ~10 % smaller than
+#: OpenCV's default filters in ~40 % of the time (9 vs 23 ms); masks, which are runs of 0 and 255,
+#: compress best unfiltered (0.4 vs 2.2 ms).
+PNG_PARAMETERS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
+                  cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB]
+MASK_PNG_PARAMETERS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
+                       cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
 JPEG_PARAMETERS = [cv2.IMWRITE_JPEG_QUALITY, 95]
 
 
 def image_bytes(image: np.ndarray, image_format: str = "png") -> bytes:
     """``png`` or ``jpg`` encoding of uint8 RGB ``(H, W, 3)``, uint8/uint16 ``(H, W)`` or bool
     ``(H, W)`` (written as {0, 255})."""
+    parameters = PNG_PARAMETERS if image_format == "png" else JPEG_PARAMETERS
     if image.dtype == bool:
-        image = image.astype(np.uint8) * 255
+        image = image.view(np.uint8) * np.uint8(255)
+        parameters = MASK_PNG_PARAMETERS if image_format == "png" else JPEG_PARAMETERS
     elif image.ndim == 3:
         image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
-    parameters = PNG_PARAMETERS if image_format == "png" else JPEG_PARAMETERS
     ok, encoded = cv2.imencode("." + image_format, image, parameters)
     if not ok:
         raise ValueError(f"image: OpenCV could not encode a {image.dtype} {image.shape} array as {image_format}")

@@ -4,6 +4,7 @@ colours, backgrounds and image degradations."""
 from __future__ import annotations
 
 from pathlib import Path
+from statistics import NormalDist
 
 import cv2
 import numpy as np
@@ -96,13 +97,23 @@ def background_image(generator: np.random.Generator, files: list[Path], width: i
     return cv2.resize(np.ascontiguousarray(crop), (width, height), interpolation=cv2.INTER_LINEAR)
 
 
+#: The 256 quantiles ``(i + 0.5) / 256`` of the standard normal: a uniform byte indexes one, which
+#: draws 8-bit-quantized Gaussian noise (cut at ±2.9 sigma) about 4x faster than ``standard_normal``.
+NORMAL_QUANTILES = np.array([NormalDist().inv_cdf((i + 0.5) / 256) for i in range(256)], dtype=np.float32)
+
+
+def gaussian_noise(generator: np.random.Generator, image: np.ndarray, std: float) -> np.ndarray:
+    """``image`` (uint8) plus zero-mean Gaussian noise of ``std`` grey levels, rounded and clipped."""
+    indices = generator.integers(0, 256, size=image.shape, dtype=np.uint8)
+    noise = cv2.LUT(indices, NORMAL_QUANTILES * np.float32(std))
+    return cv2.add(image.astype(np.float32), noise, dtype=cv2.CV_8U)  # saturating: rounds and clips
+
+
 def degrade(generator: np.random.Generator, image: np.ndarray, config: GenerationConfig) -> np.ndarray:
     """Random Gaussian blur (with ``blur_probability``) then, for half of the images, Gaussian
-    noise up to ``noise_std`` grey levels (float32 draws: far finer than a grey level)."""
+    noise up to ``noise_std`` grey levels (:func:`gaussian_noise`)."""
     if generator.random() < config.blur_probability:
         image = gaussian_blur(image, 5, sigma=float(generator.uniform(0.4, 1.2)))
     if config.noise_std > 0 and generator.random() < 0.5:
-        std = np.float32(generator.uniform(0, config.noise_std))
-        noise = generator.standard_normal(image.shape, dtype=np.float32) * std
-        image = np.clip(image + noise, 0, 255).astype(np.uint8)
+        image = gaussian_noise(generator, image, float(generator.uniform(0, config.noise_std)))
     return image

@@ -334,6 +334,26 @@ def test_composite_matches_the_backend_alpha_blend():
     assert np.abs(result.astype(int) - alpha_blend(foreground, alpha, background).astype(int)).max() <= 1
 
 
+def test_sensor_noise_is_gaussian_seeded_rounded_and_clipped():
+    from scipy import stats
+
+    from data_gen.randomization import gaussian_noise
+
+    grey = np.full((200, 300, 3), 100, dtype=np.uint8)
+    noisy = gaussian_noise(np.random.default_rng(3), grey, 4.0)
+    assert noisy.dtype == np.uint8 and noisy.shape == grey.shape
+    np.testing.assert_array_equal(noisy, gaussian_noise(np.random.default_rng(3), grey, 4.0))
+    difference = noisy.astype(float) - 100
+    assert abs(difference.mean()) < 0.05 and abs(difference.std() - np.hypot(4.0, 1 / np.sqrt(12))) < 0.1
+    # Compare the quantized draws with the normal CDF at the rounding boundaries k + 1/2.
+    levels = np.arange(-8, 8)
+    empirical = np.array([(difference <= k).mean() for k in levels])
+    np.testing.assert_allclose(empirical, stats.norm.cdf(levels + 0.5, scale=4.0), atol=0.01)
+    extremes = gaussian_noise(np.random.default_rng(4), np.array([[0, 255]] * 1000, dtype=np.uint8), 20.0)
+    assert extremes[:, 0].min() == 0 and extremes[:, 1].max() == 255 and extremes[:, 0].max() > 10
+    assert gaussian_noise(np.random.default_rng(5), grey[..., 0], 2.0).shape == (200, 300)
+
+
 @pytest.mark.parametrize("preset", [None, "3"])
 def test_workers_split_the_llvmpipe_raster_threads(monkeypatch, preset):
     """Each spawned worker gets cores / workers raster threads unless the user set LP_NUM_THREADS."""
