@@ -87,10 +87,11 @@ def end_to_end(config: GenerationConfig, workers: int) -> tuple[float, float]:
     return summary.images_rendered / summary.seconds, running
 
 
-def measure(meshes: list[Path], width: int, height: int, count: int, antialias: bool, workdir: Path) -> dict:
+def measure(meshes: list[Path], width: int, height: int, count: int, antialias: str, rgb_format: str,
+            workdir: Path) -> dict:
     config = GenerationConfig(meshes=tuple(meshes), output=workdir / "steady", num_images=count, width=width,
                               height=height, scale=0.001, objects_per_image=(1, 1), distractors=0,
-                              occluder_probability=0.0, antialias=antialias)
+                              occluder_probability=0.0, antialias=antialias, rgb_format=rgb_format)
     producer = ImageProducer(config)
     steady = generator_steady(config, producer, count)
     bare, bare_renderer = bare_loop(config, producer, count)
@@ -108,6 +109,8 @@ def main() -> int:
     parser.add_argument("--images-small", type=int, default=200, help="images at 128x128")
     parser.add_argument("--images-large", type=int, default=120, help="images at 640x480")
     parser.add_argument("--platform", choices=("egl", "osmesa"))
+    parser.add_argument("--rgb-format", choices=("png", "jpg"), default=GenerationConfig.rgb_format)
+    parser.add_argument("--sizes", nargs="+", default=["640x480", "128x128"], help="image sizes WxH")
     args = parser.parse_args()
     meshes = args.mesh or DEFAULT_MESHES
     missing = [path for path in meshes if not path.is_file()]
@@ -115,17 +118,19 @@ def main() -> int:
         print(f"benchmark: mesh not found: {missing[0]} (pass --mesh)", file=sys.stderr)
         return 2
     platform = select_platform(args.platform)
-    print(f"platform {platform}; one annotated object per image, no distractors; views/s")
+    print(f"platform {platform}; one annotated object per image, no distractors; RGB as {args.rgb_format}; views/s")
     print(f"{'size':>8} {'antialias':>9} {'bare loop':>10} {'gen 1w':>8} {'ratio':>6} "
           f"{'e2e 1w':>7} {'e2e 2w':>7} {'2w/1w':>6} {'run 1w':>7} {'run 2w':>7} {'2w/1w':>6}")
-    for (width, height), count in (((640, 480), args.images_large), ((128, 128), args.images_small)):
-        for antialias in (True, False):
+    for size in args.sizes:
+        width, height = (int(value) for value in size.split("x"))
+        count = args.images_large if width * height > 128 * 128 else args.images_small
+        for antialias in ("edges", "msaa", "none"):  # the generator's default first
             workdir = Path(tempfile.mkdtemp(prefix="paz6d-bench-"))
             try:
-                result = measure(meshes, width, height, count, antialias, workdir)
+                result = measure(meshes, width, height, count, antialias, args.rgb_format, workdir)
             finally:
                 shutil.rmtree(workdir, ignore_errors=True)
-            print(f"{width}x{height:<4} {str(antialias):>9} {result['bare']:10.1f} {result['steady']:8.1f} "
+            print(f"{width}x{height:<4} {antialias:>9} {result['bare']:10.1f} {result['steady']:8.1f} "
                   f"{result['steady'] / result['bare']:6.2f} {result['one']:7.1f} {result['two']:7.1f} "
                   f"{result['two'] / result['one']:6.2f} {result['one_running']:7.1f} {result['two_running']:7.1f} "
                   f"{result['two_running'] / result['one_running']:6.2f}", flush=True)

@@ -11,6 +11,8 @@ from pathlib import Path
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Adds the ``generate`` arguments."""
+    from renderers.renderer import ANTIALIAS_MODES
+
     parser.add_argument("--mesh", action="append", required=True, type=Path, metavar="PATH",
                         help="mesh file (PLY/OBJ/GLB/GLTF); repeat for several objects. Files named "
                              "obj_XXXXXX keep that BOP object id")
@@ -45,8 +47,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--symmetries", type=Path, help="JSON {obj_id: {symmetries_discrete/continuous}}")
     parser.add_argument("--rgb-format", choices=("png", "jpg"), default="png",
                         help="rgb images: lossless png or jpg (quality 95, like BOP PBR sets; faster)")
-    parser.add_argument("--no-antialias", action="store_true",
-                        help="single-sample colour: ~2x faster for scenes without overlapping objects")
+    parser.add_argument("--antialias", choices=ANTIALIAS_MODES, default="edges",
+                        help="edges: one single-sample pass, softened object outlines (default); msaa: 4x "
+                             "multisampled colour, ~2x slower; none: binary outlines")
     parser.add_argument("--platform", choices=("egl", "osmesa"), help="OpenGL platform (default: auto)")
     parser.add_argument("--backend", choices=("local", "ray"), default="local")
     parser.add_argument("--ray-address", help="Ray cluster address, e.g. ray://head:10001 (default: local Ray)")
@@ -69,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         light_count=tuple(args.light_count), color_jitter=args.color_jitter,
         blur_probability=args.blur_probability, noise_std=args.noise, depth_scale=args.depth_scale,
         images_per_scene=args.images_per_scene, crop_size=args.crop_size, symmetries=args.symmetries,
-        rgb_format=args.rgb_format, antialias=not args.no_antialias, platform=args.platform)
+        rgb_format=args.rgb_format, antialias=args.antialias, platform=args.platform)
     summary = generate(config, workers=args.workers, backend=args.backend, ray_address=args.ray_address,
                        show_progress=not args.quiet)
     print(f"paz6d generate: {summary.images_total} images in {config.output} "

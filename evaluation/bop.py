@@ -432,7 +432,7 @@ def _vsd_errors(data: BopEvaluationData, results: PoseResults, pairs: Evaluation
     if own_renderer:
         from renderers import Renderer
 
-        renderer = Renderer(data.width, data.height, antialias=False)
+        renderer = Renderer(data.width, data.height, antialias="none")
     try:
         images = gt_keys[pairs.gt, :2] if len(pairs) else np.zeros((0, 2), dtype=np.int64)
         keys = np.unique(images, axis=0)

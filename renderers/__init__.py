@@ -8,7 +8,7 @@ pyrender or OpenGL; that happens when the first :class:`Renderer` is created.
 
 from renderers.lights import DEFAULT_LIGHTS, Light, Lighting
 from renderers.platform import PlatformUnavailableError, select_platform
-from renderers.renderer import Renderer, RenderOutput
+from renderers.renderer import ANTIALIAS_MODES, Renderer, RenderOutput
 
-__all__ = ["DEFAULT_LIGHTS", "Light", "Lighting", "PlatformUnavailableError", "Renderer", "RenderOutput",
+__all__ = ["ANTIALIAS_MODES", "DEFAULT_LIGHTS", "Light", "Lighting", "PlatformUnavailableError", "Renderer", "RenderOutput",
            "select_platform"]

@@ -262,7 +262,7 @@ def rendered(tmp_path_factory):
     renderers = pytest.importorskip("renderers")
     width, height = 160, 120
     try:
-        renderer = renderers.Renderer(width, height, antialias=False)
+        renderer = renderers.Renderer(width, height, antialias="none")
     except renderers.PlatformUnavailableError as error:
         pytest.skip(f"no offscreen OpenGL: {error}")
     box_mm = trimesh.creation.box((60.0, 40.0, 30.0))

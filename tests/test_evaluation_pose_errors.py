@@ -232,7 +232,7 @@ def vsd_reference(depth_test, depth_est, depth_gt, K, delta, taus, diameter):
 def depth_renderer():
     renderers = pytest.importorskip("renderers")
     try:
-        renderer = renderers.Renderer(160, 120, antialias=False)
+        renderer = renderers.Renderer(160, 120, antialias="none")
     except renderers.PlatformUnavailableError as error:
         pytest.skip(f"no offscreen OpenGL: {error}")
     with renderer:

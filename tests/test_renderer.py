@@ -346,7 +346,7 @@ def test_single_sample_mode_gives_the_same_depth_and_masks(renderer, ape, layout
     objects = {"single": [(ape, T_left)], "apart": [(ape, T_left), (ape, T_right)],
                "overlapping": [(ape, T_left), (ape, T_behind)]}[layout]
     reference = renderer.render(K_128, objects)
-    with Renderer(128, 128, antialias=False) as single_sample:
+    with Renderer(128, 128, antialias="none") as single_sample:
         out = single_sample.render(K_128, objects)
     np.testing.assert_array_equal(out.masks, reference.masks)
     np.testing.assert_array_equal(out.visible_masks, reference.visible_masks)
@@ -368,3 +368,65 @@ def test_masks_only_for_the_first_objects_with_the_rest_occluding(renderer):
     np.testing.assert_array_equal(first_only.visible_masks[0], everything.visible_masks[0])
     with pytest.raises(ValueError, match="masked_objects"):
         renderer.render(K_128, [(back, T_back)], masked_objects=2)
+
+
+def exact_coverage(mesh: trimesh.Trimesh, T: np.ndarray, K: np.ndarray, size: tuple[int, int],
+                   samples: int = 8) -> np.ndarray:
+    """Fraction of each pixel's area covered by the projected mesh (``samples``² sub-pixel points)."""
+    width, height = size
+    offsets = (np.arange(samples) + 0.5) / samples - 0.5
+    total = np.zeros((height, width))
+    for dy in offsets:
+        for dx in offsets:
+            shifted = K.copy()
+            shifted[:2, 2] -= (dx, dy)  # the sub-pixel point (u + dx, v + dy) becomes a pixel centre
+            total += rasterize_silhouette(mesh, T, shifted, size)
+    return total / samples ** 2
+
+
+@pytest.mark.parametrize("angle, gain", [(0.1, 0.5), (0.37, 0.75)])
+def test_edge_antialiasing_estimates_pixel_coverage(angle, gain):
+    """Coverage error on the outline's pixels: binary 0.26 / 0.21, edges 0.10 / 0.14, MSAA 0.07 / 0.07
+    for edges at 6 / 21 degrees to the pixel grid."""
+    mesh = square(0.1, color=(200, 60, 30))
+    T = pose([0.0, 0.0, angle], [0.0031, -0.0047, 0.5])
+    coverage = exact_coverage(mesh, T, K_128, (128, 128))
+    with Renderer(128, 128, antialias="edges") as edges, Renderer(128, 128, antialias="none") as binary:
+        soft, hard = edges.render(K_128, [(mesh, T)]), binary.render(K_128, [(mesh, T)])
+    np.testing.assert_array_equal(soft.masks, hard.masks)  # annotations stay pixel-centre exact
+    np.testing.assert_array_equal(soft.depth, hard.depth)
+    band = (coverage > 0) & (coverage < 1)
+    soft_error = np.abs(soft.alpha / 255.0 - coverage)[band].mean()
+    hard_error = np.abs(hard.alpha / 255.0 - coverage)[band].mean()
+    assert soft_error < gain * hard_error, (soft_error, hard_error)
+    assert abs(soft.alpha.sum() / 255.0 - coverage.sum()) < 0.01 * coverage.sum()  # area kept
+    interior = coverage == 1
+    np.testing.assert_array_equal(soft.rgb[interior], hard.rgb[interior])
+    near = np.zeros_like(hard.masks[0])
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near |= np.roll(hard.masks[0], (dy, dx), axis=(0, 1))
+    np.testing.assert_array_equal(soft.alpha[~near], 0)  # coverage spreads one pixel at most
+    outside_ring = (soft.alpha > 0) & ~hard.masks[0]  # the pixels added outside the binary outline
+    assert outside_ring.sum() > 50
+    np.testing.assert_array_equal(soft.rgb[outside_ring], np.broadcast_to(hard.rgb[interior][0], (outside_ring.sum(), 3)))
+
+
+def test_edge_antialiasing_of_an_axis_aligned_edge():
+    from renderers.edge_coverage import soften_silhouette
+
+    rgb = np.zeros((20, 20, 3), dtype=np.uint8)
+    alpha = np.zeros((20, 20), dtype=np.uint8)
+    rgb[5:15, 5:15], alpha[5:15, 5:15] = (10, 100, 250), 255
+    soft_rgb, soft_alpha = soften_silhouette(rgb, alpha)
+    assert soft_alpha[10, 5] == 191 and soft_alpha[10, 4] == 64 and soft_alpha[10, 3] == 0  # 3/4, 1/4 on an edge
+    assert soft_alpha[10, 10] == 255 and soft_alpha[4, 4] == 16  # 1/16 diagonally off a corner
+    np.testing.assert_array_equal(soft_rgb[10, 4], (10, 100, 250))
+    np.testing.assert_array_equal(rgb[10, 4], 0)  # inputs untouched
+    empty_rgb, empty_alpha = soften_silhouette(np.zeros((4, 4, 3), np.uint8), np.zeros((4, 4), np.uint8))
+    assert not empty_alpha.any() and not empty_rgb.any()
+
+
+def test_unknown_antialias_mode_is_rejected():
+    with pytest.raises(ValueError, match="antialias: expected one of"):
+        Renderer(16, 16, antialias=True)
