@@ -300,3 +300,20 @@ def test_estimator_with_depth_from_box_uses_the_box(run_dir):
     fitted = estimator._estimate(shrunk, box)
     assert abs(plain.translation[2] - 0.5) > 0.015  # a 5 % smaller constellation reads as 5 % farther
     assert abs(fitted.translation[2] - 0.5) < 0.003
+
+
+
+def test_predict_keypoints_decodes_in_batches():
+    from paz6d.pipelines.keypoint_pose import local_expectation, predict_keypoints
+
+    def infer(batch):  # probability maps: the stride-4 cells' share of the first channel
+        cells = batch[..., 0].reshape(len(batch), 4, 4, 4, 4).sum(axis=(2, 4))
+        probabilities = (cells / cells.sum(axis=(1, 2), keepdims=True))[..., None]
+        return {"probabilities": probabilities, "uv": np.zeros((len(batch), 1, 2))}
+
+    crops = np.random.default_rng(0).uniform(0, 255, (7, 16, 16, 3))
+    uv, spread = predict_keypoints(infer, crops, 4, batch_size=3)
+    expected = local_expectation(infer(crops)["probabilities"], 4)
+    np.testing.assert_allclose(uv, expected)
+    np.testing.assert_allclose(spread, keypoint_spread(infer(crops)["probabilities"], expected, 4))
+    assert uv.shape == (7, 1, 2) and spread.shape == (7, 1)

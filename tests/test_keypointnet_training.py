@@ -121,7 +121,7 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
     losses = _losses(job.out)
     assert len(losses) == 4 and np.mean(losses[-2:]) < np.mean(losses[:2])
     for name in ("config.json", "model.keras", "keypoints.json", "metrics.json", "views_train.npz",
-                 "samples/step_00000040.png"):
+                 "views_lift.npz", "samples/step_00000040.png"):
         assert (job.out / name).exists(), name
     assert summary["steps"] == 40 and np.isfinite(summary["cross_view_px_median"])
     keypoints = json.loads((job.out / "keypoints.json").read_text())
@@ -138,6 +138,31 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
         # resuming continues from the last checkpoint up to the new total (and lifts keypoints again)
         resumed = train_keypointnet(KeypointTraining(job.out, mesh_path, 1e-3, "quick", mode, 0, 0, 50, False, TINY))
         assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
+
+
+def test_lifting_crops_are_cut_as_at_inference_with_matching_intrinsics():
+    from paz6d.backend.square_crop import square_window
+    from paz6d.training.keypointnet import inference_crops
+
+    T = np.eye(4)
+    T[:3, 3] = [0.01, -0.005, 0.4]
+    point = np.array([[0.012, 0.007, 0.0]])
+    u, v = transform_and_project(point, T, SMALL_CAMERA.K)[0]
+    image = np.zeros((120, 160, 3), np.uint8)
+    image[int(round(v)) - 1:int(round(v)) + 2, int(round(u)) - 1:int(round(u)) + 2] = 255  # a 3x3 dot
+    box = np.array([[u - 20.0, v - 15.0, u + 12.0, v + 9.0]])
+    test = kv.TestImages(images=image[None], boxes=box, T_model2cam=T[None], masks=np.zeros((1, 120, 160), bool))
+    crops, intrinsics, poses = inference_crops(test, SMALL_CAMERA.K, 1.25, 64)
+    assert crops.shape == (1, 64, 64, 3) and intrinsics.shape == (1, 3, 3)
+    np.testing.assert_array_equal(poses, T[None])
+    weights = crops[0, ..., 0].astype(float)
+    rows, columns = np.mgrid[:64, :64]
+    centroid = np.array([(weights * columns).sum(), (weights * rows).sum()]) / weights.sum()
+    expected = transform_and_project(point, T, intrinsics[0])[0]
+    dot_centre = np.array([round(u), round(v)])  # the dot is drawn around the rounded pixel
+    side = square_window(box[0], 1.25)[2]
+    # bilinear resampling keeps the centroid to ~0.05 px; a half-pixel convention slip would move it 0.8 px
+    np.testing.assert_allclose(centroid, expected + (dot_centre - [u, v]) * 64 / side, atol=0.15)
 
 
 def test_a_run_directory_refuses_a_different_run(mesh_path, tmp_path):

@@ -166,6 +166,24 @@ def decode_keypoints(outputs: dict, stride: int, method: str = "local") -> np.nd
     raise ValueError(f"method: expected one of {DECODERS}, got {method!r}")
 
 
+def predict_keypoints(infer, crops: np.ndarray, stride: int, decode: str = "local",
+                      batch_size: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """Keypoints ``(B, N, 2)`` (crop pixels, :func:`decode_keypoints`) and their spread ``(B, N)``
+    (:func:`keypoint_spread`) of ``(B, S, S, 3)`` crops, ``batch_size`` crops per network call.
+
+    Args:
+        infer: the model's inference function (:func:`paz6d.models.keypointnet.inference_function`).
+    """
+    uv_parts, spread_parts = [], []
+    for start in range(0, len(crops), batch_size):
+        batch = np.asarray(crops[start:start + batch_size], dtype=np.float32)
+        outputs = {name: np.asarray(value) for name, value in infer(batch).items()}
+        uv = decode_keypoints(outputs, stride, decode)
+        uv_parts.append(uv)
+        spread_parts.append(keypoint_spread(outputs["probabilities"], uv, stride))
+    return np.concatenate(uv_parts), np.concatenate(spread_parts)
+
+
 def write_keypoints(run_dir: str | Path, points_model, usable, method: str, error=None, targets=None) -> Path:
     """Writes ``keypoints.json`` (temporary file, then rename).
 
@@ -346,9 +364,7 @@ class KeypointPose6D(Processor):
             crop, window, _ = self._crop(image, box)
             crops.append(crop)
             windows.append(window)
-        outputs = {name: np.asarray(value) for name, value in self._infer(np.stack(crops).astype(np.float32)).items()}
-        uv = decode_keypoints(outputs, self.stride, self.decode)
-        spread = keypoint_spread(outputs["probabilities"], uv, self.stride)
+        uv, spread = predict_keypoints(self._infer, np.stack(crops), self.stride, self.decode)
         results = []
         for index, window in enumerate(windows):
             scores = 1.0 / (1.0 + spread[index])

@@ -12,8 +12,10 @@ Two modes share the data, the network, the PnP pipeline and the evaluation:
 
 The run directory is what :class:`paz6d.pipelines.keypoint_pose.KeypointPose6D` loads
 (``config.json``, ``model.keras``, ``keypoints.json``), plus the Trainer's checkpoints, ``log.csv``,
-``tensorboard/`` and ``samples/``, the rendered views (``views_train.npz``, ``views_val.npz``) and
-``metrics.json`` (keypoint consistency on held-out views). Re-running the same command resumes.
+``tensorboard/`` and ``samples/``, the rendered views (``views_train.npz``, ``views_val.npz``, and
+``views_lift.npz``: crops of unseen whole images, cut as at inference, from which the 3D keypoints
+are lifted) and ``metrics.json`` (keypoint consistency on held-out views). Re-running the same
+command resumes.
 
 This module is cheap to import: TensorFlow and the renderer are loaded inside :func:`run`.
 """
@@ -21,6 +23,7 @@ This module is cheap to import: TensorFlow and the renderer are loaded inside :f
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
 import time
@@ -320,11 +323,42 @@ def _sample_drawer(images: np.ndarray, targets: np.ndarray | None):
 
 # ------------------------------------------------------------------------------- training
 
-def lift_run_keypoints(model, views, settings: dict, object_diameter: float, out: Path, seed: int,
+def inference_crops(test, K, margin: float, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Crops of whole images made exactly as :class:`~paz6d.pipelines.keypoint_pose.KeypointPose6D`
+    makes them (square window of ``margin`` × the box around the box, resampled to ``size``).
+
+    Args:
+        test: :class:`~paz6d.training.keypoint_views.TestImages` (images, boxes, poses).
+        K: ``(3, 3)`` intrinsics of the whole images.
+    Returns:
+        ``images (V, size, size, 3)`` uint8, their intrinsics ``(V, 3, 3)`` and ``T_model2cam (V, 4, 4)``.
+    """
+    from paz6d.backend.square_crop import crop_intrinsics, crop_square, square_window
+
+    windows = [square_window(box, margin) for box in test.boxes]
+    images = np.stack([crop_square(image, window, size) for image, window in zip(test.images, windows)])
+    return images, np.stack([crop_intrinsics(K, window, size) for window in windows]), np.asarray(test.T_model2cam)
+
+
+def _cached_lifting_crops(path: Path, render, K, margin: float, size: int):
+    """:func:`inference_crops` of freshly rendered whole images, cached in ``path`` (``.npz``)."""
+    from paz6d.backend.files import write_bytes_atomically
+
+    if path.exists():
+        with np.load(path) as data:
+            return data["images"], data["K"], data["T_model2cam"]
+    images, intrinsics, poses = inference_crops(render(), K, margin, size)
+    buffer = io.BytesIO()
+    np.savez(buffer, images=images, K=intrinsics, T_model2cam=poses)
+    write_bytes_atomically(path, buffer.getvalue())
+    return images, intrinsics, poses
+
+
+def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out: Path,
                        targets: np.ndarray | None = None) -> dict:
     """Writes ``out/keypoints.json``: the 3D keypoints (object frame, metres) that PnP will use.
 
-    The trained network's keypoints on ``settings["lift_views"]`` plain crops of ``views`` (known
+    The trained network's keypoints on ``crops = (images, K, T_model2cam)`` (views with known
     poses) are lifted to 3D, by ``settings["lifting"]``:
 
     - ``"triangulate"``: 2D-only least-squares triangulation with outlier views dropped
@@ -337,20 +371,21 @@ def lift_run_keypoints(model, views, settings: dict, object_diameter: float, out
     marked unusable.
     ``targets`` (supervised mode: the farthest-point keypoints) are stored alongside for reference.
     """
-    from paz6d.models.keypointnet import depth_to_metres
-    from paz6d.pipelines.keypoint_pose import (decode_keypoints, lift_keypoints, triangulate_keypoints,
-                                               write_keypoints)
+    from paz6d.models.keypointnet import depth_to_metres, inference_function
+    from paz6d.pipelines.keypoint_pose import (decode_keypoints, lift_keypoints, predict_keypoints,
+                                               triangulate_keypoints, write_keypoints)
 
     method = settings.get("lifting", "triangulate")
     if method not in LIFTINGS:
         raise ValueError(f"lifting: expected one of {LIFTINGS}, got {method!r}")
-    images, K, T = fixed_crops(views, seed, settings["lift_views"])
-    outputs = predict_crops(model, images)
-    uv = decode_keypoints(outputs, settings["downsample"])
+    images, K, T = crops
     if method == "median":
+        outputs = predict_crops(model, images)
+        uv = decode_keypoints(outputs, settings["downsample"])
         depth = np.asarray(depth_to_metres(outputs["depth"], object_diameter, K, settings["input_size"]))
         points, _ = lift_keypoints(uv, depth, K, T)
     else:
+        uv, _ = predict_keypoints(inference_function(model), images, settings["downsample"])
         points, _ = triangulate_keypoints(uv, K, T)
     error = np.median(model_reprojection_errors(uv, K, T, points, np.ones(len(points), bool)), axis=0)
     usable = error <= MAX_LIFTING_ERROR * settings["input_size"]
@@ -388,7 +423,8 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     from paz6d.backend.mesh import diameter, load_mesh
     from paz6d.pipelines.keypoint_pose import (DECODERS, MODEL_FILE, decode_keypoints, keypoint_spread,
                                                read_keypoints, write_object)
-    from paz6d.training.keypoint_views import ViewSampling, hull_points, render_views, training_batch
+    from paz6d.training.keypoint_views import (ViewSampling, hull_points, render_test_images, render_views,
+                                               training_batch)
 
     settings = job.settings()
     started = time.perf_counter()
@@ -440,7 +476,15 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     kp.save_keypointnet(model, out / MODEL_FILE)
     train_seconds = time.perf_counter() - started - render_seconds
 
-    lifting = lift_run_keypoints(model, train_views, settings, object_diameter, out, job.seed + 1, keypoints_model)
+    if views is None:  # rendered views: lift from unseen whole images cropped as at inference
+        lifting_crops = _cached_lifting_crops(
+            out / "views_lift.npz", lambda: render_test_images(job.mesh_path, settings["lift_views"], job.seed + 20_000,
+                                                               sampling, job.mesh_scale, job.workers,
+                                                               progress=job.progress),
+            sampling.camera.K, sampling.margin, settings["input_size"])
+    else:  # crops cut from a data set's images: already made as at inference
+        lifting_crops = fixed_crops(train_views, job.seed + 1, settings["lift_views"])
+    lifting = lift_run_keypoints(model, lifting_crops, settings, object_diameter, out, keypoints_model)
     points_model, usable = read_keypoints(out)
 
     images, K, T = fixed_crops(validation_views, job.seed + 2)
