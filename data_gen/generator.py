@@ -62,10 +62,19 @@ def render_indices(producer, indices: Iterable[int], output, on_image: Callable[
 _worker_producer = None
 
 
+def raster_threads(cores: int, workers: int) -> int:
+    """llvmpipe raster threads per worker process (``LP_NUM_THREADS``): Mesa starts one per core
+    in every process by default, so ``workers`` processes would oversubscribe the cores. Each
+    worker gets ``cores // workers``, and 0 (rasterize in the worker's own thread) instead of 1: a
+    single extra thread only adds hand-offs (2 workers on 2 cores, 1,000 images at 640x480:
+    36.4 images/s with 1 raster thread each, 40.9 with 0)."""
+    threads = max(1, cores) // workers
+    return threads if threads >= 2 else 0
+
+
 def _start_worker(config: GenerationConfig, raster_threads: int) -> None:
-    """Worker process set-up: Mesa llvmpipe rasterizes with one thread per core by default, so
-    ``workers`` processes would each start that many; ``raster_threads`` (cores / workers) keeps
-    the total at the core count. A ``LP_NUM_THREADS`` set by the user wins."""
+    """Worker process set-up: ``LP_NUM_THREADS = raster_threads`` (see :func:`raster_threads`)
+    unless the user set it."""
     global _worker_producer
     os.environ.setdefault("LP_NUM_THREADS", str(raster_threads))
     from data_gen.producer import ImageProducer
@@ -94,8 +103,8 @@ def _run_local(config: GenerationConfig, assets: Assets, pending: list[int], wor
     chunk = max(1, min(8, len(pending) // (4 * workers)))
     written = 0
     context = multiprocessing.get_context("spawn")  # fresh processes: one GL context each, no inherited state
-    raster_threads = max(1, (os.cpu_count() or 1) // workers)
-    with context.Pool(workers, initializer=_start_worker, initargs=(config, raster_threads)) as pool:
+    threads = raster_threads(os.cpu_count() or 1, workers)
+    with context.Pool(workers, initializer=_start_worker, initargs=(config, threads)) as pool:
         for images, files in pool.imap_unordered(_work, _chunks(pending, chunk)):
             written += files
             progress.update(images)

@@ -49,35 +49,44 @@ def random_colors(generator: np.random.Generator, count: int) -> np.ndarray:
 
 
 def procedural_background(generator: np.random.Generator, width: int, height: int) -> np.ndarray:
-    """``(H, W, 3)`` uint8 multi-octave value noise mixed between random colours, sometimes
-    with stripes (made at half resolution, then enlarged: the pattern is smooth anyway)."""
+    """``(H, W, 3)`` uint8 multi-octave value noise mixed between two random colours, sometimes with
+    stripes. The octaves are summed on a 33×33 grid, the sum is enlarged to half resolution (cubic),
+    coloured through a lookup table, striped, then enlarged to ``W×H``: the pattern is smooth anyway."""
     low_width, low_height = max(1, (width + 1) // 2), max(1, (height + 1) // 2)
-    field = np.zeros((low_height, low_width), dtype=np.float32)
-    for octave, cells in enumerate((2, 4, 8, 32)):
+    octaves = (2, 4, 8, 32)
+    side = octaves[-1] + 1
+    field = np.zeros((side, side), dtype=np.float32)
+    for octave, cells in enumerate(octaves):
         grid = generator.random((cells + 1, cells + 1), dtype=np.float32)
-        field += cv2.resize(grid, (low_width, low_height), interpolation=cv2.INTER_CUBIC) / (octave + 1)
-    field = (field - field.min()) / max(float(field.max() - field.min()), 1e-6)
-    low, high = generator.uniform(0, 255, 3).astype(np.float32), generator.uniform(0, 255, 3).astype(np.float32)
-    image = low + field[..., None] * (high - low)
+        field += cv2.resize(grid, (side, side), interpolation=cv2.INTER_CUBIC) / (octave + 1)
+    field = cv2.resize(field, (low_width, low_height), interpolation=cv2.INTER_CUBIC)
+    levels = cv2.normalize(field, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    low, high = generator.uniform(0, 255, 3), generator.uniform(0, 255, 3)
+    palette = np.rint(low + np.linspace(0.0, 1.0, 256)[:, None] * (high - low)).astype(np.uint8)
+    image = cv2.LUT(cv2.merge([levels] * 3), palette[:, None, :])
     if generator.random() < 0.5:  # stripes add edges, as real clutter does
         period = np.float32(generator.uniform(4, 32))
         angle = generator.uniform(0, np.pi)
         columns = np.arange(low_width, dtype=np.float32) * np.float32(np.cos(angle))
         rows = np.arange(low_height, dtype=np.float32) * np.float32(np.sin(angle))
         stripes = np.sin((columns[None, :] + rows[:, None]) * np.float32(2 * np.pi) / period) > 0
-        image = np.where(stripes[..., None], image, np.float32(255) - image)
-    image = np.clip(image, 0, 255).astype(np.uint8)
+        image = np.where(stripes[..., None], image, 255 - image)
     return cv2.resize(image, (width, height), interpolation=cv2.INTER_LINEAR)
 
 
 def composite(foreground: np.ndarray, alpha: np.ndarray, background: np.ndarray) -> np.ndarray:
-    """``alpha`` (uint8, 255 = opaque) blend of uint8 RGB images, computed only where ``alpha > 0``
-    (the same result as :func:`paz6d.backend.image.alpha_blend` up to rounding, several times faster)."""
+    """``alpha`` (uint8, 255 = opaque) blend of uint8 RGB images, computed only inside the bounding
+    box of ``alpha > 0`` (the same result as :func:`paz6d.backend.image.alpha_blend` up to rounding,
+    several times faster)."""
     image = background.copy()
-    covered = alpha > 0
-    weight = alpha[covered].astype(np.uint16)[:, None]
-    blended = (foreground[covered].astype(np.uint16) * weight + background[covered] * (255 - weight) + 127) // 255
-    image[covered] = blended.astype(np.uint8)
+    rows = np.flatnonzero(alpha.any(axis=1))
+    if rows.size == 0:
+        return image
+    columns = np.flatnonzero(alpha.any(axis=0))
+    window = np.s_[rows[0]:rows[-1] + 1, columns[0]:columns[-1] + 1]
+    weight = alpha[window].astype(np.uint16)[..., None]
+    blended = (foreground[window].astype(np.uint16) * weight + background[window] * (255 - weight) + 127) // 255
+    image[window] = blended.astype(np.uint8)
     return image
 
 

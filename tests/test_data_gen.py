@@ -356,7 +356,7 @@ def test_sensor_noise_is_gaussian_seeded_rounded_and_clipped():
 
 @pytest.mark.parametrize("preset", [None, "3"])
 def test_workers_split_the_llvmpipe_raster_threads(monkeypatch, preset):
-    """Each spawned worker gets cores / workers raster threads unless the user set LP_NUM_THREADS."""
+    """Each spawned worker gets its share of raster threads unless the user set LP_NUM_THREADS."""
     import data_gen.generator as generator
     import data_gen.producer as producer
 
@@ -368,3 +368,11 @@ def test_workers_split_the_llvmpipe_raster_threads(monkeypatch, preset):
     monkeypatch.setattr(producer, "ImageProducer", lambda config: seen.setdefault("threads", os.environ["LP_NUM_THREADS"]))
     generator._start_worker(GenerationConfig(meshes=(Path("unused.ply"),), output=Path("unused"), num_images=1), 1)
     assert seen["threads"] == (preset or "1")
+
+
+def test_raster_threads_share_the_cores_and_skip_a_lone_helper_thread():
+    from data_gen.generator import raster_threads
+
+    assert [raster_threads(2, workers) for workers in (1, 2, 3)] == [2, 0, 0]
+    assert [raster_threads(16, workers) for workers in (1, 2, 4, 8, 16)] == [16, 8, 4, 2, 0]
+    assert raster_threads(0, 1) == 0
