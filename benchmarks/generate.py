@@ -7,7 +7,10 @@ For each image size it measures, in one process and run:
 * generator, 1 worker, steady state: the ``generate`` code path (sampling, randomization,
   rendering, masks, BOP + COCO annotation, PNG writing) after start-up;
 * generator end to end with 1 and 2 worker processes: with start-up ("e2e") and once all
-  workers run ("run", from the shard files' finishing times), for the 2-worker speed-up.
+  workers run ("run", from the shard files' finishing times), for the 2-worker speed-up;
+* the same running rate of 1 worker confined to one CPU (``sched_setaffinity``): 2 workers on 2
+  cores against 1 worker on 1 core is the scaling per core, which the plain 2w/1w ratio hides on a
+  2-core machine because one worker already overlaps encoding and writing on the second core.
 
 Usage: ``.venv/bin/python benchmarks/generate.py [--images-small 200] [--images-large 120]``.
 Needs the LM-O meshes in ``../shared/data`` (or pass ``--mesh``).
@@ -17,6 +20,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import multiprocessing
+import os
 import shutil
 import sys
 import tempfile
@@ -87,6 +92,22 @@ def end_to_end(config: GenerationConfig, workers: int) -> tuple[float, float]:
     return summary.images_rendered / summary.seconds, running
 
 
+def _pinned_end_to_end(config: GenerationConfig, workers: int, cores: int, results) -> None:
+    os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[:cores]))  # inherited by spawned workers
+    results.put(end_to_end(config, workers)[1])
+
+
+def pinned_running_rate(config: GenerationConfig, workers: int, cores: int) -> float:
+    """Running views/s (as :func:`end_to_end`) of ``workers`` workers confined to ``cores`` CPUs."""
+    context = multiprocessing.get_context("spawn")
+    results = context.Queue()
+    process = context.Process(target=_pinned_end_to_end, args=(config, workers, cores, results))
+    process.start()
+    rate = results.get()
+    process.join()
+    return rate
+
+
 def measure(meshes: list[Path], width: int, height: int, count: int, antialias: str, rgb_format: str,
             workdir: Path) -> dict:
     config = GenerationConfig(meshes=tuple(meshes), output=workdir / "steady", num_images=count, width=width,
@@ -99,8 +120,9 @@ def measure(meshes: list[Path], width: int, height: int, count: int, antialias: 
     bare_renderer.delete()
     one, one_running = end_to_end(dataclasses.replace(config, output=workdir / "one"), 1)
     two, two_running = end_to_end(dataclasses.replace(config, output=workdir / "two"), 2)
+    one_core = pinned_running_rate(dataclasses.replace(config, output=workdir / "one_core"), 1, 1)
     return {"bare": bare, "steady": steady, "one": one, "two": two, "one_running": one_running,
-            "two_running": two_running}
+            "two_running": two_running, "one_core": one_core}
 
 
 def main() -> int:
@@ -120,7 +142,8 @@ def main() -> int:
     platform = select_platform(args.platform)
     print(f"platform {platform}; one annotated object per image, no distractors; RGB as {args.rgb_format}; views/s")
     print(f"{'size':>8} {'antialias':>9} {'bare loop':>10} {'gen 1w':>8} {'ratio':>6} "
-          f"{'e2e 1w':>7} {'e2e 2w':>7} {'2w/1w':>6} {'run 1w':>7} {'run 2w':>7} {'2w/1w':>6}")
+          f"{'e2e 1w':>7} {'e2e 2w':>7} {'2w/1w':>6} {'run 1w':>7} {'run 2w':>7} {'2w/1w':>6} "
+          f"{'1w@1core':>8} {'2w/(1w@1core)':>13}")
     for size in args.sizes:
         width, height = (int(value) for value in size.split("x"))
         count = args.images_large if width * height > 128 * 128 else args.images_small
@@ -133,7 +156,8 @@ def main() -> int:
             print(f"{width}x{height:<4} {antialias:>9} {result['bare']:10.1f} {result['steady']:8.1f} "
                   f"{result['steady'] / result['bare']:6.2f} {result['one']:7.1f} {result['two']:7.1f} "
                   f"{result['two'] / result['one']:6.2f} {result['one_running']:7.1f} {result['two_running']:7.1f} "
-                  f"{result['two_running'] / result['one_running']:6.2f}", flush=True)
+                  f"{result['two_running'] / result['one_running']:6.2f} {result['one_core']:8.1f} "
+                  f"{result['two_running'] / result['one_core']:13.2f}", flush=True)
     return 0
 
 
