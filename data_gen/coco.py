@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from paz6d.backend.image import nonzero_window
+
 
 def encode_rle(mask: np.ndarray) -> dict:
     """``(H, W)`` bool mask to ``{"counts": [int, ...], "size": [H, W]}``.
@@ -40,8 +42,8 @@ def decode_rle(rle: dict) -> np.ndarray:
 
 def bbox_xywh(mask: np.ndarray) -> list[int]:
     """Tight ``[x, y, width, height]`` of a mask's pixels; ``[-1, -1, -1, -1]`` when empty (BOP)."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    if rows.size == 0:
+    window = nonzero_window(mask)
+    if window is None:
         return [-1, -1, -1, -1]
-    columns = np.flatnonzero(mask.any(axis=0))
-    return [int(columns[0]), int(rows[0]), int(columns[-1] - columns[0] + 1), int(rows[-1] - rows[0] + 1)]
+    rows, columns = window
+    return [columns.start, rows.start, columns.stop - columns.start, rows.stop - rows.start]

@@ -14,22 +14,22 @@ from paz6d.backend.files import TEMPORARY_PREFIX
 #: rendered image with sensor noise: the "sub" row filter makes the RGB file ~10 % smaller than
 #: OpenCV's default filters in ~40 % of the time (9 vs 23 ms); masks, which are runs of 0 and 255,
 #: compress best unfiltered (0.4 vs 2.2 ms).
-PNG_PARAMETERS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
-                  cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB]
-MASK_PNG_PARAMETERS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
-                       cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+_PNG_ZLIB = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE]
+PNG_PARAMETERS = _PNG_ZLIB + [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB]
+MASK_PNG_PARAMETERS = _PNG_ZLIB + [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
 JPEG_PARAMETERS = [cv2.IMWRITE_JPEG_QUALITY, 95]
 
 
 def image_bytes(image: np.ndarray, image_format: str = "png") -> bytes:
     """``png`` or ``jpg`` encoding of uint8 RGB ``(H, W, 3)``, uint8/uint16 ``(H, W)`` or bool
     ``(H, W)`` (written as {0, 255})."""
-    parameters = PNG_PARAMETERS if image_format == "png" else JPEG_PARAMETERS
+    png_parameters = PNG_PARAMETERS
     if image.dtype == bool:
         image = image.view(np.uint8) * np.uint8(255)
-        parameters = MASK_PNG_PARAMETERS if image_format == "png" else JPEG_PARAMETERS
+        png_parameters = MASK_PNG_PARAMETERS
     elif image.ndim == 3:
         image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+    parameters = png_parameters if image_format == "png" else JPEG_PARAMETERS
     ok, encoded = cv2.imencode("." + image_format, image, parameters)
     if not ok:
         raise ValueError(f"image: OpenCV could not encode a {image.dtype} {image.shape} array as {image_format}")

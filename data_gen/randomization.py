@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from data_gen.config import GenerationConfig
-from paz6d.backend.image import gaussian_blur, load_image
+from paz6d.backend.image import gaussian_blur, load_image, nonzero_window
 from renderers import Light, Lighting
 
 
@@ -79,11 +79,9 @@ def composite(foreground: np.ndarray, alpha: np.ndarray, background: np.ndarray)
     box of ``alpha > 0`` (the same result as :func:`paz6d.backend.image.alpha_blend` up to rounding,
     several times faster)."""
     image = background.copy()
-    rows = np.flatnonzero(alpha.any(axis=1))
-    if rows.size == 0:
+    window = nonzero_window(alpha)
+    if window is None:
         return image
-    columns = np.flatnonzero(alpha.any(axis=0))
-    window = np.s_[rows[0]:rows[-1] + 1, columns[0]:columns[-1] + 1]
     weight = alpha[window].astype(np.uint16)[..., None]
     blended = (foreground[window].astype(np.uint16) * weight + background[window] * (255 - weight) + 127) // 255
     image[window] = blended.astype(np.uint8)

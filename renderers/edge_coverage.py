@@ -14,6 +14,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from paz6d.backend.image import nonzero_window
+
 _TENT = np.array([0.25, 0.5, 0.25], dtype=np.float32)
 
 
@@ -29,13 +31,9 @@ def soften_silhouette(rgb: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, n
         the outline, ``rgb`` there the coverage-weighted object colour.
     """
     rgb, alpha = rgb.copy(), alpha.copy()
-    rows, columns = np.flatnonzero(alpha.any(axis=1)), np.flatnonzero(alpha.any(axis=0))
-    if rows.size == 0:
+    window = nonzero_window(alpha, margin=1)  # the band reaches one pixel beyond the outline
+    if window is None:
         return rgb, alpha
-    height, width = alpha.shape
-    top, bottom = max(rows[0] - 1, 0), min(rows[-1] + 2, height)
-    left, right = max(columns[0] - 1, 0), min(columns[-1] + 2, width)
-    window = np.s_[top:bottom, left:right]
     coverage = alpha[window].astype(np.float32) / 255.0
     soft = cv2.sepFilter2D(coverage, -1, _TENT, _TENT, borderType=cv2.BORDER_REPLICATE)
     weighted = cv2.sepFilter2D(rgb[window].astype(np.float32) * coverage[..., None], -1, _TENT, _TENT,

@@ -262,3 +262,14 @@ def test_alpha_blend_uint8_alpha_rounds_like_the_float_formula(picture):
     background = np.random.default_rng(2).integers(0, 256, picture.shape, dtype=np.uint8)
     expected = np.rint(alpha[..., None] / 255 * picture + (1 - alpha[..., None] / 255) * background)
     np.testing.assert_array_equal(image.alpha_blend(picture, alpha, background), expected)
+
+
+def test_nonzero_window_is_the_tight_box_grown_and_clipped():
+    from paz6d.backend.image import nonzero_window
+
+    mask = np.zeros((6, 8), dtype=np.uint8)
+    mask[2, 3] = mask[4, 6] = 9
+    assert nonzero_window(mask) == (slice(2, 5), slice(3, 7))
+    assert nonzero_window(mask, margin=1) == (slice(1, 6), slice(2, 8))
+    assert nonzero_window(mask, margin=3) == (slice(0, 6), slice(0, 8))
+    assert nonzero_window(np.zeros((3, 3), bool)) is None

@@ -123,6 +123,18 @@ def box_to_pixel_slices(box, image_shape: tuple[int, ...]) -> tuple[slice, slice
     return rows, columns
 
 
+def nonzero_window(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
+    """``(rows, columns)`` slices of the tight box around the nonzero pixels of a 2D ``mask``, grown
+    by ``margin`` pixels on each side and clipped to the mask; ``None`` when the mask is empty."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return None
+    columns = np.flatnonzero(mask.any(axis=0))
+    height, width = mask.shape
+    return (slice(max(int(rows[0]) - margin, 0), min(int(rows[-1]) + 1 + margin, height)),
+            slice(max(int(columns[0]) - margin, 0), min(int(columns[-1]) + 1 + margin, width)))
+
+
 def crop(image, box) -> np.ndarray:
     """Copies the pixels covered by ``xyxy`` ``box`` (clipped to the image).
 

@@ -371,21 +371,20 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
     marked unusable.
     ``targets`` (supervised mode: the farthest-point keypoints) are stored alongside for reference.
     """
-    from paz6d.models.keypointnet import depth_to_metres, inference_function
-    from paz6d.pipelines.keypoint_pose import (decode_keypoints, lift_keypoints, predict_keypoints,
-                                               triangulate_keypoints, write_keypoints)
+    from paz6d.models.keypointnet import depth_to_metres
+    from paz6d.pipelines.keypoint_pose import (decode_keypoints, lift_keypoints, triangulate_keypoints,
+                                               write_keypoints)
 
     method = settings.get("lifting", "triangulate")
     if method not in LIFTINGS:
         raise ValueError(f"lifting: expected one of {LIFTINGS}, got {method!r}")
     images, K, T = crops
+    outputs = predict_crops(model, images)
+    uv = decode_keypoints(outputs, settings["downsample"])
     if method == "median":
-        outputs = predict_crops(model, images)
-        uv = decode_keypoints(outputs, settings["downsample"])
         depth = np.asarray(depth_to_metres(outputs["depth"], object_diameter, K, settings["input_size"]))
         points, _ = lift_keypoints(uv, depth, K, T)
     else:
-        uv, _ = predict_keypoints(inference_function(model), images, settings["downsample"])
         points, _ = triangulate_keypoints(uv, K, T)
     error = np.median(model_reprojection_errors(uv, K, T, points, np.ones(len(points), bool)), axis=0)
     usable = error <= MAX_LIFTING_ERROR * settings["input_size"]
