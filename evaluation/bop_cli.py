@@ -13,8 +13,6 @@ imported inside :func:`run`.
 from __future__ import annotations
 
 import argparse
-import csv
-import os
 import sys
 from pathlib import Path
 
@@ -86,17 +84,12 @@ def write_errors_csv(evaluation, results, path: Path) -> Path:
     """Writes ERRORS.csv atomically: one row per evaluated estimate paired with a GT instance."""
     from evaluation.bop import ERROR_COLUMNS
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(temporary, "w", newline="", encoding="utf-8") as file:
-        writer = csv.writer(file, lineterminator="\n")
-        writer.writerow(("scene_id", "im_id", "obj_id", "score") + ERROR_COLUMNS)
-        for row in evaluation.error_rows():
-            values = ["" if row[name] is None else repr(row[name]) for name in ERROR_COLUMNS]
-            writer.writerow([row["scene_id"], row["im_id"], row["obj_id"],
-                             repr(float(results.scores[row["estimate"]]))] + values)
-    os.replace(temporary, path)
-    return path
+    from paz6d.backend.files import write_csv_atomically
+
+    rows = ([row["scene_id"], row["im_id"], row["obj_id"], repr(float(results.scores[row["estimate"]]))]
+            + ["" if row[name] is None else repr(row[name]) for name in ERROR_COLUMNS]
+            for row in evaluation.error_rows())
+    return write_csv_atomically(path, ("scene_id", "im_id", "obj_id", "score") + ERROR_COLUMNS, rows)
 
 
 def _format(value) -> str:

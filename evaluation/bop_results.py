@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from evaluation.pose_errors import ROTATION_TOLERANCE
+from paz6d.backend.files import write_csv_atomically
 
 HEADER = ("scene_id", "im_id", "obj_id", "score", "R", "t", "time")
 
@@ -181,16 +181,8 @@ def write_pose_results(path: str | Path, scene_ids, im_ids, obj_ids, scores, rot
     columns = [np.asarray(values).ravel() for values in (scene_ids, im_ids, obj_ids, scores)]
     if any(len(values) != count for values in columns + [translations_mm, times]):
         raise ValueError(f"write_pose_results: expected {count} values in every column")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(temporary, "w", newline="", encoding="utf-8") as file:
-        writer = csv.writer(file, lineterminator="\n")
-        writer.writerow(HEADER)
-        for index in range(count):
-            writer.writerow([int(columns[0][index]), int(columns[1][index]), int(columns[2][index]),
-                             repr(float(columns[3][index])),
-                             " ".join(repr(float(value)) for value in rotations[index]),
-                             " ".join(repr(float(value)) for value in translations_mm[index]),
-                             repr(float(times[index])) if math.isfinite(times[index]) else "-1"])
-    os.replace(temporary, path)
-    return path
+    rows = ([int(columns[0][index]), int(columns[1][index]), int(columns[2][index]), repr(float(columns[3][index])),
+             " ".join(repr(float(value)) for value in rotations[index]),
+             " ".join(repr(float(value)) for value in translations_mm[index]),
+             repr(float(times[index])) if math.isfinite(times[index]) else "-1"] for index in range(count))
+    return write_csv_atomically(path, HEADER, rows)

@@ -16,13 +16,14 @@ Every stage resumes from what ``DIR`` already holds.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+from paz6d.backend.files import write_json_atomically
 
 TRAIN_SEED = 0
 TEST_SEED = 1000
@@ -45,12 +46,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def _stage(message: str) -> None:
     print(f"\n== {message}", flush=True)
-
-
-def _write_json(path: Path, data) -> None:
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(data, indent=2))
-    os.replace(temporary, path)
 
 
 def _test_targets(dataset_root: Path) -> list[dict]:
@@ -264,7 +259,7 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
                             for t, p, a, r in zip(targets, poses, add, rotation)],
               "files": {"model": str(out / "model"), "mesh": str(mesh_path),
                         "recall_curves": str(out / "recall_curves.png"), "grid": str(out / "estimates_grid.png")}}
-    _write_json(out / "report.json", report)
+    write_json_atomically(out / "report.json", report, indent=2)
     _print_table(report)
     print(f"\nreport: {out / 'report.json'}; plots: {out / 'recall_curves.png'}, {out / 'estimates_grid.png'}")
     return report

@@ -15,14 +15,20 @@ box (``pnp_depth_from_box``, see :class:`~paz6d.pipelines.keypoint_pose.Keypoint
 
 from __future__ import annotations
 
-import json
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.files import new_figure, save_figure_atomically, write_json_atomically
+
 TEST_SEED_OFFSET = 1_000_003  # test images never share a seed with training/validation views
+
+
+def _finite_or_none(value) -> float | None:
+    """``float(value)``, or ``None`` (JSON ``null``) for NaN and infinities (e.g. a median over misses)."""
+    value = float(value)
+    return value if np.isfinite(value) else None
 
 
 def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object_diameter: float, camera,
@@ -71,11 +77,11 @@ def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object
                "recall_0.1d": float(np.mean(errors < 0.1 * object_diameter)),
                "recall_0.05d": float(np.mean(errors < 0.05 * object_diameter)),
                "auc_10cm": accuracy_auc(errors, 0.1),
-               "median_error_m": float(np.median(errors)),
-               "median_rotation_error_deg": float(np.median(rotation)),
-               "median_translation_error_m": float(np.median(translation)),
+               "median_error_m": _finite_or_none(np.median(errors)),
+               "median_rotation_error_deg": _finite_or_none(np.median(rotation)),
+               "median_translation_error_m": _finite_or_none(np.median(translation)),
                "pnp_failures": int((~found).sum()), "milliseconds_per_crop": round(milliseconds, 2), "error": problem,
-               "errors_m": [None if not np.isfinite(value) else float(value) for value in errors]}
+               "errors_m": [_finite_or_none(value) for value in errors]}
     return metrics, poses
 
 
@@ -108,13 +114,9 @@ def _examples_png(path: Path, run_dir: Path, test, poses, camera, points: np.nda
 
 
 def _recall_png(path: Path, curves: dict[str, np.ndarray], object_diameter: float, metric: str) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     thresholds = np.linspace(0.0, 0.2, 101)
-    figure, axis = plt.subplots(figsize=(5, 4), dpi=120)
+    figure = new_figure(5, 4, dpi=120)
+    axis = figure.add_subplot()
     for name, errors in curves.items():
         recall = [(errors < threshold * object_diameter).mean() for threshold in thresholds]
         axis.plot(thresholds, recall, label=name)
@@ -126,11 +128,7 @@ def _recall_png(path: Path, curves: dict[str, np.ndarray], object_diameter: floa
     axis.legend()
     axis.set_title(f"KeypointPose6D, {metric} recall")
     figure.tight_layout()
-    temporary = path.with_name(path.stem + ".tmp.png")
-    figure.savefig(temporary)
-    plt.close(figure)
-    os.replace(temporary, path)
-    return path
+    return save_figure_atomically(figure, path)
 
 
 def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
@@ -186,12 +184,8 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
             evaluations[variant] = metrics
             if not from_box and metrics["error"] is None:
                 _examples_png(out_dir / f"keypoint_{mode}_examples.png", run_dir, test, poses, sampling.camera, points)
-        metrics_path = run_dir / "evaluation.json"
-        metrics_path.with_name("evaluation.json.tmp").write_text(json.dumps(evaluations, indent=2))
-        os.replace(metrics_path.with_name("evaluation.json.tmp"), metrics_path)
+        write_json_atomically(run_dir / "evaluation.json", evaluations, indent=2)
     _recall_png(out_dir / "keypoint_recall.png", curves, object_diameter, "ADD-S" if symmetric else "ADD")
     report["total_seconds"] = round(time.perf_counter() - started, 1)
-    path = out_dir / "keypoint_report.json"
-    path.with_name(path.name + ".tmp").write_text(json.dumps(report, indent=2))
-    os.replace(path.with_name(path.name + ".tmp"), path)
+    write_json_atomically(out_dir / "keypoint_report.json", report, indent=2)
     return report

@@ -8,13 +8,12 @@ which gives the texture cues the Augmented Autoencoder needs to tell near-symmet
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from paz6d.backend.files import write_bytes_atomically, write_json_atomically
 from paz6d.backend.mesh import diameter
 
 OBJECT_ID = 1
@@ -72,14 +71,10 @@ def write_demo_object(directory: str | Path) -> Path:
     millimetres = mesh.copy()
     millimetres.apply_scale(1000.0)
     path = directory / f"obj_{OBJECT_ID:06d}.ply"
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_bytes(millimetres.export(file_type="ply", encoding="binary"))
-    os.replace(temporary, path)
+    write_bytes_atomically(path, millimetres.export(file_type="ply", encoding="binary"))
     low, high = millimetres.bounds
     info = {str(OBJECT_ID): {"diameter": diameter(millimetres.vertices),
                              "min_x": low[0], "min_y": low[1], "min_z": low[2],
                              "size_x": high[0] - low[0], "size_y": high[1] - low[1], "size_z": high[2] - low[2]}}
-    info_path = directory / "models_info.json"
-    info_path.with_name("models_info.json.tmp").write_text(json.dumps(info, indent=2))
-    os.replace(info_path.with_name("models_info.json.tmp"), info_path)
+    write_json_atomically(directory / "models_info.json", info, indent=2)
     return path

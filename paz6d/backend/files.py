@@ -7,28 +7,57 @@ so a killed job never leaves a half-written file behind, only stale temporaries 
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO, Iterator
+
+import numpy as np
 
 TEMPORARY_PREFIX = ".paz6d-tmp-"
 
 
-def write_bytes_atomically(path: str | Path, data: bytes) -> Path:
-    """Writes ``data`` to ``path`` through a temporary file in the same folder and ``os.replace``."""
+@contextmanager
+def atomic_output(path: str | Path) -> Iterator[BinaryIO]:
+    """A binary stream whose content appears at ``path`` (``os.replace``) only when the block ends
+    without an exception; otherwise the temporary file in the same folder is removed."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=TEMPORARY_PREFIX + path.name + ".")
     try:
         with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
+            yield stream
         os.replace(temporary, path)
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise
-    return path
+
+
+def write_bytes_atomically(path: str | Path, data: bytes) -> Path:
+    """Writes ``data`` to ``path`` through a temporary file in the same folder and ``os.replace``."""
+    with atomic_output(path) as stream:
+        stream.write(data)
+    return Path(path)
+
+
+def save_npz_atomically(path: str | Path, **arrays: Any) -> Path:
+    """``np.savez(path, **arrays)`` atomically (uncompressed; no pickled objects needed to read it back)."""
+    with atomic_output(path) as stream:
+        np.savez(stream, **arrays)
+    return Path(path)
+
+
+def write_csv_atomically(path: str | Path, header, rows) -> Path:
+    """Writes a CSV file (``header`` row, then ``rows``; LF line ends, UTF-8) atomically."""
+    text = io.StringIO(newline="")
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(rows)
+    return write_bytes_atomically(path, text.getvalue().encode("utf-8"))
 
 
 def json_bytes(data: Any, indent: int | None = None) -> bytes:

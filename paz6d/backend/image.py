@@ -14,14 +14,13 @@ Example:
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from paz6d.backend.checks import as_array
+from paz6d.backend.files import write_bytes_atomically
 
 COLOR_SPACES = ("RGB", "BGR", "HSV", "LAB", "GRAY")
 INTERPOLATIONS = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC,
@@ -85,16 +84,7 @@ def save_image(path: str | Path, image) -> Path:
     ok, encoded = cv2.imencode(suffix, array)
     if not ok:
         raise ValueError(f"{path}: OpenCV could not encode a {array.dtype} {array.shape} image as {suffix}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(encoded.tobytes())
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-    return path
+    return write_bytes_atomically(path, encoded.tobytes())
 
 
 def resize(image, size: tuple[int, int], interpolation: str = "linear") -> np.ndarray:

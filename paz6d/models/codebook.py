@@ -13,13 +13,13 @@ selection.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from paz6d.backend.checks import as_array, as_camera_matrix
+from paz6d.backend.files import save_npz_atomically
 
 CODEBOOK_FORMAT = 1
 
@@ -182,12 +182,9 @@ class Codebook:
 
     def save(self, path: str | Path) -> Path:
         """Writes an ``.npz`` (temp file, then atomic rename)."""
-        path = Path(path)
-        temporary = path.with_name(path.stem + ".tmp.npz")
-        np.savez(temporary, format=CODEBOOK_FORMAT, codes=self.codes, rotations=self.rotations,
-                 render_boxes=self.render_boxes, render_K=self.render_K, render_distance=self.render_distance)
-        os.replace(temporary, path)
-        return path
+        return save_npz_atomically(path, format=CODEBOOK_FORMAT, codes=self.codes, rotations=self.rotations,
+                                   render_boxes=self.render_boxes, render_K=self.render_K,
+                                   render_distance=self.render_distance)
 
     @classmethod
     def load(cls, path: str | Path) -> "Codebook":

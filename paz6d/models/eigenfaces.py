@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
-from paz6d.backend.files import save_figure_atomically
+from paz6d.backend.files import save_figure_atomically, save_npz_atomically
 
 FORMAT_VERSION = 1
 SNAPSHOT_RELATIVE_SINGULAR_VALUE = 1e-6
@@ -165,13 +165,9 @@ class _SubspaceRecognizer:
         path = Path(path)
         if path.suffix != ".npz":
             raise ValueError(f"path: expected a file name ending in .npz, got {path}")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        temporary = path.with_name(path.name + ".tmp.npz")
-        np.savez(temporary, kind=np.array(self.kind), format_version=np.array(FORMAT_VERSION),
-                 n_components=np.array(-1 if self.n_components is None else self.n_components),
-                 image_shape=np.array(self.image_shape), **self._arrays())
-        temporary.replace(path)
-        return path
+        return save_npz_atomically(path, kind=np.array(self.kind), format_version=np.array(FORMAT_VERSION),
+                                   n_components=np.array(-1 if self.n_components is None else self.n_components),
+                                   image_shape=np.array(self.image_shape), **self._arrays())
 
     def _arrays(self) -> dict[str, np.ndarray]:
         return {"mean": self.mean_, "components": self.components_,

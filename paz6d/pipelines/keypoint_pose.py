@@ -19,8 +19,6 @@ Example:
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +26,7 @@ import numpy as np
 from paz6d.abstract import Box2D, Keypoints2D, Pose6D, Processor
 from paz6d.backend.camera import Camera, unproject
 from paz6d.backend.checks import as_array, as_camera_matrix
+from paz6d.backend.files import load_json, write_json_atomically
 from paz6d.backend.image import as_image
 from paz6d.backend.pnp import PnPError, solve_pnp
 from paz6d.backend.square_crop import crop_square, projected_box, square_window, to_full_image
@@ -200,20 +199,13 @@ def write_keypoints(run_dir: str | Path, points_model, usable, method: str, erro
     data = {"points_model": points_model.tolist(), "usable": usable.tolist(), "method": method, "units": "metres",
             "error": None if error is None else np.asarray(error, dtype=np.float64).tolist(),
             "targets": None if targets is None else as_array(targets, "targets", (3,)).tolist()}
-    path = Path(run_dir) / KEYPOINTS_FILE
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(data, indent=2))
-    os.replace(temporary, path)
-    return path
+    return write_json_atomically(Path(run_dir) / KEYPOINTS_FILE, data, indent=2)
 
 
 def _read_json(path: Path, fields: tuple[str, ...]) -> dict:
     if not path.is_file():
         raise ValueError(f"{path}: file not found (is {path.parent} a KeypointNet run directory?)")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: invalid JSON ({error})") from error
+    data = load_json(path)
     missing = [name for name in fields if name not in data]
     if missing:
         raise ValueError(f"{path}: missing field(s) {missing}")
@@ -236,12 +228,8 @@ def read_keypoints(run_dir: str | Path) -> tuple[np.ndarray, np.ndarray]:
 def write_object(run_dir: str | Path, diameter: float, hull_points) -> Path:
     """Writes ``object.json``: the object's diameter and convex-hull points (metres)."""
     hull_points = as_array(hull_points, "hull_points", (3,))
-    path = Path(run_dir) / OBJECT_FILE
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps({"diameter": float(diameter), "hull_points": hull_points.tolist(),
-                                     "units": "metres"}))
-    os.replace(temporary, path)
-    return path
+    return write_json_atomically(Path(run_dir) / OBJECT_FILE, {"diameter": float(diameter),
+                                                               "hull_points": hull_points.tolist(), "units": "metres"})
 
 
 def read_object(run_dir: str | Path) -> dict:

@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.files import save_npz_atomically, write_json_atomically
 from paz6d.training.aae_augment import Augmentation
 
 CONFIG_FILE = "config.json"
@@ -111,12 +111,6 @@ FULL = AAEConfig(crop_size=128, latent_size=128, filters=(128, 256, 256, 512), r
 CONFIGS = {"quick": QUICK, "full": FULL}
 
 
-def _write_json(path: Path, data: dict) -> None:
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(data, indent=2))
-    os.replace(temporary, path)
-
-
 def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, seed: int,
                  dataset: Path | None) -> tuple[AAEConfig, int]:
     """Writes ``config.json`` for a new run, or reads the stored one (only ``steps`` may change)."""
@@ -136,8 +130,9 @@ def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEC
                              f"use another --out for --dataset {wanted}")
         config, seed = replace(stored_config, steps=config.steps), int(stored["seed"])
     run_dir.mkdir(parents=True, exist_ok=True)
-    _write_json(path, {"config": config.to_dict(), "mesh": str(mesh_path.resolve()), "mesh_scale": mesh_scale,
-                       "seed": seed, "dataset": None if dataset is None else str(dataset.resolve())})
+    write_json_atomically(path, {"config": config.to_dict(), "mesh": str(mesh_path.resolve()),
+                                 "mesh_scale": mesh_scale, "seed": seed,
+                                 "dataset": None if dataset is None else str(dataset.resolve())}, indent=2)
     return config, seed
 
 
@@ -148,10 +143,8 @@ def _object_geometry(run_dir: Path, mesh_path: Path, mesh_scale: float, seed: in
 
         mesh = load_mesh(mesh_path, mesh_scale)
         hull = np.asarray(mesh.convex_hull.vertices)
-        temporary = path.with_name(path.stem + ".tmp.npz")
-        np.savez(temporary, hull_points=hull, surface_points=sample_points(mesh, 2000, seed),
-                 diameter=diameter(hull), vertices=np.asarray(mesh.vertices))
-        os.replace(temporary, path)
+        save_npz_atomically(path, hull_points=hull, surface_points=sample_points(mesh, 2000, seed),
+                            diameter=diameter(hull), vertices=np.asarray(mesh.vertices))
     with np.load(path) as data:
         return {key: data[key] for key in data.files}
 
@@ -169,9 +162,7 @@ def _views(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig,
                 return {key: data[key] for key in data.files}
     rgb, alpha = render_views(mesh_path, mesh_scale, rotations, geometry, workers=workers, platform=platform,
                               progress=progress)
-    temporary = path.with_name(path.stem + ".tmp.npz")
-    np.savez(temporary, rgb=rgb, alpha=alpha, rotations=rotations, K=geometry.K, distance=geometry.distance)
-    os.replace(temporary, path)
+    save_npz_atomically(path, rgb=rgb, alpha=alpha, rotations=rotations, K=geometry.K, distance=geometry.distance)
     return {"rgb": rgb, "alpha": alpha, "rotations": rotations, "K": geometry.K, "distance": geometry.distance}
 
 
@@ -214,9 +205,7 @@ def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Pat
                 return CropPairs(data["inputs"], data["targets"], data["poses"])
     pairs = dataset_pairs(dataset, obj_id, mesh_path, mesh_scale, config.crop_size, config.padding, split, workers,
                           platform, progress)
-    temporary = path.with_name(path.stem + ".tmp.npz")
-    np.savez(temporary, inputs=pairs.inputs, targets=pairs.targets, poses=pairs.poses)
-    os.replace(temporary, path)
+    save_npz_atomically(path, inputs=pairs.inputs, targets=pairs.targets, poses=pairs.poses)
     return pairs
 
 
@@ -299,7 +288,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
                "final_metrics": training.metrics, "loader_samples_per_second_one_thread": loader_speed,
                "model_samples_per_second": training.model_samples_per_second,
                "codebook_size": len(codebook), "dataset_pairs": 0 if pairs is None else len(pairs), **timings}
-    _write_json(run_dir / SUMMARY_FILE, summary)
+    write_json_atomically(run_dir / SUMMARY_FILE, summary, indent=2)
     return summary
 
 

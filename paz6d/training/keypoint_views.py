@@ -23,7 +23,6 @@ This module imports neither TensorFlow nor pyrender at import time.
 from __future__ import annotations
 
 import multiprocessing
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -33,6 +32,7 @@ import numpy as np
 from paz6d.backend import image as image_backend
 from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera
+from paz6d.backend.files import save_npz_atomically
 from paz6d.backend.mesh import diameter, load_mesh
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_box, square_window
 
@@ -118,11 +118,7 @@ class ViewSet:
 
     def save(self, path: str | Path) -> Path:
         """Writes an ``.npz`` (temporary file, then rename)."""
-        path = Path(path)
-        temporary = path.with_name(path.stem + ".tmp.npz")
-        np.savez(temporary, **asdict(self))
-        os.replace(temporary, path)
-        return path
+        return save_npz_atomically(path, **asdict(self))
 
     @classmethod
     def load(cls, path: str | Path) -> "ViewSet":

@@ -23,14 +23,14 @@ This module is cheap to import: TensorFlow and the renderer are loaded inside :f
 from __future__ import annotations
 
 import argparse
-import io
 import json
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from paz6d.backend.files import write_json_atomically
 
 CONFIGS: dict[str, dict] = {
     # Demo budget: about 12.5 minutes of training on 2 otherwise idle CPU cores (0.136 s per step); the
@@ -134,12 +134,6 @@ def run(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------- run directory
 
-def _write_json(path: Path, data: dict) -> None:
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(data, indent=2))
-    os.replace(temporary, path)
-
-
 def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling) -> dict:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     from paz6d.pipelines.keypoint_pose import CONFIG_FILE
@@ -159,9 +153,9 @@ def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: flo
                                  f"now {config[key]!r}); choose another --out")
         if previous["settings"].get("steps") != config["settings"]["steps"]:
             previous["settings"]["steps"] = config["settings"]["steps"]  # extending a run is allowed
-            _write_json(path, previous)
+            write_json_atomically(path, previous, indent=2)
         return previous
-    _write_json(path, config)
+    write_json_atomically(path, config, indent=2)
     return config
 
 
@@ -342,15 +336,13 @@ def inference_crops(test, K, margin: float, size: int) -> tuple[np.ndarray, np.n
 
 def _cached_lifting_crops(path: Path, render, K, margin: float, size: int):
     """:func:`inference_crops` of freshly rendered whole images, cached in ``path`` (``.npz``)."""
-    from paz6d.backend.files import write_bytes_atomically
+    from paz6d.backend.files import save_npz_atomically
 
     if path.exists():
         with np.load(path) as data:
             return data["images"], data["K"], data["T_model2cam"]
     images, intrinsics, poses = inference_crops(render(), K, margin, size)
-    buffer = io.BytesIO()
-    np.savez(buffer, images=images, K=intrinsics, T_model2cam=poses)
-    write_bytes_atomically(path, buffer.getvalue())
+    save_npz_atomically(path, images=images, K=intrinsics, T_model2cam=poses)
     return images, intrinsics, poses
 
 
@@ -504,5 +496,5 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         summary[f"cross_view_px_mean{suffix}"] = float(np.mean(consistency))
         summary[f"reprojection_px_median{suffix}"] = float(np.median(reprojection)) if reprojection.size else None
     summary["spread_px_median"] = float(np.median(keypoint_spread(outputs["probabilities"], outputs["uv"], downsample)))
-    _write_json(out / "metrics.json", summary)
+    write_json_atomically(out / "metrics.json", summary, indent=2)
     return summary

@@ -38,17 +38,12 @@ from typing import Any
 
 import numpy as np
 
+from paz6d.backend.files import write_csv_atomically, write_json_atomically
 from paz6d.backend.tensorflow_guard import import_tensorflow
 
 CHECKPOINT_POINTER = "checkpoint.json"
 LOG_FILE = "log.csv"
 _FIXED_COLUMNS = ["step", "wall_seconds", "data_seconds", "step_seconds"]
-
-
-def _write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(data, indent=2))
-    os.replace(temporary, path)
 
 
 def _batch_size(batch: Any) -> int:
@@ -197,7 +192,7 @@ class Trainer:
         (temporary / "state.json").write_text(json.dumps({"step": step, "metrics": dict(metrics or {})}))
         shutil.rmtree(final, ignore_errors=True)
         os.replace(temporary, final)
-        _write_json_atomic(self.run_dir / CHECKPOINT_POINTER, {"step": step, "path": f"checkpoints/{name}"})
+        write_json_atomically(self.run_dir / CHECKPOINT_POINTER, {"step": step, "path": f"checkpoints/{name}"}, indent=2)
         folders = sorted(p for p in self.checkpoint_dir.glob("step_*") if not p.name.endswith(".tmp"))
         for old in folders[:-self.keep_checkpoints]:
             shutil.rmtree(old, ignore_errors=True)
@@ -229,13 +224,7 @@ class Trainer:
         columns = list(_FIXED_COLUMNS)
         for row in rows:
             columns.extend(key for key in row if key not in columns)
-        path = self.run_dir / LOG_FILE
-        temporary = path.with_name(path.name + ".tmp")
-        with temporary.open("w", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=columns)
-            writer.writeheader()
-            writer.writerows(rows)
-        os.replace(temporary, path)
+        write_csv_atomically(self.run_dir / LOG_FILE, columns, ([row.get(key, "") for key in columns] for row in rows))
 
     # ------------------------------------------------------------------------------------- stepping
     def _build_step(self):

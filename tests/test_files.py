@@ -1,0 +1,65 @@
+"""Crash-safe writers of paz6d.backend.files: complete files or none, no temporaries left behind."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from paz6d.backend.files import (TEMPORARY_PREFIX, atomic_output, load_json, save_npz_atomically,
+                                 write_csv_atomically, write_json_atomically)
+
+
+def leftovers(folder):
+    return sorted(path.name for path in folder.iterdir() if path.name.startswith(TEMPORARY_PREFIX))
+
+
+def test_npz_round_trip_replaces_an_older_file(tmp_path):
+    path = tmp_path / "deep" / "views.npz"
+    save_npz_atomically(path, a=np.arange(3))
+    save_npz_atomically(path, a=np.arange(5.0), b=np.eye(2, dtype=np.uint8))
+    with np.load(path) as data:
+        assert sorted(data.files) == ["a", "b"]
+        np.testing.assert_array_equal(data["a"], np.arange(5.0))
+        assert data["b"].dtype == np.uint8
+    assert leftovers(path.parent) == []
+
+
+class Unconvertible:
+    def __array__(self, dtype=None, copy=None):
+        raise RuntimeError("disk full")
+
+
+def test_failed_npz_write_keeps_the_old_file_and_no_temporary(tmp_path):
+    path = tmp_path / "views.npz"
+    save_npz_atomically(path, a=np.arange(3))
+    with pytest.raises(RuntimeError, match="disk full"):
+        save_npz_atomically(path, a=np.zeros(4), b=Unconvertible())
+    with np.load(path) as data:
+        np.testing.assert_array_equal(data["a"], np.arange(3))
+    assert leftovers(tmp_path) == []
+
+
+def test_interrupted_block_writes_nothing(tmp_path):
+    path = tmp_path / "out.bin"
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_output(path) as stream:
+            stream.write(b"half")
+            raise KeyboardInterrupt
+    assert not path.exists() and leftovers(tmp_path) == []
+
+
+def test_csv_round_trip(tmp_path):
+    path = write_csv_atomically(tmp_path / "log.csv", ["step", "loss"], ([step, 0.5 * step] for step in range(3)))
+    assert path.read_bytes().count(b"\r") == 0
+    with path.open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert rows == [{"step": str(step), "loss": str(0.5 * step)} for step in range(3)]
+
+
+def test_json_rejects_nan_without_writing(tmp_path):
+    path = tmp_path / "metrics.json"
+    write_json_atomically(path, {"recall": 0.7}, indent=2)
+    with pytest.raises(ValueError):
+        write_json_atomically(path, {"recall": float("nan")})
+    assert load_json(path) == {"recall": 0.7}
+    assert leftovers(tmp_path) == []
