@@ -28,9 +28,12 @@ def _random_run(folder: Path, settings: dict) -> Path:
     """A run directory with a randomly initialised KeypointNet of ``settings`` and a random 3D keypoint set."""
     from paz6d.models.keypointnet import build_keypointnet, save_keypointnet
     from paz6d.pipelines.keypoint_pose import write_keypoints
+    from paz6d.training.keypointnet import resolve_precision
 
     model = build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
-                              settings["downsample"], tuple(settings["dilations"]))
+                              settings["downsample"], tuple(settings["dilations"]),
+                              context_stride=settings.get("context_stride"),
+                              compute_dtype=resolve_precision(settings.get("precision", "float32")))
     save_keypointnet(model, folder / "model.keras")
     (folder / "config.json").write_text(json.dumps({"input_size": settings["input_size"], "margin": 1.25,
                                                     "downsample": settings["downsample"]}))

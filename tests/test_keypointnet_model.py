@@ -40,10 +40,52 @@ def test_build_shapes_and_probability_maps_sum_to_one(tiny_model):
 
 @pytest.mark.parametrize("kwargs, field", [({"num_keypoints": 0}, "num_keypoints"), ({"downsample": 3}, "downsample"),
                                            ({"input_size": 30, "downsample": 4}, "input_size"),
-                                           ({"dilations": ()}, "dilations")])
+                                           ({"dilations": ()}, "dilations"),
+                                           ({"downsample": 4, "context_stride": 2}, "context_stride"),
+                                           ({"downsample": 4, "context_stride": 16}, "context_stride"),
+                                           ({"input_size": 36, "downsample": 4, "context_stride": 8}, "input_size")])
 def test_build_rejects_bad_configuration(kwargs, field):
     with pytest.raises(ValueError, match=field):
         kp.build_keypointnet(**kwargs)
+
+
+def test_context_stack_runs_coarse_and_maps_come_back_at_downsample(tmp_path):
+    model = kp.build_keypointnet(num_keypoints=3, input_size=32, filters=8, downsample=2, dilations=(1, 2),
+                                 context_stride=8)
+    assert tuple(model.get_layer("dilated0_conv").output.shape[1:3]) == (4, 4)  # 32 / 8
+    assert [layer.name for layer in model.layers if layer.name.endswith("_skip")] == ["up4_skip", "up2_skip"]
+    images = np.random.default_rng(2).integers(0, 256, (2, 32, 32, 3)).astype(np.float32)
+    outputs = model(images, training=False)
+    assert tuple(outputs["probabilities"].shape) == (2, 16, 16, 3)
+    loaded = kp.load_keypointnet(kp.save_keypointnet(model, tmp_path / "decoder.keras"))
+    np.testing.assert_allclose(np.asarray(loaded(images, training=False)["uv"]), np.asarray(outputs["uv"]), atol=1e-5)
+
+
+def test_bfloat16_body_with_float32_heads_survives_save_and_load(tmp_path):
+    model = kp.build_keypointnet(num_keypoints=3, input_size=32, filters=8, downsample=2, dilations=(1,),
+                                 context_stride=4, compute_dtype="bfloat16")
+    loaded = kp.load_keypointnet(kp.save_keypointnet(model, tmp_path / "bf16.keras"))
+    for candidate in (model, loaded):
+        assert candidate.get_layer("stem_conv").compute_dtype == "bfloat16"
+        assert candidate.get_layer("up2_conv").compute_dtype == "bfloat16"
+        assert candidate.get_layer("stem_conv").variable_dtype == "float32"
+        assert candidate.get_layer("logits").compute_dtype == "float32"
+        assert candidate.get_layer("expectation").compute_dtype == "float32"
+    images = np.random.default_rng(3).integers(0, 256, (2, 32, 32, 3)).astype(np.float32)
+    outputs = loaded(images, training=False)
+    assert all(value.dtype == "float32" for value in outputs.values())
+    np.testing.assert_allclose(np.asarray(outputs["probabilities"]).sum(axis=(1, 2)), 1.0, rtol=1e-5)
+    with pytest.raises(ValueError, match="compute_dtype"):
+        kp.build_keypointnet(compute_dtype="float16")
+
+
+@pytest.mark.parametrize("flags, expected", [("fpu avx2 avx512f", False), ("fpu avx512f avx512_bf16 avx512vl", True),
+                                             ("fpu amx_bf16 amx_tile", True), ("fpu avx512_bf16x", False)])
+def test_native_bfloat16_reads_the_cpu_flags(tmp_path, flags, expected):
+    cpuinfo = tmp_path / "cpuinfo"
+    cpuinfo.write_text(f"processor\t: 0\nflags\t\t: {flags}\n")
+    assert kp.native_bfloat16(cpuinfo) is expected
+    assert kp.native_bfloat16(tmp_path / "missing") is False
 
 
 def test_save_load_round_trip_gives_identical_outputs(tiny_model, tmp_path):

@@ -11,12 +11,12 @@ import pytest
 from paz6d.backend.tensorflow_guard import import_keras
 
 
-def _problem(seed: int = 0):
+def _problem(seed: int = 0, ema_momentum: float | None = None):
     """A tiny linear regression y = x @ W_true: model, optimizer, loss_fn, data(step)."""
     keras = import_keras()
     keras.utils.set_random_seed(seed)
     model = keras.Sequential([keras.Input((4,)), keras.layers.Dense(2)])
-    optimizer = keras.optimizers.Adam(0.05)
+    optimizer = keras.optimizers.Adam(0.05, use_ema=ema_momentum is not None, ema_momentum=ema_momentum or 0.99)
     rng = np.random.default_rng(1)
     W_true = rng.normal(size=(4, 2)).astype("float32")
     inputs = rng.normal(size=(20, 8, 4)).astype("float32")
@@ -33,10 +33,10 @@ def _problem(seed: int = 0):
     return model, optimizer, loss_fn, data
 
 
-def _trainer(run_dir, steps, data=None, **kwargs):
+def _trainer(run_dir, steps, data=None, ema_momentum=None, **kwargs):
     from paz6d.training.trainer import Trainer
 
-    model, optimizer, loss_fn, default_data = _problem()
+    model, optimizer, loss_fn, default_data = _problem(ema_momentum=ema_momentum)
     options = dict(checkpoint_every=5, log_every=1, progress=False)
     options.update(kwargs)
     return Trainer(model, optimizer, loss_fn, data or default_data, run_dir, steps, **options)
@@ -128,6 +128,34 @@ def test_prefetching_gives_the_same_result(tmp_path):
     assert sorted(calls) == list(range(12))  # every batch made once, none past the end
     for got, want in zip(prefetched.model.get_weights(), plain.model.get_weights()):
         np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
+
+
+def test_weight_averaging_ends_with_the_averaged_weights_and_resumes(tmp_path):
+    trajectory = []
+
+    def record(model, step, path):
+        trajectory.append([np.array(weight) for weight in model.get_weights()])
+
+    raw = _trainer(tmp_path / "raw", 12, sample_every=1, sample_callback=record)
+    raw.fit()
+    momentum = 0.8
+    expected = trajectory[0]
+    for weights in trajectory[1:]:  # Keras: the average starts at the first step's weights
+        expected = [momentum * average + (1 - momentum) * weight for average, weight in zip(expected, weights)]
+    averaged = _trainer(tmp_path / "ema", 12, ema_momentum=momentum)
+    averaged.fit()
+    for got, want, last in zip(averaged.model.get_weights(), expected, trajectory[-1]):
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+        assert not np.allclose(got, last, atol=1e-4)  # not the raw weights
+    checkpoint = _trainer(tmp_path / "ema", 12, ema_momentum=momentum)
+    checkpoint.restore()  # checkpoints keep the raw weights
+    for got, want in zip(checkpoint.model.get_weights(), trajectory[-1]):
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    _trainer(tmp_path / "split", 5, ema_momentum=momentum).fit()  # stopped early, then extended
+    resumed = _trainer(tmp_path / "split", 12, ema_momentum=momentum)
+    resumed.fit()
+    for got, want in zip(resumed.model.get_weights(), expected):
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
 
 
 def test_keyboard_interrupt_saves_a_checkpoint(tmp_path):

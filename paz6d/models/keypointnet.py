@@ -38,6 +38,7 @@ keras = import_keras()
 
 PACKAGE = "paz6d"
 OUTPUT_NAMES = ("uv", "depth", "probabilities")
+COMPUTE_DTYPES = ("float32", "bfloat16")
 
 
 class KeypointNetError(ValueError):
@@ -101,53 +102,86 @@ class SpatialExpectation(keras.layers.Layer):
 
 def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: int = 32,
                       downsample: int = 4, dilations: tuple[int, ...] = (1, 2, 4, 8, 1, 2, 4),
-                      depth_prior: float = 1.3, name: str = "keypointnet"):
+                      depth_prior: float = 1.3, context_stride: int | None = None, compute_dtype: str = "float32",
+                      name: str = "keypointnet"):
     """Builds the KeypointNet Keras model.
 
     Args:
         num_keypoints: ``N`` ordered keypoints.
         input_size: crop side ``S`` in pixels; inputs are ``(B, S, S, 3)`` RGB values 0..255.
         filters: channels of every convolution.
-        downsample: total stride of the stem (1, 2, 4 or 8: a stride-2 first convolution, then
-            stride-2 convolutions); probability maps are ``S / downsample`` cells wide. Sub-cell
-            precision comes from the expectation.
-        dilations: dilation rate of each 3×3 convolution of the dilated stack.
+        downsample: stride of the probability maps (1, 2, 4 or 8): maps are ``S / downsample`` cells
+            wide. Sub-cell precision comes from the expectation.
+        dilations: dilation rate of each 3×3 convolution of the dilated (context) stack.
         depth_prior: initial value of the depth code ``z_hat`` (about the crop margin factor).
+        context_stride: stride at which the dilated stack runs (default ``downsample``; up to 8). When
+            coarser than ``downsample``, its output is brought back to ``downsample`` level by level: ×2
+            bilinear upsampling, plus the stem's features of that level, then a 3×3 convolution (a
+            light U-Net decoder). Finer maps for little more compute than the coarse stack.
+        compute_dtype: ``"float32"`` or ``"bfloat16"``: the convolutional body computes in bfloat16
+            with float32 weights (Keras ``mixed_bfloat16``; faster on CPUs with native bf16 such as
+            AVX512-BF16/AMX, see :func:`native_bfloat16`); the 1×1 heads and the spatial softmax and
+            expectation always run in float32, so keypoints keep sub-pixel resolution.
     Returns:
         ``keras.Model`` with outputs ``{"uv": (B, N, 2), "depth": (B, N), "probabilities": (B, h, w, N)}``.
     """
+    context_stride = downsample if context_stride is None else int(context_stride)
     if num_keypoints < 1:
         raise ValueError(f"num_keypoints: expected a positive integer, got {num_keypoints}")
     if downsample not in (1, 2, 4, 8):
         raise ValueError(f"downsample: expected 1, 2, 4 or 8, got {downsample}")
-    if input_size < 8 or input_size % downsample:
-        raise ValueError(f"input_size: expected a multiple of downsample={downsample} and >= 8, got {input_size}")
+    if context_stride not in (1, 2, 4, 8) or context_stride < downsample:
+        raise ValueError(f"context_stride: expected 1, 2, 4 or 8 and >= downsample={downsample}, got {context_stride}")
+    if input_size < 8 or input_size % context_stride:
+        raise ValueError(f"input_size: expected a multiple of {context_stride} (the coarsest stride) and >= 8, "
+                         f"got {input_size}")
     if filters < 1 or not dilations or any(int(rate) < 1 for rate in dilations):
         raise ValueError(f"filters/dilations: expected filters >= 1 and positive dilation rates, "
                          f"got {filters}, {dilations}")
+    if compute_dtype not in COMPUTE_DTYPES:
+        raise ValueError(f"compute_dtype: expected one of {COMPUTE_DTYPES}, got {compute_dtype!r}")
+    body = "mixed_bfloat16" if compute_dtype == "bfloat16" else "float32"
     layers = keras.layers
+
+    def conv_bn_relu(x, name, stride=1, rate=1):
+        x = layers.Conv2D(filters, 3, strides=stride, dilation_rate=rate, padding="same", use_bias=False,
+                          name=f"{name}_conv", dtype=body)(x)
+        x = layers.BatchNormalization(name=f"{name}_bn", dtype=body)(x)
+        return layers.ReLU(name=f"{name}_relu", dtype=body)(x)
+
     inputs = keras.Input((input_size, input_size, 3), name="image")
-    x = layers.Rescaling(1.0 / 127.5, offset=-1.0, name="scale")(inputs)
-    stem_stride = min(downsample, 2)
-    x = layers.Conv2D(filters, 3, strides=stem_stride, padding="same", use_bias=False, name="stem_conv")(x)
-    x = layers.BatchNormalization(name="stem_bn")(x)
-    x = layers.ReLU(name="stem_relu")(x)
-    for level in range(int(math.log2(downsample // stem_stride))):
-        x = layers.Conv2D(filters, 3, strides=2, padding="same", use_bias=False, name=f"down{level}_conv")(x)
-        x = layers.BatchNormalization(name=f"down{level}_bn")(x)
-        x = layers.ReLU(name=f"down{level}_relu")(x)
+    x = layers.Rescaling(1.0 / 127.5, offset=-1.0, name="scale", dtype=body)(inputs)
+    stride = min(context_stride, 2)
+    x = conv_bn_relu(x, "stem", stride)
+    skips = {stride: x}
+    for level in range(int(math.log2(context_stride // stride))):
+        x = conv_bn_relu(x, f"down{level}", 2)
+        stride *= 2
+        skips[stride] = x
     for index, rate in enumerate(dilations):
-        y = layers.Conv2D(filters, 3, dilation_rate=int(rate), padding="same", use_bias=False,
-                          name=f"dilated{index}_conv")(x)
-        y = layers.BatchNormalization(name=f"dilated{index}_bn")(y)
-        y = layers.ReLU(name=f"dilated{index}_relu")(y)
-        x = layers.Add(name=f"dilated{index}_add")([x, y])
-    logits = layers.Conv2D(num_keypoints, 1, name="logits")(x)
+        x = layers.Add(name=f"dilated{index}_add", dtype=body)([x, conv_bn_relu(x, f"dilated{index}", rate=int(rate))])
+    while stride > downsample:
+        stride //= 2
+        x = layers.UpSampling2D(2, interpolation="bilinear", name=f"up{stride}", dtype=body)(x)
+        x = conv_bn_relu(layers.Add(name=f"up{stride}_skip", dtype=body)([x, skips[stride]]), f"up{stride}")
+    logits = layers.Conv2D(num_keypoints, 1, name="logits", dtype="float32")(x)
     depth_maps = layers.Conv2D(num_keypoints, 1, name="depth_maps", kernel_initializer="zeros",
-                               bias_initializer=keras.initializers.Constant(depth_prior))(x)
-    uv, depth, probabilities = SpatialExpectation(downsample, name="expectation")([logits, depth_maps])
+                               bias_initializer=keras.initializers.Constant(depth_prior), dtype="float32")(x)
+    uv, depth, probabilities = SpatialExpectation(downsample, name="expectation", dtype="float32")([logits, depth_maps])
     outputs = {"uv": uv, "depth": depth, "probabilities": probabilities}
     return keras.Model(inputs, outputs, name=name)
+
+
+def native_bfloat16(cpuinfo: str | Path = "/proc/cpuinfo") -> bool:
+    """Whether this CPU computes bfloat16 natively (``avx512_bf16`` or ``amx_bf16`` flags, Linux).
+
+    Elsewhere TensorFlow emulates bfloat16 and a ``"bfloat16"`` model trains slower than float32.
+    """
+    try:
+        flags = Path(cpuinfo).read_text()
+    except OSError:
+        return False
+    return any(flag in flags.split() for flag in ("avx512_bf16", "amx_bf16"))
 
 
 def save_keypointnet(model, path: str | Path) -> Path:

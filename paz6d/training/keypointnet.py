@@ -33,19 +33,19 @@ import numpy as np
 from paz6d.backend.files import write_json_atomically
 
 CONFIGS: dict[str, dict] = {
-    # Demo budget: about 12.5 minutes of training on 2 otherwise idle CPU cores (0.136 s per step); the
-    # whole `paz6d demo --keypoints` part took 13.3 minutes.
-    "quick": {"num_keypoints": 16, "input_size": 128, "filters": 48, "downsample": 8,
-              "dilations": (1, 2, 4, 1, 2, 4), "views": 2000, "validation_views": 100, "lift_views": 300,
-              "steps": 5500, "pairs": 8, "learning_rate": 5e-3, "checkpoint_every": 500, "sample_every": 500,
-              "lifting": "triangulate"},
+    # Demo budget (`paz6d demo --keypoints` under 15 minutes on 2 CPU cores): see docs/keypointnet.md.
+    "quick": {"num_keypoints": 16, "input_size": 128, "filters": 48, "downsample": 4, "context_stride": 8,
+              "dilations": (1, 2, 4, 1, 2, 4), "precision": "auto", "views": 4000, "validation_views": 100,
+              "lift_views": 300, "steps": 5000, "pairs": 8, "learning_rate": 5e-3, "checkpoint_every": 500,
+              "sample_every": 500, "lifting": "triangulate"},
     # Paper-sized network and schedule, for a GPU or a long CPU run.
     "full": {"num_keypoints": 10, "input_size": 128, "filters": 64, "downsample": 2,
-             "dilations": (1, 1, 2, 4, 8, 16, 1, 2, 4, 8, 16, 1), "views": 20000, "validation_views": 200,
+             "dilations": (1, 1, 2, 4, 8, 16, 1, 2, 4, 8, 16, 1), "precision": "float32", "views": 20000, "validation_views": 200,
              "lift_views": 1000, "steps": 60000, "pairs": 16, "learning_rate": 1e-3, "checkpoint_every": 2000,
              "sample_every": 2000, "lifting": "triangulate"},
 }
 MODES = ("discovery", "supervised")
+PRECISIONS = ("float32", "bfloat16")  # compute dtype of the network body (see build_keypointnet)
 LIFTINGS = ("triangulate", "median")
 #: A lifted keypoint is usable when its median re-projection error over the lifting views is below
 #: this fraction of the crop side.
@@ -91,6 +91,18 @@ class KeypointTraining:
                 raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
             settings["steps"] = int(self.steps)
         return settings
+
+
+def resolve_precision(precision: str) -> str:
+    """``"float32"`` or ``"bfloat16"`` for a ``precision`` setting; ``"auto"`` is bfloat16 on CPUs that
+    compute it natively (:func:`paz6d.models.keypointnet.native_bfloat16`) when TensorFlow sees no GPU."""
+    if precision == "auto":
+        from paz6d.models.keypointnet import native_bfloat16, tf
+
+        return "bfloat16" if native_bfloat16() and not tf.config.list_physical_devices("GPU") else "float32"
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision: expected 'auto' or one of {PRECISIONS}, got {precision!r}")
+    return precision
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -418,6 +430,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
                                                training_batch)
 
     settings = job.settings()
+    settings["precision"] = resolve_precision(settings.get("precision", "float32"))
     started = time.perf_counter()
     mesh = load_mesh(job.mesh_path, job.mesh_scale)
     object_diameter = diameter(np.asarray(mesh.vertices))
@@ -444,9 +457,12 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     keras = kp.keras
     keras.utils.set_random_seed(job.seed)
     model = kp.build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
-                                 settings["downsample"], tuple(settings["dilations"]))
+                                 settings["downsample"], tuple(settings["dilations"]),
+                                 context_stride=settings.get("context_stride"), compute_dtype=settings["precision"])
     schedule = keras.optimizers.schedules.CosineDecay(settings["learning_rate"], settings["steps"], alpha=0.05)
-    optimizer = keras.optimizers.Adam(schedule, global_clipnorm=5.0)
+    ema = settings.get("ema_momentum")
+    optimizer = keras.optimizers.Adam(schedule, global_clipnorm=5.0, use_ema=ema is not None,
+                                      ema_momentum=0.99 if ema is None else float(ema))
     pairs, downsample = settings["pairs"], settings["downsample"]
 
     def make_batch(step: int):

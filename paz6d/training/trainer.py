@@ -93,7 +93,9 @@ class Trainer:
 
     Args:
         model: a built ``keras.Model``.
-        optimizer: a ``keras.optimizers.Optimizer``.
+        optimizer: a ``keras.optimizers.Optimizer``. With ``use_ema=True`` (an exponential moving
+            average of the weights) the model ends a completed :meth:`fit` with the averaged weights;
+            checkpoints keep the raw weights and the averages, so a resumed run continues the raw ones.
         loss_fn: ``loss_fn(model, batch) -> loss`` (scalar tensor) or a dict of scalar tensors with key
             ``"loss"`` (the others are logged as metrics). Ignored when ``train_step`` is given.
         data: ``data(step) -> batch`` (deterministic on resume) or an iterable of batches.
@@ -345,6 +347,8 @@ class Trainer:
             self.save_checkpoint(step, last_metrics)
             if self.sample_callback is not None and self.sample_every and step % self.sample_every != 0:
                 self._draw_sample(step)
+        if step == self.steps and getattr(self.optimizer, "use_ema", False):
+            self.optimizer.finalize_variable_values(self.model.trainable_variables)
         return TrainingSummary(start_step=start_step, final_step=step, metrics=last_metrics,
                                loader_samples_per_second=samples / data_seconds if data_seconds > 0 else float("inf"),
                                model_samples_per_second=samples / step_seconds if step_seconds > 0 else float("inf"))
