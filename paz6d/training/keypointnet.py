@@ -36,13 +36,13 @@ CONFIGS: dict[str, dict] = {
     # Demo budget (`paz6d demo --keypoints` under 15 minutes on 2 CPU cores): see docs/keypointnet.md.
     "quick": {"num_keypoints": 16, "input_size": 128, "filters": 48, "downsample": 4, "context_stride": 8,
               "dilations": (1, 2, 4, 1, 2, 4), "precision": "auto", "views": 4000, "validation_views": 100,
-              "lift_views": 300, "steps": 5000, "pairs": 8, "learning_rate": 5e-3, "checkpoint_every": 500,
-              "sample_every": 500, "lifting": "triangulate"},
+              "lift_views": 300, "steps": 5000, "pairs": 8, "learning_rate": 5e-3, "ema_momentum": 0.998,
+              "checkpoint_every": 500, "sample_every": 500, "lifting": "triangulate"},
     # Paper-sized network and schedule, for a GPU or a long CPU run.
     "full": {"num_keypoints": 10, "input_size": 128, "filters": 64, "downsample": 2,
-             "dilations": (1, 1, 2, 4, 8, 16, 1, 2, 4, 8, 16, 1), "precision": "float32", "views": 20000, "validation_views": 200,
-             "lift_views": 1000, "steps": 60000, "pairs": 16, "learning_rate": 1e-3, "checkpoint_every": 2000,
-             "sample_every": 2000, "lifting": "triangulate"},
+             "dilations": (1, 1, 2, 4, 8, 16, 1, 2, 4, 8, 16, 1), "precision": "float32", "views": 20000,
+             "validation_views": 200, "lift_views": 1000, "steps": 60000, "pairs": 16, "learning_rate": 1e-3,
+             "ema_momentum": 0.999, "checkpoint_every": 2000, "sample_every": 2000, "lifting": "triangulate"},
 }
 MODES = ("discovery", "supervised")
 PRECISIONS = ("float32", "bfloat16")  # compute dtype of the network body (see build_keypointnet)
