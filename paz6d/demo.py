@@ -179,8 +179,13 @@ def _print_table(report: dict) -> None:
              ("model samples/s", f"{report['training']['model_samples_per_second']:.0f}"),
              ("inference per object", f"{1000 * report['seconds_per_estimate']:.1f} ms"),
              ("total time", f"{report['timings']['total_seconds'] / 60:.1f} min")]
-    width = max(len(name) for name, _ in lines)
-    print("\n" + "\n".join(f"  {name:<{width}}  {value}" for name, value in lines))
+    print_rows(lines)
+
+
+def print_rows(rows: list[tuple[str, str]]) -> None:
+    """Prints ``(name, value)`` rows as an aligned two-column table."""
+    width = max(len(name) for name, _ in rows)
+    print("\n" + "\n".join(f"  {name:<{width}}  {value}" for name, value in rows))
 
 
 def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, platform: str | None = None,

@@ -188,4 +188,27 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
     _recall_png(out_dir / "keypoint_recall.png", curves, object_diameter, "ADD-S" if symmetric else "ADD")
     report["total_seconds"] = round(time.perf_counter() - started, 1)
     write_json_atomically(out_dir / "keypoint_report.json", report, indent=2)
+    _print_summary(report, out_dir)
     return report
+
+
+def _print_summary(report: dict, out_dir: Path) -> None:
+    from paz6d.demo import print_rows
+
+    def number(value, scale: float = 1.0, unit: str = "", digits: int = 1) -> str:
+        return "-" if value is None else f"{scale * value:.{digits}f}{unit}"
+
+    rows = []
+    for mode, result in report["modes"].items():
+        plain, boxed = result["pnp"], result["pnp_depth_from_box"]
+        rows += [(f"KeypointNet ({mode}): test images", f"{plain['images']}"),
+                 ("keypoint re-projection (median)", number(result["training"].get("reprojection_px_median"),
+                                                            unit=" px", digits=2)),
+                 (f"{plain['metric']} recall @ 0.1 d, PnP", number(plain["recall_0.1d"], 100, " %")),
+                 (f"{plain['metric']} recall @ 0.1 d, PnP + depth_from_box", number(boxed["recall_0.1d"], 100, " %")),
+                 ("median rotation / translation error", f"{number(plain['median_rotation_error_deg'], unit=' deg')} / "
+                                                         f"{number(plain['median_translation_error_m'], 1000, ' mm')}"),
+                 ("PnP failures", f"{plain['pnp_failures']}" + (f" ({plain['error']})" if plain["error"] else ""))]
+    rows.append(("total time", f"{report['total_seconds'] / 60:.1f} min"))
+    print_rows(rows)
+    print(f"\nreport: {out_dir / 'keypoint_report.json'}; plots: {out_dir / 'keypoint_recall.png'}")

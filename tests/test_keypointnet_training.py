@@ -276,7 +276,7 @@ def test_precision_setting_resolves_auto_from_the_cpu(monkeypatch):
         resolve_precision("half")
 
 
-def test_keypoint_demo_trains_evaluates_and_reports(mesh_path, tmp_path):
+def test_keypoint_demo_trains_evaluates_and_reports(mesh_path, tmp_path, capsys):
     from paz6d.keypoint_demo import run_keypoint_demo
 
     report = run_keypoint_demo(tmp_path, mesh_path, mesh_scale=1e-3, test_images=3, workers=0, steps=10,
@@ -291,3 +291,8 @@ def test_keypoint_demo_trains_evaluates_and_reports(mesh_path, tmp_path):
     for name in ("keypoint_report.json", "keypoint_recall.png", "keypointnet_supervised/evaluation.json"):
         assert (tmp_path / name).exists(), name
     assert json.loads((tmp_path / "keypoint_report.json").read_text())["test_images"] == 3
+    printed = capsys.readouterr().out
+    recall = 100 * result["pnp"]["recall_0.1d"]
+    line = next(line for line in printed.splitlines() if line.split("  ")[1:2] == ["ADD recall @ 0.1 d, PnP"])
+    assert line.endswith(f"{recall:.1f} %")  # the printed summary shows the report's number
+    assert "keypoint_report.json" in printed
