@@ -165,6 +165,17 @@ def decode_keypoints(outputs: dict, stride: int, method: str = "local") -> np.nd
     raise ValueError(f"method: expected one of {DECODERS}, got {method!r}")
 
 
+def infer_in_batches(infer, crops: np.ndarray, batch_size: int = 32) -> dict[str, np.ndarray]:
+    """KeypointNet outputs (numpy, ``{"uv", "depth", "probabilities"}``) of ``(B, S, S, 3)`` crops,
+    ``batch_size`` crops per call of ``infer`` (:func:`paz6d.models.keypointnet.inference_function`)."""
+    parts: dict[str, list] = {}
+    for start in range(0, len(crops), batch_size):
+        batch = np.asarray(crops[start:start + batch_size], dtype=np.float32)
+        for name, value in infer(batch).items():
+            parts.setdefault(name, []).append(np.asarray(value))
+    return {name: np.concatenate(values) for name, values in parts.items()}
+
+
 def predict_keypoints(infer, crops: np.ndarray, stride: int, decode: str = "local",
                       batch_size: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """Keypoints ``(B, N, 2)`` (crop pixels, :func:`decode_keypoints`) and their spread ``(B, N)``
@@ -173,14 +184,9 @@ def predict_keypoints(infer, crops: np.ndarray, stride: int, decode: str = "loca
     Args:
         infer: the model's inference function (:func:`paz6d.models.keypointnet.inference_function`).
     """
-    uv_parts, spread_parts = [], []
-    for start in range(0, len(crops), batch_size):
-        batch = np.asarray(crops[start:start + batch_size], dtype=np.float32)
-        outputs = {name: np.asarray(value) for name, value in infer(batch).items()}
-        uv = decode_keypoints(outputs, stride, decode)
-        uv_parts.append(uv)
-        spread_parts.append(keypoint_spread(outputs["probabilities"], uv, stride))
-    return np.concatenate(uv_parts), np.concatenate(spread_parts)
+    outputs = infer_in_batches(infer, crops, batch_size)
+    uv = decode_keypoints(outputs, stride, decode)
+    return uv, keypoint_spread(outputs["probabilities"], uv, stride)
 
 
 def write_keypoints(run_dir: str | Path, points_model, usable, method: str, error=None, targets=None) -> Path:

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import write_json_atomically
+from paz6d.backend.files import save_npz_atomically, write_json_atomically
 
 CONFIGS: dict[str, dict] = {
     # Demo budget (`paz6d demo --keypoints` under 15 minutes on 2 CPU cores): see docs/keypointnet.md.
@@ -265,14 +265,9 @@ def fixed_crops(views, seed: int, count: int | None = None):
 def predict_crops(model, images: np.ndarray, batch_size: int = 32) -> dict[str, np.ndarray]:
     """Runs the model over ``(V, S, S, 3)`` crops in batches; numpy outputs."""
     from paz6d.models.keypointnet import inference_function
+    from paz6d.pipelines.keypoint_pose import infer_in_batches
 
-    infer = inference_function(model)
-    parts: dict[str, list] = {}
-    for start in range(0, len(images), batch_size):
-        outputs = infer(images[start:start + batch_size].astype(np.float32))
-        for name, value in outputs.items():
-            parts.setdefault(name, []).append(np.asarray(value))
-    return {name: np.concatenate(values) for name, values in parts.items()}
+    return infer_in_batches(inference_function(model), images, batch_size)
 
 
 def cross_view_errors(uv, depth, K, T_model2cam) -> np.ndarray:
@@ -348,8 +343,6 @@ def inference_crops(test, K, margin: float, size: int) -> tuple[np.ndarray, np.n
 
 def _cached_lifting_crops(path: Path, render, K, margin: float, size: int):
     """:func:`inference_crops` of freshly rendered whole images, cached in ``path`` (``.npz``)."""
-    from paz6d.backend.files import save_npz_atomically
-
     if path.exists():
         with np.load(path) as data:
             return data["images"], data["K"], data["T_model2cam"]
