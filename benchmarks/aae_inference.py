@@ -24,8 +24,8 @@ def measure(config, entries: int, batch: int, repeats: int) -> dict:
     from scipy.spatial.distance import cdist
 
     from paz6d.backend.tensorflow_guard import import_keras
-    from paz6d.models.aae import build_encoder, encode_function, to_model_input
-    from paz6d.models.codebook import Codebook
+    from paz6d.aae.model import build_encoder, encode_function, to_model_input
+    from paz6d.aae.codebook import Codebook
 
     keras = import_keras()
     keras.utils.set_random_seed(0)
@@ -56,7 +56,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20)
     args = parser.parse_args()
     print(f"CPU cores: {os.cpu_count()}, load average (1 min) at start: {os.getloadavg()[0]:.1f}")
-    from paz6d.training.aae import FULL, QUICK
+    from paz6d.aae.train import FULL, QUICK
 
     for name, config in (("quick", QUICK), ("full", FULL)):
         r = measure(config, args.entries, args.batch, args.repeats)

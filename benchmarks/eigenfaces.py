@@ -14,7 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from paz6d.models.eigenfaces import EigenFaces, FisherFaces
+from paz6d.faces.eigenfaces import EigenFaces, FisherFaces
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "faces" / "orl"
 

@@ -12,13 +12,13 @@ import sys
 
 COMMANDS = {
     "generate": ("data_gen.cli", "render a synthetic BOP-format data set from meshes"),
-    "train": ({"aae": ("paz6d.training.aae", "Augmented Autoencoder (implicit 6D pose)"),
-               "keypointnet": ("paz6d.training.keypointnet", "KeypointNet keypoint discovery"),
-               "emotion": ("paz6d.training.emotion", "mini-Xception emotion classifier")},
+    "train": ({"aae": ("paz6d.aae.train", "Augmented Autoencoder (implicit 6D pose)"),
+               "keypointnet": ("paz6d.keypointnet.train", "KeypointNet keypoint discovery"),
+               "emotion": ("paz6d.faces.emotion_train", "mini-Xception emotion classifier")},
               "train a model"),
     "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
     "estimate": ("paz6d.estimate", "run a trained pose model on a BOP data set (ground-truth boxes) -> BOP results CSV"),
-    "demo": ("paz6d.demo", "end-to-end demo: generate data, train, estimate poses, evaluate"),
+    "demo": ("paz6d.demo.aae_demo", "end-to-end demo: generate data, train, estimate poses, evaluate"),
 }
 
 

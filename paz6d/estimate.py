@@ -42,10 +42,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def _estimator(method: str, run_dir: Path, camera):
     if method == "aae":
-        from paz6d.pipelines.implicit_pose import ImplicitPose6D
+        from paz6d.aae.pipeline import ImplicitPose6D
 
         return ImplicitPose6D(run_dir, camera)
-    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+    from paz6d.keypointnet.pipeline import KeypointPose6D
 
     return KeypointPose6D(run_dir, camera)
 

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from paz6d.models.eigenfaces import (EigenFaces, FisherFaces, reconstruction_errors, save_eigenface_grid,
+from paz6d.faces.eigenfaces import (EigenFaces, FisherFaces, reconstruction_errors, save_eigenface_grid,
                                      save_reconstruction_error_plot)
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "faces" / "orl"

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.datasets.fer2013 import load_image_folder
-from paz6d.pipelines.emotion import EmotionClassifier
-from paz6d.training.emotion import confusion_matrix, save_confusion_matrix_plot
+from paz6d.faces.emotion import EmotionClassifier
+from paz6d.faces.emotion_train import confusion_matrix, save_confusion_matrix_plot
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "faces" / "fer2013_sample"
 

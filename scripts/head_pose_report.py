@@ -22,7 +22,7 @@ import skimage.data
 from tqdm import tqdm
 
 from paz6d.backend.camera import Camera
-from paz6d.pipelines.head_pose import HeadPose6D, draw_axes, yaw_pitch_roll_degrees
+from paz6d.faces.head_pose import HeadPose6D, draw_axes, yaw_pitch_roll_degrees
 
 FOCAL = 512.0
 CAMERA = Camera([[FOCAL, 0, 255.5], [0, FOCAL, 255.5], [0, 0, 1]], 512, 512)

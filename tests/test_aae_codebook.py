@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from paz6d.models import codebook as cb
+from paz6d.aae import codebook as cb
 
 
 def _random_codebook(count=50, latent=6, seed=0):

@@ -7,9 +7,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from paz6d.assets.demo_object import make_demo_mesh
-from paz6d.pipelines.implicit_pose import (fit_translation_to_box, pose_from_codebook_view, ray_rotation,
+from paz6d.aae.pipeline import (fit_translation_to_box, pose_from_codebook_view, ray_rotation,
                                            silhouette_box, translation_from_box)
-from paz6d.training.aae_views import ViewGeometry, silhouette_boxes
+from paz6d.aae.views import ViewGeometry, silhouette_boxes
 
 K = np.array([[572.4, 0.0, 325.3], [0.0, 573.6, 242.0], [0.0, 0.0, 1.0]])
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from paz6d.models import aae
+from paz6d.aae import model as aae
 
 TINY = dict(input_size=16, latent_size=8, filters=(4, 8), kernel_size=3)
 

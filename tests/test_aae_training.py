@@ -21,8 +21,8 @@ import_tensorflow()  # before any renderer in this process
 from paz6d.abstract import Box2D, Pose6D  # noqa: E402
 from paz6d.assets.demo_object import write_demo_object  # noqa: E402
 from paz6d.backend.camera import Camera  # noqa: E402
-from paz6d.training.aae import QUICK, train_aae  # noqa: E402
-from paz6d.training.aae_augment import Augmentation  # noqa: E402
+from paz6d.aae.train import QUICK, train_aae  # noqa: E402
+from paz6d.aae.augment import Augmentation  # noqa: E402
 
 TOY = replace(QUICK, crop_size=16, latent_size=16, filters=(8, 16), kernel_size=3, render_size=40, views=24,
               in_plane=6, steps=40, batch_size=8, learning_rate=2e-3, bootstrap_fraction=0.25,
@@ -69,10 +69,10 @@ def test_rerun_resumes_and_extends(toy_run):
 
 def test_rendering_at_a_codebook_rotation_returns_that_rotation(toy_run):
     """Render with the codebook's own camera at in-plane angle 0: the crop equals the codebook crop."""
-    from paz6d.models.codebook import Codebook
-    from paz6d.pipelines.implicit_pose import ImplicitPose6D
+    from paz6d.aae.codebook import Codebook
+    from paz6d.aae.pipeline import ImplicitPose6D
     from paz6d.backend.mesh import load_mesh
-    from paz6d.training.aae_views import mask_box
+    from paz6d.aae.views import mask_box
     from renderers import Renderer
 
     root, mesh_path, _ = toy_run
@@ -103,8 +103,8 @@ def test_rendering_at_a_codebook_rotation_returns_that_rotation(toy_run):
 def test_in_plane_warp_matches_a_direct_rendering(toy_run):
     """The codebook's in-plane views come from image rotation; check it against rendering R_z @ R."""
     from paz6d.backend.mesh import load_mesh
-    from paz6d.models.codebook import in_plane_rotations
-    from paz6d.training.aae_views import rotate_view
+    from paz6d.aae.codebook import in_plane_rotations
+    from paz6d.aae.views import rotate_view
     from renderers import Renderer
 
     root, mesh_path, _ = toy_run
@@ -122,7 +122,7 @@ def test_in_plane_warp_matches_a_direct_rendering(toy_run):
 
 
 def test_batch_api_matches_single_calls_and_accepts_box_types(toy_run):
-    from paz6d.pipelines.implicit_pose import ImplicitPose6D
+    from paz6d.aae.pipeline import ImplicitPose6D
 
     root, _, _ = toy_run
     views = np.load(root / "run" / "views.npz")
@@ -140,7 +140,7 @@ def test_batch_api_matches_single_calls_and_accepts_box_types(toy_run):
 
 
 def test_bad_inputs_raise_clear_value_errors(toy_run, tmp_path):
-    from paz6d.pipelines.implicit_pose import ImplicitPose6D
+    from paz6d.aae.pipeline import ImplicitPose6D
 
     root, _, _ = toy_run
     views = np.load(root / "run" / "views.npz")
@@ -174,8 +174,8 @@ def test_bad_inputs_raise_clear_value_errors(toy_run, tmp_path):
 
 def test_icp_refinement_with_depth_recovers_the_pose(toy_run):
     from paz6d.backend.mesh import load_mesh
-    from paz6d.pipelines.implicit_pose import ImplicitPose6D
-    from paz6d.training.aae_views import mask_box
+    from paz6d.aae.pipeline import ImplicitPose6D
+    from paz6d.aae.views import mask_box
     from renderers import Renderer
     from scipy.spatial.transform import Rotation
 
@@ -203,7 +203,7 @@ def test_training_from_a_generated_data_set(toy_run, tmp_path):
     from data_gen.config import GenerationConfig
     from data_gen.generator import generate
     from paz6d.backend.image import load_image
-    from paz6d.training.aae_views import mask_box
+    from paz6d.aae.views import mask_box
 
     root, mesh, _ = toy_run
     data = tmp_path / "data"

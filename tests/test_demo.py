@@ -42,9 +42,9 @@ def test_demo_object_files_are_bop_millimetres(tmp_path):
 
 
 def test_demo_smoke_run(tmp_path):
-    from paz6d.demo import run_demo
-    from paz6d.training.aae import QUICK
-    from paz6d.training.aae_augment import Augmentation
+    from paz6d.demo.aae_demo import run_demo
+    from paz6d.aae.train import QUICK
+    from paz6d.aae.augment import Augmentation
 
     toy = replace(QUICK, crop_size=16, latent_size=16, filters=(8, 16), kernel_size=3, render_size=40, views=24,
                   in_plane=6, steps=20, batch_size=8, learning_rate=2e-3, bootstrap_fraction=0.25,
@@ -70,15 +70,15 @@ def test_demo_smoke_run(tmp_path):
                                     axis=1))
     assert first["add_m"] == pytest.approx(direct, rel=1e-9)
     # the model directory is an ImplicitPose6D run dir
-    from paz6d.pipelines.implicit_pose import ImplicitPose6D
+    from paz6d.aae.pipeline import ImplicitPose6D
 
     K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
     assert ImplicitPose6D(tmp_path / "model", K).crop_size == 16
 
 
 def test_demo_keypoints_option_runs_the_keypoint_demo_on_the_demo_mesh(tmp_path, monkeypatch):
-    import paz6d.demo as demo
-    import paz6d.keypoint_demo as keypoint_demo
+    import paz6d.demo.aae_demo as demo
+    import paz6d.demo.keypoint_demo as keypoint_demo
     from paz6d.cli import build_parser
 
     calls = {}

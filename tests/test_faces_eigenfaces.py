@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import skimage.data
 
-from paz6d.models.eigenfaces import (EigenFaces, FisherFaces, as_face_stack, reconstruction_errors,
+from paz6d.faces.eigenfaces import (EigenFaces, FisherFaces, as_face_stack, reconstruction_errors,
                                      save_eigenface_grid, save_reconstruction_error_plot)
 
 ORL_SUBJECTS = 40
@@ -70,7 +70,7 @@ def test_full_face_space_reconstructs_training_images_exactly(small_faces):
 
 
 def test_snapshot_pca_matches_direct_svd_and_survives_rank_deficiency(small_faces):
-    from paz6d.models.eigenfaces import principal_components
+    from paz6d.faces.eigenfaces import principal_components
 
     images, _ = small_faces
     data = images.reshape(12, -1).astype(np.float64)

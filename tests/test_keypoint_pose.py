@@ -14,7 +14,7 @@ from paz6d.backend.farthest_points import farthest_point_sampling
 from paz6d.backend.pnp import PnPError
 from paz6d.backend.square_crop import (crop_intrinsics, crop_square, crop_transform, projected_box, square_window,
                                       to_full_image)
-from paz6d.pipelines.keypoint_pose import (depth_from_box, keypoint_spread, lift_keypoints, read_keypoints,
+from paz6d.keypointnet.pipeline import (depth_from_box, keypoint_spread, lift_keypoints, read_keypoints,
                                           read_object, write_keypoints, write_object)
 
 K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
@@ -164,7 +164,7 @@ def test_draw_keypoints_box_cube_and_grid():
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     """A run directory with an (untrained) tiny KeypointNet and 8 known 3D keypoints."""
-    kp = pytest.importorskip("paz6d.models.keypointnet")
+    kp = pytest.importorskip("paz6d.keypointnet.model")
     folder = tmp_path_factory.mktemp("keypoint_run")
     kp.save_keypointnet(kp.build_keypointnet(8, 32, 4, 2, (1,)), folder / "model.keras")
     (folder / "config.json").write_text(json.dumps({"input_size": 32, "margin": 1.25, "downsample": 2}))
@@ -175,7 +175,7 @@ def run_dir(tmp_path_factory):
 
 
 def test_pnp_lifting_recovers_a_known_pose_from_perfect_keypoints(run_dir):
-    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+    from paz6d.keypointnet.pipeline import KeypointPose6D
 
     estimator = KeypointPose6D(run_dir, K)
     T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
@@ -191,7 +191,7 @@ def test_pnp_lifting_recovers_a_known_pose_from_perfect_keypoints(run_dir):
 
 
 def test_fewer_than_four_usable_keypoints_is_a_clear_error(run_dir, tmp_path):
-    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+    from paz6d.keypointnet.pipeline import KeypointPose6D
 
     estimator = KeypointPose6D(run_dir, K)
     T = _pose([0.1, 0.2, 0.3], [0.0, 0.0, 0.5])
@@ -207,7 +207,7 @@ def test_fewer_than_four_usable_keypoints_is_a_clear_error(run_dir, tmp_path):
 
 
 def test_estimator_accepts_camera_or_matrix_and_box_or_tuple(run_dir):
-    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+    from paz6d.keypointnet.pipeline import KeypointPose6D
 
     image = np.random.default_rng(0).integers(0, 256, (120, 160, 3), dtype=np.uint8)
     by_camera = KeypointPose6D(run_dir, Camera(K, 160, 120))
@@ -230,7 +230,7 @@ def test_estimator_accepts_camera_or_matrix_and_box_or_tuple(run_dir):
 
 
 def test_corrupt_or_incomplete_run_directory_is_a_clear_error(run_dir, tmp_path):
-    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+    from paz6d.keypointnet.pipeline import KeypointPose6D
 
     with pytest.raises(ValueError, match="config.json"):
         KeypointPose6D(tmp_path, K)
@@ -242,7 +242,7 @@ def test_corrupt_or_incomplete_run_directory_is_a_clear_error(run_dir, tmp_path)
 
 
 def test_local_expectation_ignores_mass_far_from_the_peak():
-    from paz6d.pipelines.keypoint_pose import local_expectation
+    from paz6d.keypointnet.pipeline import local_expectation
 
     probabilities = np.zeros((1, 8, 8, 2))
     probabilities[0, 2, 1, 0], probabilities[0, 2, 2, 0] = 0.3, 0.1  # a weaker mode far from the peak
@@ -256,7 +256,7 @@ def test_local_expectation_ignores_mass_far_from_the_peak():
 
 
 def test_triangulate_keypoints_recovers_points_and_drops_outlier_views():
-    from paz6d.pipelines.keypoint_pose import triangulate_keypoints
+    from paz6d.keypointnet.pipeline import triangulate_keypoints
 
     points_model = np.random.default_rng(4).uniform(-0.05, 0.05, (5, 3))
     uv, _, intrinsics, poses = _views(points_model, 12, seed=2)
@@ -289,7 +289,7 @@ def test_depth_from_box_moves_the_object_to_fit_its_box(run_dir):
 
 
 def test_estimator_with_depth_from_box_uses_the_box(run_dir):
-    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+    from paz6d.keypointnet.pipeline import KeypointPose6D
 
     estimator = KeypointPose6D(run_dir, K, depth_from_box=True)
     T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
@@ -304,7 +304,7 @@ def test_estimator_with_depth_from_box_uses_the_box(run_dir):
 
 
 def test_predict_keypoints_decodes_in_batches():
-    from paz6d.pipelines.keypoint_pose import local_expectation, predict_keypoints
+    from paz6d.keypointnet.pipeline import local_expectation, predict_keypoints
 
     def infer(batch):  # probability maps: the stride-4 cells' share of the first channel
         cells = batch[..., 0].reshape(len(batch), 4, 4, 4, 4).sum(axis=(2, 4))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-kp = pytest.importorskip("paz6d.models.keypointnet")
+kp = pytest.importorskip("paz6d.keypointnet.model")
 
 
 def _value(tensor) -> float:

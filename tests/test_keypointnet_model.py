@@ -5,7 +5,7 @@ import zipfile
 import numpy as np
 import pytest
 
-kp = pytest.importorskip("paz6d.models.keypointnet")
+kp = pytest.importorskip("paz6d.keypointnet.model")
 
 
 def test_spatial_expectation_hand_computed():

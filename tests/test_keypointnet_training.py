@@ -10,7 +10,7 @@ import pytest
 
 from paz6d.backend.camera import Camera, transform_and_project
 from paz6d.backend.tensorflow_guard import import_tensorflow
-from paz6d.training import keypoint_views as kv
+from paz6d.keypointnet import views as kv
 
 import_tensorflow()  # the renderer shares this process with TensorFlow (workers=0)
 
@@ -112,8 +112,8 @@ def _losses(run_dir) -> list[float]:
 
 @pytest.mark.parametrize("mode", ["supervised", "discovery"])
 def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path, tmp_path):
-    from paz6d.pipelines.keypoint_pose import KeypointPose6D
-    from paz6d.training.keypointnet import KeypointTraining, train_keypointnet
+    from paz6d.keypointnet.pipeline import KeypointPose6D
+    from paz6d.keypointnet.train import KeypointTraining, train_keypointnet
 
     job = KeypointTraining(tmp_path / mode, mesh_path, 1e-3, "quick", mode, seed=0, workers=0, steps=40,
                            progress=False, overrides=TINY)
@@ -129,7 +129,7 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
     assert len(keypoints["points_model"]) == len(keypoints["usable"]) == 6
     if mode == "supervised":
         # 40 steps do not make usable lifted keypoints; with the targets the pipeline loads the run
-        from paz6d.pipelines.keypoint_pose import write_keypoints
+        from paz6d.keypointnet.pipeline import write_keypoints
 
         write_keypoints(job.out, keypoints["targets"], np.ones(6, bool), "farthest-point")
         estimator = KeypointPose6D(job.out, SMALL_CAMERA.K, depth_from_box=True)
@@ -142,7 +142,7 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
 
 def test_lifting_crops_are_cut_as_at_inference_with_matching_intrinsics():
     from paz6d.backend.square_crop import square_window
-    from paz6d.training.keypointnet import inference_crops
+    from paz6d.keypointnet.train import inference_crops
 
     T = np.eye(4)
     T[:3, 3] = [0.01, -0.005, 0.4]
@@ -166,7 +166,7 @@ def test_lifting_crops_are_cut_as_at_inference_with_matching_intrinsics():
 
 
 def test_a_run_directory_refuses_a_different_run(mesh_path, tmp_path):
-    from paz6d.training.keypointnet import KeypointTraining, _prepare_run_dir
+    from paz6d.keypointnet.train import KeypointTraining, _prepare_run_dir
 
     job = KeypointTraining(tmp_path, mesh_path, 1e-3, "quick", "supervised", overrides=TINY)
     _prepare_run_dir(job, job.settings(), 0.1, kv.ViewSampling(input_size=32))
@@ -180,7 +180,7 @@ def test_a_run_directory_refuses_a_different_run(mesh_path, tmp_path):
 
 
 def test_cross_view_errors_are_zero_for_geometrically_consistent_keypoints():
-    from paz6d.training.keypointnet import cross_view_errors
+    from paz6d.keypointnet.train import cross_view_errors
 
     rng = np.random.default_rng(0)
     points = rng.uniform(-0.05, 0.05, (5, 3))
@@ -202,7 +202,7 @@ def test_cross_view_errors_are_zero_for_geometrically_consistent_keypoints():
 
 def test_cli_arguments_and_clear_errors(tmp_path, capsys):
     from paz6d.cli import main
-    from paz6d.training.keypointnet import configure
+    from paz6d.keypointnet.train import configure
 
     parser = argparse.ArgumentParser()
     configure(parser)
@@ -248,7 +248,7 @@ def _write_bop_set(root, mesh_path, count: int = 3):
 
 
 def test_bop_object_views_crop_around_visible_instances(mesh_path, tmp_path):
-    from paz6d.training.keypoint_dataset import bop_object_views
+    from paz6d.keypointnet.dataset import bop_object_views
 
     poses, vertices = _write_bop_set(tmp_path, mesh_path)
     views, found_mesh, scale = bop_object_views(tmp_path, input_size=32)
@@ -264,8 +264,8 @@ def test_bop_object_views_crop_around_visible_instances(mesh_path, tmp_path):
 
 
 def test_precision_setting_resolves_auto_from_the_cpu(monkeypatch):
-    from paz6d.models import keypointnet as kp
-    from paz6d.training.keypointnet import resolve_precision
+    from paz6d.keypointnet import model as kp
+    from paz6d.keypointnet.train import resolve_precision
 
     assert resolve_precision("float32") == "float32" and resolve_precision("bfloat16") == "bfloat16"
     monkeypatch.setattr(kp, "native_bfloat16", lambda: True)
@@ -277,7 +277,7 @@ def test_precision_setting_resolves_auto_from_the_cpu(monkeypatch):
 
 
 def test_keypoint_demo_trains_evaluates_and_reports(mesh_path, tmp_path, capsys):
-    from paz6d.keypoint_demo import run_keypoint_demo
+    from paz6d.demo.keypoint_demo import run_keypoint_demo
 
     report = run_keypoint_demo(tmp_path, mesh_path, mesh_scale=1e-3, test_images=3, workers=0, steps=10,
                                progress=False, overrides=TINY)

@@ -167,7 +167,7 @@ def decode_keypoints(outputs: dict, stride: int, method: str = "local") -> np.nd
 
 def infer_in_batches(infer, crops: np.ndarray, batch_size: int = 32) -> dict[str, np.ndarray]:
     """KeypointNet outputs (numpy, ``{"uv", "depth", "probabilities"}``) of ``(B, S, S, 3)`` crops,
-    ``batch_size`` crops per call of ``infer`` (:func:`paz6d.models.keypointnet.inference_function`)."""
+    ``batch_size`` crops per call of ``infer`` (:func:`paz6d.keypointnet.model.inference_function`)."""
     parts: dict[str, list] = {}
     for start in range(0, len(crops), batch_size):
         batch = np.asarray(crops[start:start + batch_size], dtype=np.float32)
@@ -182,7 +182,7 @@ def predict_keypoints(infer, crops: np.ndarray, stride: int, decode: str = "loca
     (:func:`keypoint_spread`) of ``(B, S, S, 3)`` crops, ``batch_size`` crops per network call.
 
     Args:
-        infer: the model's inference function (:func:`paz6d.models.keypointnet.inference_function`).
+        infer: the model's inference function (:func:`paz6d.keypointnet.model.inference_function`).
     """
     outputs = infer_in_batches(infer, crops, batch_size)
     uv = decode_keypoints(outputs, stride, decode)
@@ -298,7 +298,7 @@ class KeypointPose6D(Processor):
                  max_spread: float | None = None, min_keypoints: int = 4, decode: str = "local",
                  depth_from_box: bool = False, class_name: str | None = None):
         super().__init__()
-        from paz6d.models.keypointnet import inference_function, load_keypointnet
+        from paz6d.keypointnet.model import inference_function, load_keypointnet
 
         self.run_dir = Path(run_dir)
         if isinstance(camera, Camera):

@@ -3,7 +3,7 @@
 The encoder maps an object crop ``(S, S, 3)`` (float32 RGB in [0, 1]) to a latent code; the decoder
 reconstructs the clean rendering of the object from it. Trained to undo augmentations (background,
 occluders, colour/light jitter, crop shift), the code depends on the object's orientation only and
-indexes a codebook of orientations (:mod:`paz6d.models.codebook`).
+indexes a codebook of orientations (:mod:`paz6d.aae.codebook`).
 
 Crops are squares of side ``padding * max(box width, box height)`` centred on the object's 2D box
 (:func:`crop_object`); the same function makes training, codebook and test crops.

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from paz6d.models.aae import crop_object, encode_function, to_model_input
-from paz6d.models.codebook import Codebook, codebook_angles, codebook_rotations
-from paz6d.training.aae_views import ViewGeometry, mask_box, rotate_view, silhouette_boxes
+from paz6d.aae.model import crop_object, encode_function, to_model_input
+from paz6d.aae.codebook import Codebook, codebook_angles, codebook_rotations
+from paz6d.aae.views import ViewGeometry, mask_box, rotate_view, silhouette_boxes
 
 
 def codebook_crops(rgb: np.ndarray, alpha: np.ndarray, geometry: ViewGeometry, in_plane: int, crop_size: int,
                    padding: float, views: range | None = None) -> np.ndarray:
     """Clean crops ``(len(views) * in_plane, S, S, 3)`` uint8 of views ``views`` (default all) at the
-    codebook's in-plane angles, ordered like :func:`paz6d.models.codebook.codebook_rotations`."""
+    codebook's in-plane angles, ordered like :func:`paz6d.aae.codebook.codebook_rotations`."""
     views = range(len(rgb)) if views is None else views
     crops = np.empty((len(views) * in_plane, crop_size, crop_size, 3), np.uint8)
     angles = codebook_angles(in_plane)

@@ -1,7 +1,7 @@
 """AAE training pairs streamed from a BOP data set (e.g. ``paz6d generate`` output).
 
 Each annotated instance of the object gives one pair: the input is the square crop of the image around
-its ground-truth box (:func:`paz6d.models.aae.crop_object`, the crop the pipeline makes at test time)
+its ground-truth box (:func:`paz6d.aae.model.crop_object`, the crop the pipeline makes at test time)
 and the target is a clean rendering of the object at the ground-truth pose seen through that same
 crop (the crop's intrinsics, :func:`paz6d.backend.square_crop.crop_intrinsics`), rendered in worker
 processes that never import TensorFlow.
@@ -36,7 +36,7 @@ def dataset_crops(root: str | Path, obj_id: int, crop_size: int, padding: float,
     from tqdm.auto import tqdm
 
     from paz6d.datasets.bop import BOPDataset
-    from paz6d.models.aae import crop_object
+    from paz6d.aae.model import crop_object
 
     dataset = BOPDataset(root, split=split)
     crops, Ks, poses = [], [], []
@@ -64,7 +64,7 @@ def dataset_pairs(root: str | Path, obj_id: int, mesh_path: str | Path, mesh_sca
                   padding: float, split: str = "train", workers: int = 2, platform: str | None = None,
                   progress: bool = True) -> CropPairs:
     """Input crops from the data set and clean targets rendered through the same crop windows."""
-    from paz6d.training.aae_views import render_poses
+    from paz6d.aae.views import render_poses
 
     inputs, Ks, poses = dataset_crops(root, obj_id, crop_size, padding, split, progress=progress)
     targets, _ = render_poses(mesh_path, mesh_scale, Ks, poses, crop_size, workers, platform, progress=progress,

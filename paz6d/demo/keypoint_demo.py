@@ -6,11 +6,11 @@ Meant to be called by ``paz6d demo --keypoints``::
     report = run_keypoint_demo(Path("demo_output"), Path("demo_output/mesh/obj_000001.ply"), mesh_scale=0.001)
 
 Outputs in ``out_dir``: ``keypointnet_<mode>/`` (run directories that
-:class:`~paz6d.pipelines.keypoint_pose.KeypointPose6D` loads), ``keypoint_report.json`` (every number),
+:class:`~paz6d.keypointnet.pipeline.KeypointPose6D` loads), ``keypoint_report.json`` (every number),
 ``keypoint_recall.png`` (ADD(-S) recall against threshold) and ``keypoint_<mode>_examples.png``
 (crops with predicted keypoints, the ground-truth 3D box in green and the estimate in red).
 Each mode is scored twice: plain PnP (``pnp``) and PnP with the depth fitted to the ground-truth
-box (``pnp_depth_from_box``, see :class:`~paz6d.pipelines.keypoint_pose.KeypointPose6D`).
+box (``pnp_depth_from_box``, see :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object
     """Scores :class:`KeypointPose6D` on rendered test images with their ground-truth boxes.
 
     Args:
-        test: :class:`~paz6d.training.keypoint_views.TestImages`.
+        test: :class:`~paz6d.keypointnet.views.TestImages`.
         points: ``(N, 3)`` model points in metres (for ADD / ADD-S).
         symmetric: score with ADD-S (ADI) instead of ADD.
         depth_from_box: the :class:`KeypointPose6D` option of that name.
@@ -46,7 +46,7 @@ def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object
         estimated, e.g. too few usable keypoints, else ``None``); poses are ``Pose6D`` or ``None``.
     """
     from evaluation.pose_errors import accuracy_auc, add_error, adi_error, rotation_error_deg, translation_error
-    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+    from paz6d.keypointnet.pipeline import KeypointPose6D
 
     from paz6d.backend.pnp import PnPError
 
@@ -91,7 +91,7 @@ def _examples_png(path: Path, run_dir: Path, test, poses, camera, points: np.nda
     from paz6d.backend.image import save_image
     from paz6d.backend.mesh import bounding_box_corners
     from paz6d.backend.square_crop import crop_square, crop_transform, square_window
-    from paz6d.pipelines.keypoint_pose import KeypointPose6D
+    from paz6d.keypointnet.pipeline import KeypointPose6D
 
     estimator = KeypointPose6D(run_dir, camera)
     corners = bounding_box_corners(points)
@@ -150,8 +150,8 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
 
     import_tensorflow()
     from paz6d.backend.mesh import diameter, load_mesh
-    from paz6d.training.keypoint_views import ViewSampling, render_test_images
-    from paz6d.training.keypointnet import KeypointTraining, train_keypointnet
+    from paz6d.keypointnet.views import ViewSampling, render_test_images
+    from paz6d.keypointnet.train import KeypointTraining, train_keypointnet
 
     started = time.perf_counter()
     out_dir = Path(out_dir)
@@ -193,7 +193,7 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
 
 
 def _print_summary(report: dict, out_dir: Path) -> None:
-    from paz6d.demo import print_rows
+    from paz6d.demo.aae_demo import print_rows
 
     def number(value, scale: float = 1.0, unit: str = "", digits: int = 1) -> str:
         return "-" if value is None else f"{scale * value:.{digits}f}{unit}"

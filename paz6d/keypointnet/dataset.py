@@ -1,7 +1,7 @@
 """KeypointNet training views cut from a BOP data set (e.g. the output of ``paz6d generate``).
 
 Every annotated instance of the chosen object that is visible enough becomes one
-:class:`~paz6d.training.keypoint_views.ViewSet` entry: the square crop around its visible box
+:class:`~paz6d.keypointnet.views.ViewSet` entry: the square crop around its visible box
 (``margin`` × the longer side) resized to ``input_size``, its visible mask, the crop intrinsics
 and the ground-truth pose. The image's own background is kept (``alpha`` = 255 everywhere), so
 batch-time background replacement leaves it untouched.
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, square_window
-from paz6d.training.keypoint_views import ViewSet
+from paz6d.keypointnet.views import ViewSet
 
 
 def _default_split(root: Path) -> str:

@@ -172,7 +172,7 @@ class ImplicitPose6D(Processor):
         camera: :class:`~paz6d.backend.camera.Camera` or a ``(3, 3)`` intrinsics matrix ``K``.
         refine: depth-free translation refinement (box fitting), see module docstring.
         neighbours: codebook matches averaged into the rotation (within ``neighbour_radius_deg`` of the best,
-            weighted by similarity, :meth:`~paz6d.models.codebook.Codebook.neighbour_average`), which refines
+            weighted by similarity, :meth:`~paz6d.aae.codebook.Codebook.neighbour_average`), which refines
             it below the codebook's spacing; 1 uses the best match alone.
         neighbour_radius_deg: only matches this close to the best one are averaged.
         top_k: codebook candidates kept; with a depth image the candidate ICP fits best wins.
@@ -187,8 +187,8 @@ class ImplicitPose6D(Processor):
     def __init__(self, run_dir: str | Path, camera, refine: bool = True, neighbours: int = 10,
                  neighbour_radius_deg: float = 15.0, top_k: int = 1, class_name: str | None = None):
         super().__init__()
-        from paz6d.models.aae import encode_function, encoder_of, load_model
-        from paz6d.models.codebook import Codebook
+        from paz6d.aae.model import encode_function, encoder_of, load_model
+        from paz6d.aae.codebook import Codebook
 
         run_dir = Path(run_dir)
         if not run_dir.is_dir():
@@ -235,14 +235,14 @@ class ImplicitPose6D(Processor):
 
     def crop(self, image, box) -> np.ndarray:
         """The model input crop ``(S, S, 3)`` uint8 of ``box`` in ``image``."""
-        from paz6d.models.aae import crop_object
+        from paz6d.aae.model import crop_object
 
         image = self._check_image(image)
         return crop_object(image, _as_box(box, image.shape), self.crop_size, self.padding)
 
     def encode(self, crops) -> np.ndarray:
         """Latent codes ``(B, L)`` of uint8 crops ``(B, S, S, 3)``."""
-        from paz6d.models.aae import to_model_input
+        from paz6d.aae.model import to_model_input
 
         inputs = to_model_input(crops)
         if inputs.shape[1:3] != (self.crop_size, self.crop_size):
@@ -251,7 +251,7 @@ class ImplicitPose6D(Processor):
 
     def reconstruct(self, crops) -> np.ndarray:
         """The autoencoder's reconstructions ``(B, S, S, 3)`` uint8 of crops."""
-        from paz6d.models.aae import to_model_input
+        from paz6d.aae.model import to_model_input
 
         output = np.asarray(self.autoencoder(to_model_input(crops), training=False))
         return np.clip(np.rint(output * 255), 0, 255).astype(np.uint8)
@@ -314,7 +314,7 @@ class ImplicitPose6D(Processor):
             return []
         checked = [self._check_image(image, f"images[{i}]") for i, image in enumerate(images)]
         boxes = [_as_box(box, image.shape, f"boxes[{i}]") for i, (box, image) in enumerate(zip(boxes, checked))]
-        from paz6d.models.aae import crop_object
+        from paz6d.aae.model import crop_object
 
         crops = np.stack([crop_object(image, box, self.crop_size, self.padding) for image, box in zip(checked, boxes)])
         indices, similarities, best = self._lookup(self.encode(crops), 1)

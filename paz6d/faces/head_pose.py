@@ -38,8 +38,8 @@ from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera
 from paz6d.backend.image import as_image
 from paz6d.backend.pnp import PnPError, reprojection_errors, solve_pnp
-from paz6d.pipelines.haar import HaarCascadeDetector
-from paz6d.pipelines.packaged_models import packaged_file
+from paz6d.faces.haar import HaarCascadeDetector
+from paz6d.faces.packaged_models import packaged_file
 
 FACE_MODEL_FILE = Path(__file__).resolve().parents[1] / "assets" / "face_landmarks_3d.json"
 LANDMARK_MODEL_FILE = ("data", "face_landmark.tflite")

@@ -11,7 +11,7 @@ Stages, each resumable from what is already in the run directory::
     RUN_DIR/codebook.npz      latent codes of every view x in-plane rotation
     RUN_DIR/summary.json      loss, throughput (loader vs model samples/s), timings
 
-``paz6d.pipelines.implicit_pose.ImplicitPose6D(RUN_DIR, camera)`` loads the result.
+``paz6d.aae.pipeline.ImplicitPose6D(RUN_DIR, camera)`` loads the result.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import save_npz_atomically, write_json_atomically
-from paz6d.training.aae_augment import Augmentation
+from paz6d.aae.augment import Augmentation
 
 CONFIG_FILE = "config.json"
 OBJECT_FILE = "object.npz"
@@ -151,8 +151,8 @@ def _object_geometry(run_dir: Path, mesh_path: Path, mesh_scale: float, seed: in
 
 def _views(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, geometry, workers: int,
            platform: str | None, progress: bool) -> dict:
-    from paz6d.models.codebook import fibonacci_sphere, look_at_rotations
-    from paz6d.training.aae_views import render_views
+    from paz6d.aae.codebook import fibonacci_sphere, look_at_rotations
+    from paz6d.aae.views import render_views
 
     path = run_dir / VIEWS_FILE
     rotations = look_at_rotations(fibonacci_sphere(config.views))
@@ -168,7 +168,7 @@ def _views(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig,
 
 def _sample_callback(sampler, count: int = 8):
     """Draws ``count`` fixed validation samples: augmented input / reconstruction / clean target rows."""
-    from paz6d.models.aae import to_model_input
+    from paz6d.aae.model import to_model_input
 
     rng = np.random.default_rng(123456)
     pairs = [sampler.sample(rng) for _ in range(count)]
@@ -196,7 +196,7 @@ def measure_loader(sampler, batch_size: int, batches: int = 4) -> float:
 
 def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Path, mesh_scale: float,
            config: AAEConfig, workers: int, platform: str | None, progress: bool):
-    from paz6d.training.aae_dataset import CropPairs, dataset_pairs
+    from paz6d.aae.dataset import CropPairs, dataset_pairs
 
     path = run_dir / PAIRS_FILE
     if path.exists():
@@ -232,10 +232,10 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     from paz6d.backend.tensorflow_guard import import_keras
 
     keras = import_keras()
-    from paz6d.models.aae import build_autoencoder, encoder_of, load_model, reconstruction_loss, save_model
-    from paz6d.training.aae_augment import ViewSampler
-    from paz6d.training.aae_codebook import build_codebook
-    from paz6d.training.aae_views import ViewGeometry
+    from paz6d.aae.model import build_autoencoder, encoder_of, load_model, reconstruction_loss, save_model
+    from paz6d.aae.augment import ViewSampler
+    from paz6d.aae.build_codebook import build_codebook
+    from paz6d.aae.views import ViewGeometry
     from paz6d.training.trainer import Trainer
 
     timings = {}

@@ -10,7 +10,7 @@ Two modes share the data, the network, the PnP pipeline and the evaluation:
   projected into every view; the network learns them as heatmaps (cross-entropy to a Gaussian)
   plus their coordinates and depths. The 3D keypoints are known exactly.
 
-The run directory is what :class:`paz6d.pipelines.keypoint_pose.KeypointPose6D` loads
+The run directory is what :class:`paz6d.keypointnet.pipeline.KeypointPose6D` loads
 (``config.json``, ``model.keras``, ``keypoints.json``), plus the Trainer's checkpoints, ``log.csv``,
 ``tensorboard/`` and ``samples/``, the rendered views (``views_train.npz``, ``views_val.npz``, and
 ``views_lift.npz``: crops of unseen whole images, cut as at inference, from which the 3D keypoints
@@ -95,9 +95,9 @@ class KeypointTraining:
 
 def resolve_precision(precision: str) -> str:
     """``"float32"`` or ``"bfloat16"`` for a ``precision`` setting; ``"auto"`` is bfloat16 on CPUs that
-    compute it natively (:func:`paz6d.models.keypointnet.native_bfloat16`) when TensorFlow sees no GPU."""
+    compute it natively (:func:`paz6d.keypointnet.model.native_bfloat16`) when TensorFlow sees no GPU."""
     if precision == "auto":
-        from paz6d.models.keypointnet import native_bfloat16, tf
+        from paz6d.keypointnet.model import native_bfloat16, tf
 
         return "bfloat16" if native_bfloat16() and not tf.config.list_physical_devices("GPU") else "float32"
     if precision not in PRECISIONS:
@@ -128,7 +128,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``paz6d train keypointnet``."""
     if args.dataset is not None:
-        from paz6d.training.keypoint_dataset import bop_object_views
+        from paz6d.keypointnet.dataset import bop_object_views
 
         views, mesh_path, scale = bop_object_views(args.dataset, args.object_id, args.split,
                                                    CONFIGS[args.config]["input_size"],
@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling) -> dict:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
-    from paz6d.pipelines.keypoint_pose import CONFIG_FILE
+    from paz6d.keypointnet.pipeline import CONFIG_FILE
 
     config = {"mode": job.mode, "config": job.config, "seed": job.seed, "mesh_path": str(Path(job.mesh_path).resolve()),
               "mesh_scale": job.mesh_scale, "diameter": object_diameter,
@@ -172,7 +172,7 @@ def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: flo
 
 
 def _cached_views(path: Path, render):
-    from paz6d.training.keypoint_views import ViewSet
+    from paz6d.keypointnet.views import ViewSet
 
     if path.exists():
         return ViewSet.load(path)
@@ -185,7 +185,7 @@ def _cached_views(path: Path, render):
 
 def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_model: np.ndarray | None):
     """``loss_fn(model, batch) -> dict`` for the shared Trainer (TensorFlow imported here)."""
-    from paz6d.models import keypointnet as kp
+    from paz6d.keypointnet import model as kp
 
     tf = kp.tf
     size = float(settings["input_size"])
@@ -250,7 +250,7 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
 def fixed_crops(views, seed: int, count: int | None = None):
     """Views composited over seeded random backgrounds without crop/colour jitter: ``images (V, S, S, 3)
     uint8``, ``K (V, 3, 3)``, ``T_model2cam (V, 4, 4)``."""
-    from paz6d.training.keypoint_views import Augmentation, augmented_view
+    from paz6d.keypointnet.views import Augmentation, augmented_view
 
     count = len(views) if count is None else min(count, len(views))
     plain = Augmentation(crop_scale=0.0, crop_shift=0.0, colour=False, background=True)
@@ -264,8 +264,8 @@ def fixed_crops(views, seed: int, count: int | None = None):
 
 def predict_crops(model, images: np.ndarray, batch_size: int = 32) -> dict[str, np.ndarray]:
     """Runs the model over ``(V, S, S, 3)`` crops in batches; numpy outputs."""
-    from paz6d.models.keypointnet import inference_function
-    from paz6d.pipelines.keypoint_pose import infer_in_batches
+    from paz6d.keypointnet.model import inference_function
+    from paz6d.keypointnet.pipeline import infer_in_batches
 
     return infer_in_batches(inference_function(model), images, batch_size)
 
@@ -325,11 +325,11 @@ def _sample_drawer(images: np.ndarray, targets: np.ndarray | None):
 # ------------------------------------------------------------------------------- training
 
 def inference_crops(test, K, margin: float, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Crops of whole images made exactly as :class:`~paz6d.pipelines.keypoint_pose.KeypointPose6D`
+    """Crops of whole images made exactly as :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`
     makes them (square window of ``margin`` × the box around the box, resampled to ``size``).
 
     Args:
-        test: :class:`~paz6d.training.keypoint_views.TestImages` (images, boxes, poses).
+        test: :class:`~paz6d.keypointnet.views.TestImages` (images, boxes, poses).
         K: ``(3, 3)`` intrinsics of the whole images.
     Returns:
         ``images (V, size, size, 3)`` uint8, their intrinsics ``(V, 3, 3)`` and ``T_model2cam (V, 4, 4)``.
@@ -359,17 +359,17 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
     poses) are lifted to 3D, by ``settings["lifting"]``:
 
     - ``"triangulate"``: 2D-only least-squares triangulation with outlier views dropped
-      (:func:`~paz6d.pipelines.keypoint_pose.triangulate_keypoints`); systematic 2D biases of the
+      (:func:`~paz6d.keypointnet.pipeline.triangulate_keypoints`); systematic 2D biases of the
       network are absorbed into the 3D model, so they cancel in PnP;
     - ``"median"``: per-view 3D points from the predicted depths, median over views (the paper's
-      lifting, :func:`~paz6d.pipelines.keypoint_pose.lift_keypoints`).
+      lifting, :func:`~paz6d.keypointnet.pipeline.lift_keypoints`).
 
     Keypoints whose median re-projection error exceeds :data:`MAX_LIFTING_ERROR` × crop side are
     marked unusable.
     ``targets`` (supervised mode: the farthest-point keypoints) are stored alongside for reference.
     """
-    from paz6d.models.keypointnet import depth_to_metres
-    from paz6d.pipelines.keypoint_pose import (decode_keypoints, lift_keypoints, triangulate_keypoints,
+    from paz6d.keypointnet.model import depth_to_metres
+    from paz6d.keypointnet.pipeline import (decode_keypoints, lift_keypoints, triangulate_keypoints,
                                                write_keypoints)
 
     method = settings.get("lifting", "triangulate")
@@ -404,7 +404,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
 
     Args:
         job: what to train and where.
-        views: optional pre-built :class:`~paz6d.training.keypoint_views.ViewSet` (e.g. from a BOP set);
+        views: optional pre-built :class:`~paz6d.keypointnet.views.ViewSet` (e.g. from a BOP set);
             by default views of ``job.mesh_path`` are rendered in worker processes.
     Returns:
         A summary dict (also written to ``job.out/metrics.json``): training time, final losses and,
@@ -417,9 +417,9 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
 
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
-    from paz6d.pipelines.keypoint_pose import (DECODERS, MODEL_FILE, decode_keypoints, keypoint_spread,
+    from paz6d.keypointnet.pipeline import (DECODERS, MODEL_FILE, decode_keypoints, keypoint_spread,
                                                read_keypoints, write_object)
-    from paz6d.training.keypoint_views import (ViewSampling, hull_points, render_test_images, render_views,
+    from paz6d.keypointnet.views import (ViewSampling, hull_points, render_test_images, render_views,
                                                training_batch)
 
     settings = job.settings()
@@ -444,7 +444,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     if job.mode == "supervised":
         keypoints_model = supervised_keypoints(mesh, settings["num_keypoints"], job.seed)
 
-    from paz6d.models import keypointnet as kp
+    from paz6d.keypointnet import model as kp
     from paz6d.training.trainer import Trainer
 
     keras = kp.keras

@@ -1,9 +1,9 @@
 """Training pairs for the Augmented Autoencoder: (augmented input crop, clean target crop).
 
-From a pool of clean on-axis views (:mod:`paz6d.training.aae_views`) a sample picks a view and an
+From a pool of clean on-axis views (:mod:`paz6d.aae.views`) a sample picks a view and an
 in-plane angle, rotates the view about the principal point, and makes
 
-* the target: :func:`paz6d.models.aae.crop_object` of the clean view (object on black) around its box;
+* the target: :func:`paz6d.aae.model.crop_object` of the clean view (object on black) around its box;
 * the input: the object re-lit (per-channel gains, brightness gradient), composited over a random
   procedural background, partly covered by random occluders, cropped around a shifted and rescaled
   box, then colour-jittered (brightness, contrast, saturation, hue), blurred and noised.
@@ -19,8 +19,8 @@ import cv2
 import numpy as np
 
 from paz6d.backend import image as image_backend
-from paz6d.models.aae import crop_object
-from paz6d.training.aae_views import mask_box, rotate_view
+from paz6d.aae.model import crop_object
+from paz6d.aae.views import mask_box, rotate_view
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ class ViewSampler:
         augmentation: input augmentation strengths.
         seed: base seed of the data stream.
         background_bank: number of procedural backgrounds made once and reused (random crops/flips).
-        pairs: optional :class:`~paz6d.training.aae_dataset.CropPairs` from a data set (input crops of real
+        pairs: optional :class:`~paz6d.aae.dataset.CropPairs` from a data set (input crops of real
             or generated images, clean rendered targets); drawn with probability ``pair_fraction`` and
             then occluded and colour-jittered like the rendered views.
         pair_fraction: share of samples taken from ``pairs``.

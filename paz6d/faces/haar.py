@@ -2,7 +2,7 @@
 
 Example:
     >>> import skimage.data
-    >>> from paz6d.pipelines.haar import HaarCascadeDetector
+    >>> from paz6d.faces.haar import HaarCascadeDetector
     >>> boxes = HaarCascadeDetector("frontalface_default")(skimage.data.astronaut())
     >>> len(boxes)
     1

@@ -69,7 +69,7 @@ def _test_targets(dataset_root: Path) -> list[dict]:
 def _estimate(run_dir: Path, targets: list[dict]) -> tuple[list, float, object]:
     from tqdm.auto import tqdm
 
-    from paz6d.pipelines.implicit_pose import ImplicitPose6D
+    from paz6d.aae.pipeline import ImplicitPose6D
 
     estimator = ImplicitPose6D(run_dir, targets[0]["camera"])
     poses = []
@@ -125,7 +125,7 @@ def _overlay(image: np.ndarray, mask_gt: np.ndarray, mask_est: np.ndarray, box, 
     """``size``² crop around ``box`` with the outlines of the ground truth (green) and the estimate (red)."""
     import cv2
 
-    from paz6d.models.aae import crop_object
+    from paz6d.aae.model import crop_object
 
     canvas = crop_object(image, box, size, padding=1.5)
     for mask, color in ((mask_gt, (0, 255, 0)), (mask_est, (255, 40, 40))):
@@ -139,7 +139,7 @@ def _plot_grid(path: Path, estimator, targets, poses, mesh_path: Path, rows: int
     """Rows of: test crop (model input) / reconstruction / estimate overlay (green GT, red estimate)."""
     from paz6d.backend.image import save_image
     from paz6d.backend.mesh import load_mesh
-    from paz6d.models.aae import crop_object
+    from paz6d.aae.model import crop_object
     from renderers import Renderer
 
     mesh = load_mesh(mesh_path, 0.001)
@@ -197,7 +197,7 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     from data_gen.config import GenerationConfig
     from data_gen.generator import generate
     from paz6d.assets.demo_object import OBJECT_ID, write_demo_object
-    from paz6d.training.aae import QUICK, train_aae
+    from paz6d.aae.train import QUICK, train_aae
 
     config = QUICK if config is None else config
     if int(test_images) <= 0:
@@ -272,7 +272,7 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
 
 def run(args: argparse.Namespace) -> int:
     """Runs ``paz6d demo``."""
-    from paz6d.training.aae import QUICK
+    from paz6d.aae.train import QUICK
 
     config = QUICK
     if args.steps is not None:
@@ -281,7 +281,7 @@ def run(args: argparse.Namespace) -> int:
         config = replace(QUICK, steps=args.steps)
     report = run_demo(args.out, config, args.test_images, args.workers, args.platform)
     if args.keypoints:
-        from paz6d.keypoint_demo import run_keypoint_demo
+        from paz6d.demo.keypoint_demo import run_keypoint_demo
 
         run_keypoint_demo(Path(args.out) / "keypoints", Path(report["files"]["mesh"]), mesh_scale=0.001,
                           test_images=args.test_images, workers=args.workers)

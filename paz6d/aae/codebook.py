@@ -5,7 +5,7 @@ view sphere (a Fibonacci lattice; the paper uses the 2,562 vertices of a subdivi
 times ``in_plane`` rotations about the camera axis (paper: 36), i.e. ``R = R_z(angle) @ R_view``.
 Each codebook entry renders the object at ``T = (R, [0, 0, render_distance])`` (on the optical axis)
 with ``render_K``; ``render_boxes`` are the silhouette boxes of those renderings, used to recover
-translation from a test box (see :mod:`paz6d.pipelines.implicit_pose`).
+translation from a test box (see :mod:`paz6d.aae.pipeline`).
 
 Lookup is one batched matrix product of L2-normalised codes (cosine similarity) plus a top-k
 selection.

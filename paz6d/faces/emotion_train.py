@@ -10,7 +10,7 @@ Data (``--data``):
 
 Training uses the shared :class:`~paz6d.training.trainer.Trainer` (checkpoints, resume, CSV and
 TensorBoard logs). ``RUN_DIR`` receives ``model.keras`` and ``classes.json`` (what
-:class:`paz6d.pipelines.emotion.DetectEmotion` loads), ``metrics.json`` (validation accuracy and
+:class:`paz6d.faces.emotion.DetectEmotion` loads), ``metrics.json`` (validation accuracy and
 confusion matrix), ``confusion_matrix.png`` and, during training, ``validation.csv`` plus
 ``samples/step_*.png`` confusion matrices.
 """
@@ -144,7 +144,7 @@ class BatchSampler:
         self.steps_per_epoch = max(1, len(faces) // batch_size)
 
     def __call__(self, step: int):
-        from paz6d.models.xception import preprocess_faces
+        from paz6d.faces.xception import preprocess_faces
 
         epoch, position = divmod(int(step), self.steps_per_epoch)
         order = np.random.default_rng([self.seed, epoch]).permutation(len(self.faces))
@@ -232,7 +232,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--{name.replace('_', '-')}: expected a positive integer, got {getattr(args, name)}")
     data = load_emotion_data(args.data, args.val_fraction, args.seed)  # before TensorFlow: bad data fails fast
     from paz6d.backend.tensorflow_guard import import_keras
-    from paz6d.models.xception import mini_xception, preprocess_faces
+    from paz6d.faces.xception import mini_xception, preprocess_faces
     from paz6d.training.trainer import Trainer
 
     keras = import_keras()

@@ -1,0 +1,1 @@
+"""Faces: Haar cascade detection, eigen/fisherfaces, emotion (mini-Xception) and head pose."""
