@@ -1,0 +1,80 @@
+"""The package import graph has no cycles and the backend imports nothing above it.
+
+Packages are the top-level folders (``renderers``, ``data_gen``, ``evaluation``) and the first-level
+packages of ``paz6d`` (``paz6d.backend``, ``paz6d.aae``, ...). Every import counts, including those
+inside functions, so a cycle cannot hide behind a deferred import.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+TOP_LEVEL = ("paz6d", "renderers", "data_gen", "evaluation")
+
+
+def package_of(module: str) -> str:
+    parts = module.split(".")
+    return ".".join(parts[:2]) if parts[0] == "paz6d" and len(parts) > 1 else parts[0]
+
+
+def imported_modules(tree: ast.AST) -> list[str]:
+    names = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.append(node.module)
+        elif isinstance(node, ast.Import):
+            names.extend(alias.name for alias in node.names)
+    return [name for name in names if name.split(".")[0] in TOP_LEVEL]
+
+
+def package_graph() -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = {}
+    for top in TOP_LEVEL:
+        for path in (ROOT / top).rglob("*.py"):
+            module = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+            source = package_of(module)
+            targets = graph.setdefault(source, set())
+            for name in imported_modules(ast.parse(path.read_text(encoding="utf-8"))):
+                target = package_of(name)
+                if target not in (source, "paz6d"):
+                    targets.add(target)
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One cycle as a list of packages (first == last), or None; depth-first search."""
+    state: dict[str, int] = {}
+    path: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        path.append(node)
+        for target in sorted(graph.get(node, ())):
+            if state.get(target) == 1:
+                return path[path.index(target):] + [target]
+            if target not in state and (cycle := visit(target)):
+                return cycle
+        state[node] = 2
+        path.pop()
+        return None
+
+    for node in sorted(graph):
+        if node not in state and (cycle := visit(node)):
+            return cycle
+    return None
+
+
+def test_find_cycle_detects_a_planted_cycle():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_no_import_cycle_between_packages():
+    cycle = find_cycle(package_graph())
+    assert cycle is None, f"import cycle between packages: {' -> '.join(cycle)}"
+
+
+def test_backend_imports_nothing_above_it():
+    assert package_graph()["paz6d.backend"] == set()
