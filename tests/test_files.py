@@ -1,6 +1,8 @@
 """Crash-safe writers of paz6d.backend.files: complete files or none, no temporaries left behind."""
 
 import csv
+import os
+import stat
 
 import numpy as np
 import pytest
@@ -63,3 +65,43 @@ def test_json_rejects_nan_without_writing(tmp_path):
         write_json_atomically(path, {"recall": float("nan")})
     assert load_json(path) == {"recall": 0.7}
     assert leftovers(tmp_path) == []
+
+
+def test_outputs_respect_the_umask(tmp_path):
+    previous = os.umask(0o022)
+    try:
+        write_json_atomically(tmp_path / "shared.json", {"a": 1})
+        os.umask(0o077)
+        write_json_atomically(tmp_path / "private.json", {"a": 1})
+    finally:
+        os.umask(previous)
+    assert stat.S_IMODE((tmp_path / "shared.json").stat().st_mode) == 0o644
+    assert stat.S_IMODE((tmp_path / "private.json").stat().st_mode) == 0o600
+
+
+@pytest.mark.parametrize("kind", ["symlink", "folder", "fifo"])
+def test_non_regular_targets_are_refused_and_left_alone(tmp_path, kind):
+    target = tmp_path / "out.json"
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    if kind == "symlink":
+        target.symlink_to(victim)
+    elif kind == "folder":
+        target.mkdir()
+    else:
+        os.mkfifo(target)
+    with pytest.raises(ValueError, match="refusing to replace"):
+        write_json_atomically(target, {"a": 1})
+    assert victim.read_text() == "keep me"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(TEMPORARY_PREFIX)]
+
+
+def test_device_target_is_refused():
+    with pytest.raises(ValueError, match="/dev/null: refusing to replace a device"):
+        write_json_atomically("/dev/null", {"a": 1})
+
+
+def test_file_in_place_of_a_folder_is_a_clear_error(tmp_path):
+    (tmp_path / "blocker").write_text("")
+    with pytest.raises(ValueError, match="blocker"):
+        write_json_atomically(tmp_path / "blocker" / "out.json", {"a": 1})

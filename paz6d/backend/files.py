@@ -11,6 +11,7 @@ import csv
 import io
 import json
 import os
+import stat
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -21,15 +22,59 @@ import numpy as np
 TEMPORARY_PREFIX = ".paz6d-tmp-"
 
 
+def _current_umask() -> int:
+    """The process umask, read without changing it where Linux shows it (no window in which
+    other threads would create files with a zero umask)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except OSError:
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def prepare_output_file(path: str | Path) -> Path:
+    """Checks that ``path`` may receive an output file and creates its folder.
+
+    Only a missing path or an existing regular file may be (re)placed: a symbolic link, folder,
+    device, FIFO or socket at ``path`` is refused, as is a parent that is not a folder.
+
+    Raises:
+        ValueError: naming ``path`` and what stands there.
+    """
+    path = Path(path)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    except NotADirectoryError as error:
+        raise ValueError(f"{path}: a parent of this output path is a file, not a folder") from error
+    if mode is not None and not stat.S_ISREG(mode):
+        kind = ("a symbolic link" if stat.S_ISLNK(mode) else "a folder" if stat.S_ISDIR(mode)
+                else "a device, FIFO or socket")
+        raise ValueError(f"{path}: refusing to replace {kind} with an output file; "
+                         "give the path of a new or existing regular file")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError) as error:
+        raise ValueError(f"{path}: cannot create its folder {path.parent} (a file stands in the way)") from error
+    return path
+
+
 @contextmanager
 def atomic_output(path: str | Path) -> Iterator[BinaryIO]:
     """A binary stream whose content appears at ``path`` (``os.replace``) only when the block ends
-    without an exception; otherwise the temporary file in the same folder is removed."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    without an exception; otherwise the temporary file in the same folder is removed. The file
+    gets the permissions of a newly created file (``0o666`` less the umask), as ``open`` would
+    give it. See :func:`prepare_output_file` for the paths that are refused."""
+    path = prepare_output_file(path)
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=TEMPORARY_PREFIX + path.name + ".")
     try:
         with os.fdopen(handle, "wb") as stream:
+            os.fchmod(stream.fileno(), 0o666 & ~_current_umask())
             yield stream
         os.replace(temporary, path)
     except BaseException:
@@ -99,8 +144,6 @@ def new_figure(width: float, height: float, dpi: int = 100):
 
 def save_figure_atomically(figure, path: str | Path) -> Path:
     """Saves a matplotlib figure as PNG atomically and returns the path."""
-    import io
-
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png")
     return write_bytes_atomically(path, buffer.getvalue())
@@ -111,7 +154,7 @@ def save_keras_model_atomically(model, path: str | Path) -> Path:
     path = Path(path)
     if path.suffix != ".keras":
         raise ValueError(f"path: expected a file name ending in .keras, got {path}")
-    path.parent.mkdir(parents=True, exist_ok=True)
+    prepare_output_file(path)
     temporary = path.with_name(TEMPORARY_PREFIX + path.stem + ".keras")
     try:
         model.save(temporary)
