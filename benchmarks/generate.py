@@ -73,10 +73,10 @@ def bare_loop(config: GenerationConfig, producer: ImageProducer, count: int) -> 
 
 def generator_steady(config: GenerationConfig, producer: ImageProducer, count: int) -> float:
     """Views/s of the generator's own loop (render + annotate + write) after start-up."""
-    config.output.mkdir(parents=True, exist_ok=True)
-    render_indices(producer, [count], config.output, lambda _: None)  # warm-up image
+    config.out.mkdir(parents=True, exist_ok=True)
+    render_indices(producer, [count], config.out, lambda _: None)  # warm-up image
     started = time.perf_counter()
-    render_indices(producer, range(count), config.output, lambda _: None)
+    render_indices(producer, range(count), config.out, lambda _: None)
     return count / (time.perf_counter() - started)
 
 
@@ -84,7 +84,7 @@ def end_to_end(config: GenerationConfig, workers: int) -> tuple[float, float]:
     """``(views/s including start-up, views/s once every worker runs)``; the second comes from
     the finishing times of the images' shard files, skipping each worker's first two images."""
     summary = generate(config, workers=workers, show_progress=False)
-    shards = config.output / ".paz6d-generate" / "shards"
+    shards = config.out / ".paz6d-generate" / "shards"
     finished = sorted(path.stat().st_mtime for path in shards.rglob("*.json"))
     skip = 2 * workers
     span = finished[-1] - finished[skip - 1] if len(finished) > skip + 1 else 0.0
@@ -110,17 +110,17 @@ def pinned_running_rate(config: GenerationConfig, workers: int, cores: int) -> f
 
 def measure(meshes: list[Path], width: int, height: int, count: int, antialias: str, rgb_format: str,
             workdir: Path) -> dict:
-    config = GenerationConfig(meshes=tuple(meshes), output=workdir / "steady", num_images=count, width=width,
-                              height=height, scale=0.001, objects_per_image=(1, 1), distractors=0,
+    config = GenerationConfig(meshes=tuple(meshes), out=workdir / "steady", num_images=count, width=width,
+                              height=height, mesh_scale=0.001, objects_per_image=(1, 1), distractors=0,
                               occluder_probability=0.0, antialias=antialias, rgb_format=rgb_format)
     producer = ImageProducer(config)
     steady = generator_steady(config, producer, count)
     bare, bare_renderer = bare_loop(config, producer, count)
     producer.close()
     bare_renderer.delete()
-    one, one_running = end_to_end(dataclasses.replace(config, output=workdir / "one"), 1)
-    two, two_running = end_to_end(dataclasses.replace(config, output=workdir / "two"), 2)
-    one_core = pinned_running_rate(dataclasses.replace(config, output=workdir / "one_core"), 1, 1)
+    one, one_running = end_to_end(dataclasses.replace(config, out=workdir / "one"), 1)
+    two, two_running = end_to_end(dataclasses.replace(config, out=workdir / "two"), 2)
+    one_core = pinned_running_rate(dataclasses.replace(config, out=workdir / "one_core"), 1, 1)
     return {"bare": bare, "steady": steady, "one": one, "two": two, "one_running": one_running,
             "two_running": two_running, "one_core": one_core}
 

@@ -77,7 +77,7 @@ def _load_meshes(config: GenerationConfig) -> list[trimesh.Trimesh]:
     meshes = []
     for path in config.meshes:
         try:
-            mesh = load_mesh(path, scale=config.scale)
+            mesh = load_mesh(path, scale=config.mesh_scale)
         except MeshError as error:
             raise ValueError(f"mesh: {error}") from error
         if mesh.area <= 0:

@@ -34,16 +34,16 @@ def image_location(index: int, images_per_scene: int) -> tuple[int, int]:
 
 
 def scene_folder(config: GenerationConfig, scene_id: int) -> Path:
-    return config.output / config.split / f"{scene_id:06d}"
+    return config.out / config.split / f"{scene_id:06d}"
 
 
 def shard_path(config: GenerationConfig, index: int) -> Path:
     scene_id, im_id = image_location(index, config.images_per_scene)
-    return config.output / STATE_FOLDER / "shards" / config.split / f"{scene_id:06d}" / f"{im_id:06d}.json"
+    return config.out / STATE_FOLDER / "shards" / config.split / f"{scene_id:06d}" / f"{im_id:06d}.json"
 
 
 def shard_relative_path(config: GenerationConfig, index: int) -> str:
-    return str(shard_path(config, index).relative_to(config.output))
+    return str(shard_path(config, index).relative_to(config.out))
 
 
 def image_relative_paths(config: GenerationConfig, index: int, instance_count: int) -> dict[str, str]:
@@ -61,14 +61,14 @@ def image_relative_paths(config: GenerationConfig, index: int, instance_count: i
 
 def write_state(config: GenerationConfig) -> None:
     """Records the run's fingerprint; raises ``ValueError`` if the folder holds a different run."""
-    path = config.output / STATE_FOLDER / "config.json"
+    path = config.out / STATE_FOLDER / "config.json"
     fingerprint = config.fingerprint()
     if path.exists():
         previous = json.loads(path.read_text())
         if previous != fingerprint:
             keys = set(previous) | set(fingerprint)
             changed = sorted(key for key in keys if previous.get(key) != fingerprint.get(key))
-            raise ValueError(f"output: {config.output} holds a data set generated with other settings "
+            raise ValueError(f"out: {config.out} holds a data set generated with other settings "
                              f"({', '.join(changed)} differ); use another --out or the same settings to resume")
         return
     write_json_atomically(path, fingerprint)
@@ -77,7 +77,7 @@ def write_state(config: GenerationConfig) -> None:
 def write_static_files(config: GenerationConfig, assets: Assets) -> list[Path]:
     """``camera.json``, ``models/obj_XXXXXX.ply`` (mm, vertex colours) and ``models_info.json``."""
     K = np.asarray(config.K)
-    written = [config.output / "camera.json"]
+    written = [config.out / "camera.json"]
     write_json_atomically(written[0], {"cx": K[0, 2], "cy": K[1, 2], "depth_scale": config.depth_scale,
                                        "fx": K[0, 0], "fy": K[1, 1], "height": config.height,
                                        "width": config.width})
@@ -87,7 +87,7 @@ def write_static_files(config: GenerationConfig, assets: Assets) -> list[Path]:
         if millimetres.visual.kind == "texture":
             millimetres.visual = millimetres.visual.to_color()
         millimetres.apply_scale(1000.0)
-        path = config.output / "models" / f"obj_{object_id:06d}.ply"
+        path = config.out / "models" / f"obj_{object_id:06d}.ply"
         write_bytes_atomically(path, millimetres.export(file_type="ply", encoding="binary"))
         written.append(path)
         low, high = bounding_box(millimetres.vertices)
@@ -96,7 +96,7 @@ def write_static_files(config: GenerationConfig, assets: Assets) -> list[Path]:
                 "size_z": float(high[2] - low[2])}
         info.update(assets.symmetries.get(object_id, {}))
         models_info[str(object_id)] = info
-    written.append(config.output / "models" / "models_info.json")
+    written.append(config.out / "models" / "models_info.json")
     write_json_atomically(written[-1], models_info)
     return written
 
@@ -172,6 +172,6 @@ def merge_scenes(config: GenerationConfig, object_ids: list[int]) -> list[Path]:
             write_json_atomically(folder / name, data)
             written.append(folder / name)
     if config.split == "test":
-        write_json_atomically(config.output / "test_targets_bop19.json", targets)
-        written.append(config.output / "test_targets_bop19.json")
+        write_json_atomically(config.out / "test_targets_bop19.json", targets)
+        written.append(config.out / "test_targets_bop19.json")
     return written

@@ -10,10 +10,13 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from paz6d.cli_options import option
+from renderers.platform import PLATFORMS
 from renderers.renderer import ANTIALIAS_MODES
 
 ROTATION_MODES = ("so3", "view-sphere")
 RGB_FORMATS = ("png", "jpg")
+BACKENDS = ("local", "ray")  # where images are rendered: local processes or Ray actors
 BACKGROUND_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 
 
@@ -42,89 +45,70 @@ def _fraction(value: float, name: str) -> float:
 
 @dataclass(frozen=True)
 class GenerationConfig:
-    """Everything that determines a generated data set (plus how to run it).
+    """Everything that determines a generated data set; each field is also a ``paz6d generate`` flag
+    (:mod:`paz6d.cli_options`: ``mesh_scale`` is ``--mesh-scale``, help text in the field).
 
-    Lengths are metres unless a field says otherwise; BOP files on disk are millimetres.
-
-    Attributes:
-        meshes: mesh files (PLY/OBJ/GLB/...); object ids come from ``obj_XXXXXX`` file names when
-            every file is named so, else 1, 2, ... in the given order.
-        output: output folder (BOP layout).
-        num_images: number of images.
-        width, height: image size in pixels.
-        seed: master seed; image ``i`` uses ``SeedSequence([seed, i])``.
-        split: BOP split folder name (``train``, ``val``, ``test``...).
-        scale: factor from mesh file units to metres (0.001 for BOP meshes in mm).
-        intrinsics: ``(fx, fy, cx, cy)`` pixels; default ``fx = fy = 0.9 * width``, centre pixel.
-        objects_per_image: ``(min, max)`` annotated objects per image.
-        distance: ``(min, max)`` camera-to-object-centre distance in metres; default from the
-            largest mesh so that it spans 15 %...60 % of the shorter image side.
-        rotation: ``"so3"`` (uniform) or ``"view-sphere"`` (viewpoint on a sphere + in-plane angle).
-        inplane_degrees: maximum absolute in-plane rotation for ``view-sphere``.
-        elevation_degrees: ``(min, max)`` viewpoint elevation for ``view-sphere``.
-        distractors: maximum number of unannotated distractor primitives per image.
-        occluder_probability: chance that a primitive is put between the camera and an object.
-        backgrounds: folder of background images (procedural backgrounds when ``None``).
-        light_count: ``(min, max)`` number of random lights.
-        color_jitter: objects' base colour is multiplied by ``U(1 - j, 1 + j)`` per channel.
-        blur_probability: chance of a Gaussian blur of the final image.
-        noise_std: maximum standard deviation (grey levels) of the Gaussian image noise (added
-            to half of the images).
-        depth_scale: BOP depth scale: depth PNG value × ``depth_scale`` = millimetres.
-        images_per_scene: images per ``<split>/<scene>`` folder.
-        crop_size: side in pixels of per-object crops written for autoencoder training (0: off).
-        symmetries: JSON file ``{obj_id: {"symmetries_discrete": [...], "symmetries_continuous": [...]}}``
-            copied into ``models_info.json`` (BOP units: mm).
-        rgb_format: ``"png"`` (lossless) or ``"jpg"`` (quality 95, as BOP's PBR sets; faster).
-        antialias: ``"edges"`` (single-sample render with softened object outlines), ``"msaa"``
-            (4× multisampled colour: ~2x slower on llvmpipe) or ``"none"``; see
-            :class:`renderers.Renderer`.
-        platform: OpenGL platform for the renderers (``egl``/``osmesa``/auto).
+    Lengths are metres unless a field says otherwise; BOP files on disk are millimetres. Image ``i``
+    uses the seed ``SeedSequence([seed, i])``, so it does not depend on ``num_images``.
     """
 
-    meshes: tuple[Path, ...]
-    output: Path
-    num_images: int
-    width: int = 640
-    height: int = 480
-    seed: int = 0
-    split: str = "train"
-    scale: float = 1.0
-    intrinsics: tuple[float, float, float, float] | None = None
-    objects_per_image: tuple[int, int] = (1, 3)
-    distance: tuple[float, float] | None = None
-    rotation: str = "so3"
-    inplane_degrees: float = 180.0
-    elevation_degrees: tuple[float, float] = (-90.0, 90.0)
-    distractors: int = 2
-    occluder_probability: float = 0.3
-    backgrounds: Path | None = None
-    light_count: tuple[int, int] = (1, 3)
-    color_jitter: float = 0.2
-    blur_probability: float = 0.3
-    noise_std: float = 4.0
-    depth_scale: float = 0.1
-    images_per_scene: int = 1000
-    crop_size: int = 0
-    symmetries: Path | None = None
-    rgb_format: str = "png"
-    antialias: str = "edges"
-    platform: str | None = None
+    meshes: tuple[Path, ...] = option(
+        help="mesh files (PLY/OBJ/GLB/GLTF), one per object. Object ids come from obj_XXXXXX file names "
+             "when every file is named so, else 1, 2, ... in the given order", metavar="PATH")
+    out: Path = option(help="output folder (BOP layout)")
+    num_images: int = option(help="number of images")
+    width: int = option(640, "image width (pixels)")
+    height: int = option(480, "image height (pixels)")
+    seed: int = option(0, "master seed (image i uses SeedSequence([seed, i]))")
+    split: str = option("train", "BOP split folder name (train, val, test, ...)")
+    mesh_scale: float = option(1.0, "mesh file units to metres (0.001 for BOP meshes in millimetres)")
+    intrinsics: tuple[float, float, float, float] | None = option(
+        None, "camera intrinsics in pixels (default fx = fy = 0.9 width, centre pixel)",
+        metavar=("FX", "FY", "CX", "CY"))
+    objects_per_image: tuple[int, int] = option((1, 3), "annotated objects per image", metavar=("MIN", "MAX"))
+    distance: tuple[float, float] | None = option(
+        None, "camera-to-object-centre distance range in metres (default: the largest mesh spans 15 %...60 % "
+              "of the shorter image side)", metavar=("MIN", "MAX"))
+    rotation: str = option("so3", "object rotations: uniform (so3) or a viewpoint on a sphere plus an "
+                                  "in-plane angle (view-sphere)", choices=ROTATION_MODES)
+    inplane_degrees: float = option(180.0, "maximum absolute in-plane angle (degrees), view-sphere")
+    elevation_degrees: tuple[float, float] = option((-90.0, 90.0), "viewpoint elevation range (degrees), "
+                                                    "view-sphere", metavar=("MIN", "MAX"))
+    distractors: int = option(2, "maximum number of unannotated distractor primitives per image")
+    occluder_probability: float = option(0.3, "chance that a primitive is put between the camera and an object")
+    backgrounds: Path | None = option(None, "folder of background images (default: procedural backgrounds)")
+    light_count: tuple[int, int] = option((1, 3), "number of random lights", metavar=("MIN", "MAX"))
+    color_jitter: float = option(0.2, "objects' base colour is multiplied by U(1 - j, 1 + j) per channel")
+    blur_probability: float = option(0.3, "chance of a Gaussian blur of the final image")
+    noise_std: float = option(4.0, "maximum standard deviation (grey levels) of the Gaussian image noise, "
+                                   "added to half of the images")
+    depth_scale: float = option(0.1, "BOP depth scale: depth PNG value x depth_scale = millimetres")
+    images_per_scene: int = option(1000, "images per <split>/<scene> folder")
+    crop_size: int = option(0, "side in pixels of per-object crops written for autoencoder training (0: off)")
+    symmetries: Path | None = option(
+        None, "JSON file {obj_id: {symmetries_discrete: [...], symmetries_continuous: [...]}} copied into "
+              "models_info.json (BOP units: mm)")
+    rgb_format: str = option("png", "rgb images: lossless png or jpg (quality 95, like BOP PBR sets; faster)",
+                             choices=RGB_FORMATS)
+    antialias: str = option(
+        "edges", "edges: one single-sample pass with softened object outlines; msaa: 4x multisampled colour, "
+                 "~2x slower; none: binary outlines (see renderers.Renderer)", choices=ANTIALIAS_MODES)
+    platform: str | None = option(None, "OpenGL platform of the renderers (default: auto)", choices=PLATFORMS)
 
     def __post_init__(self):
         meshes = tuple(Path(path) for path in self.meshes)
         if not meshes:
-            raise ValueError("meshes: expected at least one --mesh file")
+            raise ValueError("meshes: expected at least one mesh file")
         object.__setattr__(self, "meshes", meshes)
-        object.__setattr__(self, "output", Path(self.output))
+        object.__setattr__(self, "out", Path(self.out))
         for name in ("num_images", "width", "height", "images_per_scene"):
             _positive_int(getattr(self, name), name)
         if isinstance(self.seed, bool) or int(self.seed) != self.seed or self.seed < 0:
             raise ValueError(f"seed: expected a non-negative integer, got {self.seed!r}")
         if not self.split or "/" in self.split or self.split.startswith("."):
             raise ValueError(f"split: expected a plain folder name, got {self.split!r}")
-        if not math.isfinite(self.scale) or self.scale <= 0:
-            raise ValueError(f"scale: expected a positive number (file units to metres), got {self.scale}")
+        if not math.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
+            raise ValueError(f"mesh_scale: expected a positive number (file units to metres), got {self.mesh_scale}")
         if self.intrinsics is not None:
             fx, fy, cx, cy = self.intrinsics
             if not all(math.isfinite(v) for v in self.intrinsics) or fx <= 0 or fy <= 0:
@@ -178,12 +162,27 @@ class GenerationConfig:
         set can be extended by re-running with a larger number.
         """
         data = dataclasses.asdict(self)
-        for name in ("output", "num_images", "platform"):
+        for name in ("out", "num_images", "platform"):
             data.pop(name)
+        data["scale"] = data.pop("mesh_scale")  # the key data sets made before the field's rename hold
         data["meshes"] = [str(path.resolve()) for path in self.meshes]
         for name in ("backgrounds", "symmetries"):
             data[name] = None if data[name] is None else str(Path(data[name]).resolve())
         return json.loads(json.dumps(data))
+
+
+@dataclass(frozen=True)
+class GenerationRun:
+    """How a ``paz6d generate`` run is executed (no influence on the images); each field is a flag.
+
+    Checked by :func:`data_gen.generator.generate`, whose keyword arguments these are.
+    """
+
+    workers: int = option(1, "worker processes (Ray actors with --backend ray)")
+    backend: str = option("local", "local: processes on this machine; ray: Ray actors (needs the ray extra)",
+                          choices=BACKENDS)
+    ray_address: str | None = option(None, "Ray cluster address, e.g. ray://head:10001 (default: start a local Ray)")
+    progress: bool = option(True, "progress bar on stderr")
 
 
 def check_output_writable(output: Path) -> None:
@@ -194,16 +193,16 @@ def check_output_writable(output: Path) -> None:
     """
     output = Path(output)
     if output.exists() and not output.is_dir():
-        raise ValueError(f"output: {output} exists and is not a folder")
+        raise ValueError(f"out: {output} exists and is not a folder")
     existing = output
     while not existing.exists():
         existing = existing.parent
     if not existing.is_dir():
-        raise ValueError(f"output: {existing} (an ancestor of {output}) is not a folder")
+        raise ValueError(f"out: {existing} (an ancestor of {output}) is not a folder")
     try:  # os.access says yes to root even where writes fail (read-only mounts, /proc)
         handle, probe = tempfile.mkstemp(dir=existing, prefix=".paz6d-write-probe-")
     except OSError as error:
-        raise ValueError(f"output: cannot write in {existing} ({error.strerror})") from error
+        raise ValueError(f"out: cannot write in {existing} ({error.strerror})") from error
     os.close(handle)
     os.unlink(probe)
 

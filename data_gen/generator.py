@@ -18,10 +18,9 @@ from tqdm import tqdm
 
 from data_gen import bop_writer
 from data_gen.assets import Assets, load_assets
-from data_gen.config import GenerationConfig, check_output_writable
+from data_gen.config import BACKENDS, GenerationConfig, check_output_writable
 from data_gen.files import remove_stale_temporaries
 
-BACKENDS = ("local", "ray")
 
 
 @dataclass
@@ -83,7 +82,7 @@ def _start_worker(config: GenerationConfig, raster_threads: int) -> None:
 
 
 def _work(indices: list[int]) -> tuple[int, int]:
-    written = render_indices(_worker_producer, indices, _worker_producer.config.output, lambda count: None)
+    written = render_indices(_worker_producer, indices, _worker_producer.config.out, lambda count: None)
     return len(indices), written
 
 
@@ -97,7 +96,7 @@ def _run_local(config: GenerationConfig, assets: Assets, pending: list[int], wor
 
         producer = ImageProducer(config, assets)
         try:
-            return render_indices(producer, pending, config.output, progress.update)
+            return render_indices(producer, pending, config.out, progress.update)
         finally:
             producer.close()
     chunk = max(1, min(8, len(pending) // (4 * workers)))
@@ -134,11 +133,11 @@ def generate(config: GenerationConfig, workers: int = 1, backend: str = "local",
 
         import_ray()
     assets = load_assets(config)
-    check_output_writable(config.output)
+    check_output_writable(config.out)
     started = time.perf_counter()
-    config.output.mkdir(parents=True, exist_ok=True)
+    config.out.mkdir(parents=True, exist_ok=True)
     bop_writer.write_state(config)
-    remove_stale_temporaries(config.output)
+    remove_stale_temporaries(config.out)
     written = len(bop_writer.write_static_files(config, assets))
     pending = [index for index in range(config.num_images) if not bop_writer.shard_path(config, index).exists()]
     with tqdm(total=config.num_images, initial=config.num_images - len(pending), unit="img",

@@ -55,7 +55,7 @@ def run_with_ray(config: GenerationConfig, pending: list[int], workers: int, add
         written = 0
         for results in pool.map_unordered(lambda actor, chunk: actor.produce.remote(chunk), chunks):
             for files in results:
-                written += write_files(config.output, files)
+                written += write_files(config.out, files)
                 progress.update(1)
         for actor in actors:
             ray.kill(actor)

@@ -207,7 +207,7 @@ def test_training_from_a_generated_data_set(toy_run, tmp_path):
 
     root, mesh, _ = toy_run
     data = tmp_path / "data"
-    generate(GenerationConfig(meshes=(mesh,), output=data, num_images=3, seed=5, scale=0.001, objects_per_image=(1, 1),
+    generate(GenerationConfig(meshes=(mesh,), out=data, num_images=3, seed=5, mesh_scale=0.001, objects_per_image=(1, 1),
                               crop_size=TOY.crop_size), workers=1, show_progress=False)
     summary = train_aae(mesh, tmp_path / "run", replace(TOY, steps=10), mesh_scale=0.001, workers=0, progress=False,
                         dataset=data, object_id=1)
@@ -238,8 +238,8 @@ def test_estimate_command_writes_bop_results_that_evaluate_scores(toy_run, tmp_p
 
     root, mesh, _ = toy_run
     dataset = tmp_path / "set"
-    generate(GenerationConfig(meshes=(mesh,), output=dataset, num_images=3, width=160, height=120, seed=5,
-                              split="test", scale=0.001, objects_per_image=(1, 1), distractors=0,
+    generate(GenerationConfig(meshes=(mesh,), out=dataset, num_images=3, width=160, height=120, seed=5,
+                              split="test", mesh_scale=0.001, objects_per_image=(1, 1), distractors=0,
                               occluder_probability=0.0), workers=1, show_progress=False)
     visible = [(sample.im_id, instance.T_model2cam) for sample in BOPDataset(dataset, "test")
                for instance in sample.objects if instance.info["visib_fract"] >= 0.1]

@@ -39,7 +39,7 @@ def lmo_meshes(shared_data) -> tuple[Path, Path]:
 
 
 def tiny_config(meshes, out: Path, **overrides) -> GenerationConfig:
-    settings = dict(meshes=tuple(meshes), output=out, num_images=4, width=96, height=72, seed=7, scale=0.001,
+    settings = dict(meshes=tuple(meshes), out=out, num_images=4, width=96, height=72, seed=7, mesh_scale=0.001,
                     objects_per_image=(1, 2), crop_size=32, occluder_probability=0.5, images_per_scene=3)
     settings.update(overrides)
     return GenerationConfig(**settings)
@@ -60,7 +60,7 @@ def generated(lmo_meshes, tmp_path_factory):
 def test_summary_counts_files(generated):
     config, summary = generated
     assert summary.images_rendered == 4 and summary.images_skipped == 0
-    files = [path for path in config.output.rglob("*") if path.is_file()]
+    files = [path for path in config.out.rglob("*") if path.is_file()]
     assert summary.files_written == len(files) - 1  # everything but the run's fingerprint file
     assert not [path for path in files if ".paz6d-tmp-" in path.name]
 
@@ -68,7 +68,7 @@ def test_summary_counts_files(generated):
 def test_poses_round_trip_through_the_bop_reader(generated):
     config, _ = generated
     assets = load_assets(config)
-    samples = list(BOPDataset(config.output, split="train"))
+    samples = list(BOPDataset(config.out, split="train"))
     assert [(s.scene_id, s.im_id) for s in samples] == [(0, 0), (0, 1), (0, 2), (1, 0)]
     for index, sample in enumerate(samples):
         scene = sample_scene(image_generator(config.seed, index), assets, config)
@@ -82,7 +82,7 @@ def test_poses_round_trip_through_the_bop_reader(generated):
 def test_masks_depth_and_gt_info_agree(generated, lmo_meshes):
     config, _ = generated
     meshes = {1: load_mesh(lmo_meshes[0], 0.001), 5: load_mesh(lmo_meshes[1], 0.001)}
-    for sample in BOPDataset(config.output, split="train"):
+    for sample in BOPDataset(config.out, split="train"):
         for obj in sample.objects:
             info = obj.info
             assert obj.mask.sum() == info["px_count_all"] and obj.mask_visib.sum() == info["px_count_visib"]
@@ -104,17 +104,17 @@ def test_masks_depth_and_gt_info_agree(generated, lmo_meshes):
 
 def test_depth_png_uses_depth_scale(generated):
     config, _ = generated
-    depth_png = cv2.imread(str(config.output / "train" / "000000" / "depth" / "000000.png"), cv2.IMREAD_UNCHANGED)
-    sample = next(iter(BOPDataset(config.output, split="train")))
+    depth_png = cv2.imread(str(config.out / "train" / "000000" / "depth" / "000000.png"), cv2.IMREAD_UNCHANGED)
+    sample = next(iter(BOPDataset(config.out, split="train")))
     assert depth_png.dtype == np.uint16
     np.testing.assert_allclose(sample.depth, depth_png * config.depth_scale / 1000.0, rtol=1e-6)
-    camera = json.loads((config.output / "camera.json").read_text())
+    camera = json.loads((config.out / "camera.json").read_text())
     assert camera["depth_scale"] == config.depth_scale and camera["width"] == 96
 
 
 def test_coco_file_loads_in_pycocotools_and_matches_gt_info(generated):
     config, _ = generated
-    folder = config.output / "train" / "000000"
+    folder = config.out / "train" / "000000"
     coco = COCO(str(folder / "scene_gt_coco.json"))
     gt_info = json.loads((folder / "scene_gt_info.json").read_text())
     scene_gt = json.loads((folder / "scene_gt.json").read_text())
@@ -133,10 +133,10 @@ def test_coco_file_loads_in_pycocotools_and_matches_gt_info(generated):
 
 def test_models_are_written_in_millimetres_with_official_diameters(generated, lmo_meshes, shared_data):
     config, _ = generated
-    info = load_models_info(config.output / "models" / "models_info.json")
+    info = load_models_info(config.out / "models" / "models_info.json")
     official = load_models_info(shared_data / "bop_lmo" / "models" / "models_info.json")
     for obj_id, source in zip((1, 5), lmo_meshes):
-        written = trimesh.load(config.output / "models" / f"obj_{obj_id:06d}.ply", process=False)
+        written = trimesh.load(config.out / "models" / f"obj_{obj_id:06d}.ply", process=False)
         original = trimesh.load(source, process=False)
         np.testing.assert_allclose(written.vertices, original.vertices, atol=1e-4)  # float32 PLY, mm
         np.testing.assert_array_equal(written.visual.vertex_colors, original.visual.vertex_colors)
@@ -146,7 +146,7 @@ def test_models_are_written_in_millimetres_with_official_diameters(generated, lm
 
 def test_crops_have_consistent_intrinsics_and_masks(generated, lmo_meshes):
     config, _ = generated
-    folder = config.output / "train" / "000000"
+    folder = config.out / "train" / "000000"
     crops = json.loads((folder / "crops.json").read_text())
     meshes = {1: load_mesh(lmo_meshes[0], 0.001), 5: load_mesh(lmo_meshes[1], 0.001)}
     checked = 0
@@ -172,26 +172,26 @@ def test_crops_have_consistent_intrinsics_and_masks(generated, lmo_meshes):
 
 def test_same_seed_same_bytes_for_any_worker_count(generated, tmp_path):
     config, _ = generated
-    parallel = dataclasses.replace(config, output=tmp_path / "parallel")
+    parallel = dataclasses.replace(config, out=tmp_path / "parallel")
     generate(parallel, workers=2, show_progress=False)
-    reference = tree_digest(config.output)
-    assert tree_digest(parallel.output) == reference
-    other_seed = dataclasses.replace(config, output=tmp_path / "other", seed=8, num_images=1)
+    reference = tree_digest(config.out)
+    assert tree_digest(parallel.out) == reference
+    other_seed = dataclasses.replace(config, out=tmp_path / "other", seed=8, num_images=1)
     generate(other_seed, workers=1, show_progress=False)
-    assert tree_digest(other_seed.output)["train/000000/rgb/000000.png"] != reference["train/000000/rgb/000000.png"]
+    assert tree_digest(other_seed.out)["train/000000/rgb/000000.png"] != reference["train/000000/rgb/000000.png"]
 
 
 def test_extending_a_finished_set_renders_only_new_images(generated, tmp_path):
     config, _ = generated
-    smaller = dataclasses.replace(config, output=tmp_path / "grow", num_images=2)
+    smaller = dataclasses.replace(config, out=tmp_path / "grow", num_images=2)
     generate(smaller, show_progress=False)
     summary = generate(dataclasses.replace(smaller, num_images=4), show_progress=False)
     assert (summary.images_rendered, summary.images_skipped) == (2, 2)
-    assert tree_digest(smaller.output) == tree_digest(config.output)
+    assert tree_digest(smaller.out) == tree_digest(config.out)
 
 
 def resume_config(mesh: Path, out: Path) -> GenerationConfig:
-    return GenerationConfig(meshes=(mesh,), output=out, num_images=30, width=128, height=96, seed=3, scale=0.001,
+    return GenerationConfig(meshes=(mesh,), out=out, num_images=30, width=128, height=96, seed=3, mesh_scale=0.001,
                             objects_per_image=(1, 1), images_per_scene=8)
 
 
@@ -225,9 +225,9 @@ def test_resume_after_sigkill_completes_without_redoing_images(lmo_meshes, tmp_p
     assert summary.images_skipped == len(finished) and summary.images_rendered == 30 - len(finished)
     assert all(path.stat().st_mtime_ns == mtime for path, mtime in finished.items())
     assert not list(out.rglob(".paz6d-tmp-*"))
-    reference = dataclasses.replace(config, output=tmp_path / "uninterrupted")
+    reference = dataclasses.replace(config, out=tmp_path / "uninterrupted")
     generate(reference, show_progress=False)
-    assert tree_digest(out) == tree_digest(reference.output)
+    assert tree_digest(out) == tree_digest(reference.out)
     assert len(BOPDataset(out, split="train")) == 30
 
 
@@ -271,7 +271,7 @@ def test_occluders_and_distractors_hide_objects(lmo_meshes, tmp_path):
     config = tiny_config(lmo_meshes, tmp_path / "occluded", num_images=6, occluder_probability=1.0, distractors=3,
                          objects_per_image=(1, 1), crop_size=0)
     generate(config, show_progress=False)
-    fractions = [obj.info["visib_fract"] for sample in BOPDataset(config.output, split="train")
+    fractions = [obj.info["visib_fract"] for sample in BOPDataset(config.out, split="train")
                  for obj in sample.objects]
     assert min(fractions) < 0.95
 
@@ -283,7 +283,7 @@ def test_backgrounds_come_from_the_folder(lmo_meshes, tmp_path):
     config = tiny_config(lmo_meshes, tmp_path / "bg", num_images=1, backgrounds=backgrounds, noise_std=0.0,
                          blur_probability=0.0, distractors=0, occluder_probability=0.0, crop_size=0)
     generate(config, show_progress=False)
-    sample = next(iter(BOPDataset(config.output, split="train")))
+    sample = next(iter(BOPDataset(config.out, split="train")))
     # Away from the anti-aliased outline, every pixel without depth shows the background file.
     background = cv2.erode((sample.depth == 0).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     assert background.sum() > 1000
@@ -306,14 +306,14 @@ def test_jpg_rgb_and_symmetries_are_written(lmo_meshes, tmp_path):
     config = tiny_config(lmo_meshes, tmp_path / "jpg", num_images=1, rgb_format="jpg", crop_size=0,
                          symmetries=symmetries)
     generate(config, show_progress=False)
-    info = load_models_info(config.output / "models" / "models_info.json")
+    info = load_models_info(config.out / "models" / "models_info.json")
     assert info[1].symmetries_continuous == [] and len(info[5].symmetries_continuous) == 1
     axis, offset = info[5].symmetries_continuous[0]
     np.testing.assert_allclose(axis, [0, 0, 1])
     np.testing.assert_allclose(offset, [0, 0, 0.01])  # mm in the file, metres from the reader
-    folder = config.output / "train" / "000000"
+    folder = config.out / "train" / "000000"
     assert (folder / "rgb" / "000000.jpg").is_file() and not (folder / "rgb" / "000000.png").exists()
-    sample = next(iter(BOPDataset(config.output, split="train")))
+    sample = next(iter(BOPDataset(config.out, split="train")))
     assert sample.image.shape == (72, 96, 3)
     coco = json.loads((folder / "scene_gt_coco.json").read_text())
     assert coco["images"][0]["file_name"] == "rgb/000000.jpg"
@@ -366,7 +366,7 @@ def test_workers_split_the_llvmpipe_raster_threads(monkeypatch, preset):
         monkeypatch.setenv("LP_NUM_THREADS", preset)
     seen = {}
     monkeypatch.setattr(producer, "ImageProducer", lambda config: seen.setdefault("threads", os.environ["LP_NUM_THREADS"]))
-    generator._start_worker(GenerationConfig(meshes=(Path("unused.ply"),), output=Path("unused"), num_images=1), 1)
+    generator._start_worker(GenerationConfig(meshes=(Path("unused.ply"),), out=Path("unused"), num_images=1), 1)
     assert seen["threads"] == (preset or "1")
 
 

@@ -213,8 +213,8 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
 
     _stage(f"2/5 held-out test images ({test_images}, seed {TEST_SEED})")
     tick = time.perf_counter()
-    generation = GenerationConfig(meshes=(mesh_path,), output=out / "test_data", num_images=test_images,
-                                  seed=TEST_SEED, split="test", scale=0.001, objects_per_image=(1, 1),
+    generation = GenerationConfig(meshes=(mesh_path,), out=out / "test_data", num_images=test_images,
+                                  seed=TEST_SEED, split="test", mesh_scale=0.001, objects_per_image=(1, 1),
                                   platform=platform)
     generate(generation, workers=max(1, workers))
     timings["test_data_seconds"] = time.perf_counter() - tick
