@@ -311,3 +311,19 @@ def test_rotate_broadcasts_rotations_against_point_sets():
         np.testing.assert_allclose(result[index], Rotation.from_quat(q[index]).apply(vectors), atol=1e-12)
     np.testing.assert_allclose(quaternion.rotate(q, vectors[0]), Rotation.from_quat(q).apply(vectors[0]), atol=1e-12)
     assert quaternion.rotate(q[0], vectors[0]).shape == (3,)
+
+
+@pytest.mark.parametrize("magnitude", [1e3, 1e200, 1e300])
+def test_huge_rotation_vectors_give_the_reduced_rotation(magnitude):
+    # The angle modulo 2*pi is what scipy computes from the same axis; both must be unit quaternions.
+    q = quaternion.from_rotation_vector([magnitude, 0.0, 0.0])
+    assert np.all(np.isfinite(q)) and np.isclose(np.linalg.norm(q), 1.0)
+    reduced = np.mod(magnitude, 2 * np.pi)
+    expected = Rotation.from_rotvec([reduced, 0.0, 0.0]).as_quat()
+    assert min(np.abs(q - expected).max(), np.abs(q + expected).max()) < 1e-6
+
+
+@pytest.mark.parametrize("t", [np.nan, np.inf, [0.5, np.nan]])
+def test_slerp_rejects_non_finite_t(t):
+    with pytest.raises(ValueError, match="t: expected finite"):
+        quaternion.slerp([0, 0, 0, 1.0], [1.0, 0, 0, 0], t)

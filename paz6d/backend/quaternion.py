@@ -130,11 +130,14 @@ def to_rotation_vector(q) -> np.ndarray:
 def from_rotation_vector(vector) -> np.ndarray:
     """Rotation vectors ``(..., 3)`` (axis × angle in radians) to unit quaternions ``(..., 4)``."""
     vector = as_array(vector, "vector", (3,))
-    angle = np.linalg.norm(vector, axis=-1)
+    # hypot instead of norm: |v|^2 overflows for |v| > 1e154 rad, hypot does not.
+    angle = np.hypot(np.hypot(vector[..., 0], vector[..., 1]), vector[..., 2])
     small = angle < 1e-8
+    # The quaternion has period 4*pi in the angle; reducing first keeps sin/cos exact for huge angles.
+    half = np.mod(angle, 4.0 * np.pi) / 2.0
     # sin(angle/2)/angle -> 1/2 - angle^2/48 as angle -> 0.
-    scale = np.where(small, 0.5 - angle ** 2 / 48.0, np.sin(angle / 2) / np.where(small, 1.0, angle))
-    return np.concatenate([vector * scale[..., None], np.cos(angle / 2)[..., None]], axis=-1)
+    scale = np.where(small, 0.5 - angle ** 2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
+    return np.concatenate([vector * scale[..., None], np.cos(half)[..., None]], axis=-1)
 
 
 def _axis_quaternion(axis: str, angle: np.ndarray) -> np.ndarray:
@@ -267,7 +270,10 @@ def slerp(q0, q1, t) -> np.ndarray:
     """
     q0 = as_unit_quaternion(q0, "q0")
     q1 = as_unit_quaternion(q1, "q1")
-    t = np.asarray(t, dtype=np.float64)[..., None]
+    t = np.asarray(t, dtype=np.float64)
+    if not np.all(np.isfinite(t)):
+        raise ValueError("t: expected finite interpolation parameters (0 gives q0, 1 gives q1), got NaN or inf")
+    t = t[..., None]
     dot = np.sum(q0 * q1, axis=-1, keepdims=True)
     q1 = np.where(dot < 0, -q1, q1)
     dot = np.clip(np.abs(dot), -1.0, 1.0)
