@@ -16,8 +16,9 @@ annotation                      flag
 ``X | None``                    as ``X``; ``None`` when the flag is not given
 ==============================  ===============================================================
 
-Help text, ``metavar`` and ``choices`` (for a ``str`` field whose values live in a constant) come
-from the field's metadata, most simply written with :func:`option`. A field without a default is a
+Help text, ``metavar``, ``choices`` (for a ``str`` field whose values live in a constant) and
+``one_of`` (alternatives such as ``--mesh`` or ``--dataset``) come from the field's metadata, most
+simply written with :func:`option`. A field without a default is a
 required flag. Checks stay in the dataclass (``__post_init__``): :func:`config_from_args` reports a
 ``ValueError`` that starts with a field name (``"mesh_scale: expected ..."``) under the flag's name
 (``"--mesh-scale: expected ..."``).
@@ -47,9 +48,15 @@ _SCALAR_TYPES = (int, float, str, Path)
 
 
 def option(default: Any = dataclasses.MISSING, help: str = "", *, metavar: str | tuple[str, ...] | None = None,
-           choices: Iterable | None = None, default_factory: Any = dataclasses.MISSING) -> Any:
-    """A dataclass field with the metadata its flag needs (no ``default``: a required flag)."""
+           choices: Iterable | None = None, one_of: str | None = None, default_factory: Any = dataclasses.MISSING) -> Any:
+    """A dataclass field with the metadata its flag needs (no ``default``: a required flag).
+
+    Fields with the same ``one_of`` name are alternatives: exactly one of their flags must be given
+    (an argparse mutually exclusive group; the dataclass should check the same for library callers).
+    """
     metadata = {"help": help}
+    if one_of is not None:
+        metadata["one_of"] = one_of
     if metavar is not None:
         metadata["metavar"] = metavar
     if choices is not None:
@@ -114,6 +121,7 @@ def add_config_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGro
                          exclude: Iterable[str] = ()) -> None:
     """Adds one flag per field of ``config_class`` (except ``exclude``) to ``parser``."""
     hints = typing.get_type_hints(config_class)
+    alternatives: dict[str, argparse._MutuallyExclusiveGroup] = {}
     for field in flag_fields(config_class, exclude):
         options = _argument_options(config_class, field, hints[field.name])
         default = field_default(field)
@@ -133,7 +141,13 @@ def add_config_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGro
             options["choices"] = field.metadata["choices"]
         if "metavar" in field.metadata:
             options["metavar"] = field.metadata["metavar"]
-        parser.add_argument(flag_name(field.name), dest=field.name, help=help_text, **options)
+        target = parser
+        if "one_of" in field.metadata:
+            name = field.metadata["one_of"]
+            if name not in alternatives:
+                alternatives[name] = parser.add_mutually_exclusive_group(required=True)
+            target = alternatives[name]
+        target.add_argument(flag_name(field.name), dest=field.name, help=help_text, **options)
 
 
 @contextlib.contextmanager

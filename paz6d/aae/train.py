@@ -24,8 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import save_npz_atomically, write_json_atomically
 from paz6d.aae.augment import Augmentation
+from paz6d.backend.files import save_npz_atomically, write_json_atomically
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
+from renderers.platform import PLATFORMS
 
 CONFIG_FILE = "config.json"
 OBJECT_FILE = "object.npz"
@@ -109,6 +111,49 @@ FULL = AAEConfig(crop_size=128, latent_size=128, filters=(128, 256, 256, 512), r
                  in_plane=36, steps=30000, batch_size=64, learning_rate=2e-4, checkpoint_every=1000,
                  sample_every=2000, log_every=50)
 CONFIGS = {"quick": QUICK, "full": FULL}
+
+
+@dataclass(frozen=True)
+class AAETraining:
+    """One ``paz6d train aae`` run (each field is a flag, see :mod:`paz6d.cli_options`): the object,
+    from a mesh or a BOP data set, the run directory, the config preset and how to run."""
+
+    out: Path = option(help="run directory (re-run to resume)")
+    mesh: Path | None = option(None, "mesh of the object (PLY/OBJ/GLB)", one_of="source")
+    dataset: Path | None = option(None, "BOP data set (e.g. from `paz6d generate`): its models/obj_XXXXXX.ply "
+                                        "(millimetres) is the object and its image crops are training inputs",
+                                  one_of="source")
+    object_id: int | None = option(None, "object of --dataset (default: the only one)")
+    split: str = option("train", "split of --dataset to read")
+    pair_fraction: float = option(0.5, "with --dataset: share of training samples taken from its crops "
+                                       "(the rest: rendered views)")
+    config: str = option("quick", "quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
+                                  "92,232-view codebook (hours on a CPU)", choices=tuple(sorted(CONFIGS)))
+    steps: int | None = option(None, "training steps (default: the config's)")
+    seed: int = option(0, "seed of the model initialisation and of the data stream")
+    mesh_scale: float | None = option(None, "mesh units to metres (default: 1 with --mesh, 0.001 with --dataset, "
+                                            "whose meshes are BOP millimetres)")
+    workers: int = option(2, "rendering processes (0: render in this process)")
+    platform: str | None = option(None, "OpenGL platform of the renderers (default: auto)", choices=PLATFORMS)
+    progress: bool = option(True, "progress bars")
+
+    def __post_init__(self):
+        if (self.mesh is None) == (self.dataset is None):
+            raise ValueError("mesh: expected exactly one of mesh and dataset")
+        if self.config not in CONFIGS:
+            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
+        if self.steps is not None and self.steps <= 0:
+            raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
+        if self.mesh_scale is None:
+            object.__setattr__(self, "mesh_scale", 1.0 if self.dataset is None else 0.001)
+        if not np.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
+            raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
+
+    @property
+    def model_config(self) -> AAEConfig:
+        """The preset :attr:`config` with :attr:`steps` applied."""
+        preset = CONFIGS[self.config]
+        return preset if self.steps is None else replace(preset, steps=self.steps)
 
 
 def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, seed: int,
@@ -293,24 +338,8 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    """Adds the ``paz6d train aae`` arguments."""
-    source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument("--mesh", type=Path, help="mesh of the object (PLY/OBJ/GLB)")
-    source.add_argument("--dataset", type=Path, help="BOP data set (e.g. from `paz6d generate`): its "
-                        "models/obj_XXXXXX.ply (millimetres) is the object and its image crops are training inputs")
-    parser.add_argument("--object-id", type=int, default=None, help="object of --dataset (default: the only one)")
-    parser.add_argument("--split", default="train", help="split of --dataset to read (default: train)")
-    parser.add_argument("--pair-fraction", type=float, default=0.5,
-                        help="with --dataset: share of training samples taken from its crops (rest: rendered views)")
-    parser.add_argument("--out", type=Path, required=True, help="run directory (re-run to resume)")
-    parser.add_argument("--config", choices=sorted(CONFIGS), default="quick",
-                        help="quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
-                        "92,232-view codebook (hours on a CPU)")
-    parser.add_argument("--steps", type=int, default=None, help="training steps (default: the config's)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--scale", type=float, default=1.0, help="mesh units to metres (0.001 for millimetres)")
-    parser.add_argument("--workers", type=int, default=2, help="rendering processes")
-    parser.add_argument("--platform", choices=("egl", "osmesa"), default=None, help="OpenGL platform")
+    """Adds the ``paz6d train aae`` flags (the fields of :class:`AAETraining`)."""
+    add_config_arguments(parser, AAETraining)
 
 
 def _dataset_mesh(dataset: Path, object_id: int | None) -> tuple[Path, int]:
@@ -329,19 +358,11 @@ def _dataset_mesh(dataset: Path, object_id: int | None) -> tuple[Path, int]:
 
 def run(args: argparse.Namespace) -> int:
     """Runs ``paz6d train aae``."""
-    config = CONFIGS[args.config]
-    if args.steps is not None:
-        if args.steps <= 0:
-            raise ValueError(f"--steps: expected a positive number of steps, got {args.steps}")
-        config = replace(config, steps=args.steps)
-    object_id = 1
-    if args.dataset is not None:
-        (mesh, object_id), scale = _dataset_mesh(args.dataset, args.object_id), 0.001
-    else:
-        mesh, scale = args.mesh, args.scale
-    if not np.isfinite(scale) or scale <= 0:
-        raise ValueError(f"--scale: expected a positive factor to metres, got {scale}")
-    summary = train_aae(mesh, args.out, config, scale, args.seed, args.workers, args.platform,
-                        dataset=args.dataset, object_id=object_id, split=args.split, pair_fraction=args.pair_fraction)
+    job = config_from_args(AAETraining, args)
+    with flags_in_errors(AAETraining):
+        mesh, object_id = (job.mesh, 1) if job.dataset is None else _dataset_mesh(job.dataset, job.object_id)
+        summary = train_aae(mesh, job.out, job.model_config, job.mesh_scale, job.seed, job.workers, job.platform,
+                            job.progress, dataset=job.dataset, object_id=object_id, split=job.split,
+                            pair_fraction=job.pair_fraction)
     print(json.dumps(summary, indent=2))
     return 0
