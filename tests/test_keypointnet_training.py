@@ -115,7 +115,7 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
     from paz6d.keypointnet.pipeline import KeypointPose6D
     from paz6d.keypointnet.train import KeypointTraining, train_keypointnet
 
-    job = KeypointTraining(tmp_path / mode, mesh_path, 1e-3, "quick", mode, seed=0, workers=0, steps=40,
+    job = KeypointTraining(tmp_path / mode, mesh_path, mesh_scale=1e-3, mode=mode, seed=0, workers=0, steps=40,
                            progress=False, overrides=TINY)
     summary = train_keypointnet(job)
     losses = _losses(job.out)
@@ -129,14 +129,15 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
     assert len(keypoints["points_model"]) == len(keypoints["usable"]) == 6
     if mode == "supervised":
         # 40 steps do not make usable lifted keypoints; with the targets the pipeline loads the run
-        from paz6d.keypointnet.pipeline import write_keypoints
+        from paz6d.keypointnet.run_dir import write_keypoints
 
         write_keypoints(job.out, keypoints["targets"], np.ones(6, bool), "farthest-point")
         estimator = KeypointPose6D(job.out, SMALL_CAMERA.K, depth_from_box=True)
         image = np.random.default_rng(0).integers(0, 256, (120, 160, 3), dtype=np.uint8)
         assert len(estimator.detect(image, (60, 40, 100, 80))) == 6
         # resuming continues from the last checkpoint up to the new total (and lifts keypoints again)
-        resumed = train_keypointnet(KeypointTraining(job.out, mesh_path, 1e-3, "quick", mode, 0, 0, 50, False, TINY))
+        resumed = train_keypointnet(KeypointTraining(job.out, mesh_path, mesh_scale=1e-3, mode=mode, workers=0, steps=50,
+                                                     progress=False, overrides=TINY))
         assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
 
 
@@ -168,15 +169,18 @@ def test_lifting_crops_are_cut_as_at_inference_with_matching_intrinsics():
 def test_a_run_directory_refuses_a_different_run(mesh_path, tmp_path):
     from paz6d.keypointnet.train import KeypointTraining, _prepare_run_dir
 
-    job = KeypointTraining(tmp_path, mesh_path, 1e-3, "quick", "supervised", overrides=TINY)
+    job = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="supervised", overrides=TINY)
     _prepare_run_dir(job, job.settings(), 0.1, kv.ViewSampling(input_size=32))
-    other = KeypointTraining(tmp_path, mesh_path, 1e-3, "quick", "discovery", overrides=TINY)
+    other = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="discovery", overrides=TINY)
     with pytest.raises(ValueError, match="different run"):
         _prepare_run_dir(other, other.settings(), 0.1, kv.ViewSampling(input_size=32))
     with pytest.raises(ValueError, match="mode"):
-        KeypointTraining(tmp_path, mesh_path, mode="other").settings()
+        KeypointTraining(tmp_path, mesh_path, mode="other")
     with pytest.raises(ValueError, match="steps"):
-        KeypointTraining(tmp_path, mesh_path, steps=0).settings()
+        KeypointTraining(tmp_path, mesh_path, steps=0)
+    with pytest.raises(ValueError, match="exactly one of mesh and dataset"):
+        KeypointTraining(tmp_path)
+    assert KeypointTraining(tmp_path, dataset=tmp_path).mesh_scale == 1e-3  # BOP meshes are millimetres
 
 
 def test_cross_view_errors_are_zero_for_geometrically_consistent_keypoints():

@@ -167,8 +167,8 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
         run_dir = out_dir / f"keypointnet_{mode}"
         runs[mode] = run_dir
         report["modes"][mode] = {"training": train_keypointnet(
-            KeypointTraining(run_dir, Path(mesh_path), mesh_scale, config, mode, seed, workers, steps, progress,
-                             dict(overrides or {})))}
+            KeypointTraining(run_dir, Path(mesh_path), mesh_scale=mesh_scale, config=config, mode=mode, seed=seed,
+                             workers=workers, steps=steps, progress=progress, overrides=dict(overrides or {})))}
     render_started = time.perf_counter()
     test = render_test_images(mesh_path, test_images, seed + TEST_SEED_OFFSET, sampling, mesh_scale, workers,
                               progress=progress)

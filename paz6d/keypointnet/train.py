@@ -10,12 +10,11 @@ Two modes share the data, the network, the PnP pipeline and the evaluation:
   projected into every view; the network learns them as heatmaps (cross-entropy to a Gaussian)
   plus their coordinates and depths. The 3D keypoints are known exactly.
 
-The run directory is what :class:`paz6d.keypointnet.pipeline.KeypointPose6D` loads
-(``config.json``, ``model.keras``, ``keypoints.json``), plus the Trainer's checkpoints, ``log.csv``,
-``tensorboard/`` and ``samples/``, the rendered views (``views_train.npz``, ``views_val.npz``, and
-``views_lift.npz``: crops of unseen whole images, cut as at inference, from which the 3D keypoints
-are lifted) and ``metrics.json`` (keypoint consistency on held-out views). Re-running the same
-command resumes.
+The run directory (its files and formats: :mod:`paz6d.keypointnet.run_dir`) is what
+:class:`paz6d.keypointnet.pipeline.KeypointPose6D` loads, plus the Trainer's checkpoints, ``log.csv``,
+``tensorboard/`` and ``samples/``, the rendered views (training, validation, and crops of unseen whole
+images, cut as at inference, from which the 3D keypoints are lifted) and the training metrics
+(keypoint consistency on held-out views). Re-running the same command resumes.
 
 This module is cheap to import: TensorFlow and the renderer are loaded inside :func:`run`.
 """
@@ -25,12 +24,14 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import save_npz_atomically, write_json_atomically
+from paz6d.backend.files import save_npz_atomically
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
+from paz6d.keypointnet import run_dir as run_files
 
 CONFIGS: dict[str, dict] = {
     # Demo budget (`paz6d demo --keypoints` under 15 minutes on 2 CPU cores): see docs/keypointnet.md.
@@ -67,20 +68,39 @@ SUPERVISED_WEIGHTS = {"heatmap": 1.0, "coordinates": 2.0, "depth": 1.0}
 
 @dataclass
 class KeypointTraining:
-    """Everything a KeypointNet run needs (written to ``run_dir/config.json``)."""
+    """One ``paz6d train keypointnet`` run (each field but ``overrides`` is a flag, see
+    :mod:`paz6d.cli_options`; ``config.json`` in the run directory records it).
 
-    out: Path
-    mesh_path: Path
-    mesh_scale: float = 1.0
-    config: str = "quick"
-    mode: str = "supervised"
-    seed: int = 0
-    workers: int = 2
-    steps: int | None = None
-    progress: bool = True
-    overrides: dict = field(default_factory=dict)
+    With ``dataset``, :func:`run` cuts the views from the data set's images and fills in ``mesh``.
+    """
+
+    out: Path = option(help="run directory (re-run the command to resume)")
+    mesh: Path | None = option(None, "object mesh (PLY/OBJ/GLB); views are rendered on the fly", one_of="source")
+    dataset: Path | None = option(None, "BOP data set folder: views are cut from its images", one_of="source")
+    object_id: int | None = option(None, "with --dataset: BOP object id (default: the first)")
+    split: str | None = option(None, "with --dataset: split folder (default: train_pbr, else train)")
+    mesh_scale: float | None = option(None, "mesh file units to metres (default: 1 with --mesh, 0.001 with "
+                                            "--dataset, whose meshes are BOP millimetres)")
+    config: str = option("quick", "model and schedule size", choices=tuple(sorted(CONFIGS)))
+    mode: str = option("supervised", "discovery (the paper's, unsupervised) or supervised (farthest-point "
+                                     "keypoints)", choices=MODES)
+    seed: int = option(0, "seed of every random choice")
+    workers: int = option(2, "rendering worker processes (0: render in this process)")
+    steps: int | None = option(None, "training steps (default: the config's)")
+    progress: bool = option(True, "progress bars")
+    overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
+
+    def __post_init__(self):
+        if (self.mesh is None) == (self.dataset is None):
+            raise ValueError("mesh: expected exactly one of mesh and dataset")
+        if self.mesh_scale is None:
+            self.mesh_scale = 1.0 if self.dataset is None else 1e-3
+        if not np.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
+            raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
+        self.settings()  # checks config, mode and steps
 
     def settings(self) -> dict:
+        """The config's settings with ``overrides`` and ``steps`` applied."""
         if self.config not in CONFIGS:
             raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
         if self.mode not in MODES:
@@ -106,40 +126,22 @@ def resolve_precision(precision: str) -> str:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    """Adds the ``paz6d train keypointnet`` arguments."""
-    source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument("--mesh", type=Path, help="object mesh (PLY/OBJ/GLB); views are rendered on the fly")
-    source.add_argument("--dataset", type=Path, help="BOP dataset folder: views are cut from its images")
-    parser.add_argument("--out", type=Path, required=True, help="run directory (re-run the command to resume)")
-    parser.add_argument("--config", choices=sorted(CONFIGS), default="quick", help="model/schedule size")
-    parser.add_argument("--mode", choices=MODES, default="supervised",
-                        help="discovery (paper, unsupervised) or supervised (farthest-point keypoints)")
-    parser.add_argument("--steps", type=int, default=None, help="override the number of training steps")
-    parser.add_argument("--seed", type=int, default=0, help="seed of every random choice")
-    parser.add_argument("--mesh-scale", type=float, default=None,
-                        help="factor from mesh file units to metres (default 1; 0.001 for BOP millimetre meshes; "
-                             "with --dataset the BOP default 0.001)")
-    parser.add_argument("--object-id", type=int, default=None, help="with --dataset: BOP object id (default: first)")
-    parser.add_argument("--split", default=None, help="with --dataset: split folder (default: train_pbr, else train)")
-    parser.add_argument("--workers", type=int, default=2, help="rendering worker processes (0 = in process)")
-    parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    """Adds the ``paz6d train keypointnet`` flags (the fields of :class:`KeypointTraining`)."""
+    add_config_arguments(parser, KeypointTraining, exclude=("overrides",))
 
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``paz6d train keypointnet``."""
-    if args.dataset is not None:
-        from paz6d.keypointnet.dataset import bop_object_views
+    job = config_from_args(KeypointTraining, args, exclude=("overrides",))
+    with flags_in_errors(KeypointTraining):
+        views = None
+        if job.dataset is not None:
+            from paz6d.keypointnet.dataset import bop_object_views
 
-        views, mesh_path, scale = bop_object_views(args.dataset, args.object_id, args.split,
-                                                   CONFIGS[args.config]["input_size"],
-                                                   1e-3 if args.mesh_scale is None else args.mesh_scale)
-        job = KeypointTraining(args.out, mesh_path, scale, args.config, args.mode, args.seed, args.workers,
-                               args.steps, not args.no_progress)
+            views, mesh, scale = bop_object_views(job.dataset, job.object_id, job.split,
+                                                  job.settings()["input_size"], job.mesh_scale)
+            job = replace(job, mesh=mesh, mesh_scale=scale, dataset=None)
         summary = train_keypointnet(job, views=views)
-    else:
-        job = KeypointTraining(args.out, args.mesh, 1.0 if args.mesh_scale is None else args.mesh_scale, args.config,
-                               args.mode, args.seed, args.workers, args.steps, not args.no_progress)
-        summary = train_keypointnet(job)
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -148,26 +150,24 @@ def run(args: argparse.Namespace) -> int:
 
 def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling) -> dict:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
-    from paz6d.keypointnet.pipeline import CONFIG_FILE
-
-    config = {"mode": job.mode, "config": job.config, "seed": job.seed, "mesh_path": str(Path(job.mesh_path).resolve()),
+    config = {"mode": job.mode, "config": job.config, "seed": job.seed, "mesh_path": str(Path(job.mesh).resolve()),
               "mesh_scale": job.mesh_scale, "diameter": object_diameter,
               "input_size": settings["input_size"], "margin": sampling.margin, "downsample": settings["downsample"],
               "settings": {key: list(value) if isinstance(value, tuple) else value for key, value in settings.items()},
               "sampling": sampling.to_dict()}
     job.out.mkdir(parents=True, exist_ok=True)
-    path = job.out / CONFIG_FILE
+    path = run_files.config_path(job.out)
     if path.exists():
-        previous = json.loads(path.read_text())
+        previous = run_files.read_config(job.out)
         for key in ("mode", "config", "seed", "mesh_path", "mesh_scale", "input_size", "downsample"):
             if previous.get(key) != config[key]:
                 raise ValueError(f"{path}: this run directory holds a different run ({key}={previous.get(key)!r}, "
                                  f"now {config[key]!r}); choose another --out")
         if previous["settings"].get("steps") != config["settings"]["steps"]:
             previous["settings"]["steps"] = config["settings"]["steps"]  # extending a run is allowed
-            write_json_atomically(path, previous, indent=2)
+            run_files.write_config(job.out, previous)
         return previous
-    write_json_atomically(path, config, indent=2)
+    run_files.write_config(job.out, config)
     return config
 
 
@@ -265,9 +265,9 @@ def fixed_crops(views, seed: int, count: int | None = None):
 def predict_crops(model, images: np.ndarray, batch_size: int = 32) -> dict[str, np.ndarray]:
     """Runs the model over ``(V, S, S, 3)`` crops in batches; numpy outputs."""
     from paz6d.keypointnet.model import inference_function
-    from paz6d.keypointnet.pipeline import infer_in_batches
+    from paz6d.processors.predict import predict_in_batches
 
-    return infer_in_batches(inference_function(model), images, batch_size)
+    return predict_in_batches(inference_function(model), images, batch_size)
 
 
 def cross_view_errors(uv, depth, K, T_model2cam) -> np.ndarray:
@@ -359,18 +359,17 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
     poses) are lifted to 3D, by ``settings["lifting"]``:
 
     - ``"triangulate"``: 2D-only least-squares triangulation with outlier views dropped
-      (:func:`~paz6d.keypointnet.pipeline.triangulate_keypoints`); systematic 2D biases of the
+      (:func:`~paz6d.keypointnet.keypoints.triangulate_keypoints`); systematic 2D biases of the
       network are absorbed into the 3D model, so they cancel in PnP;
     - ``"median"``: per-view 3D points from the predicted depths, median over views (the paper's
-      lifting, :func:`~paz6d.keypointnet.pipeline.lift_keypoints`).
+      lifting, :func:`~paz6d.keypointnet.keypoints.lift_keypoints`).
 
     Keypoints whose median re-projection error exceeds :data:`MAX_LIFTING_ERROR` × crop side are
     marked unusable.
     ``targets`` (supervised mode: the farthest-point keypoints) are stored alongside for reference.
     """
     from paz6d.keypointnet.model import depth_to_metres
-    from paz6d.keypointnet.pipeline import (decode_keypoints, lift_keypoints, triangulate_keypoints,
-                                               write_keypoints)
+    from paz6d.keypointnet.keypoints import decode_keypoints, lift_keypoints, triangulate_keypoints
 
     method = settings.get("lifting", "triangulate")
     if method not in LIFTINGS:
@@ -386,7 +385,7 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
     error = np.median(model_reprojection_errors(uv, K, T, points, np.ones(len(points), bool)), axis=0)
     usable = error <= MAX_LIFTING_ERROR * settings["input_size"]
     name = {"triangulate": "triangulated", "median": "lifted-median"}[method]
-    write_keypoints(out, points, usable, name, error, targets)
+    run_files.write_keypoints(out, points, usable, name, error, targets)
     return {"lifting": name, "lifting_error_px": error.tolist(), "usable_keypoints": int(usable.sum())}
 
 
@@ -405,7 +404,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     Args:
         job: what to train and where.
         views: optional pre-built :class:`~paz6d.keypointnet.views.ViewSet` (e.g. from a BOP set);
-            by default views of ``job.mesh_path`` are rendered in worker processes.
+            by default views of ``job.mesh`` are rendered in worker processes.
     Returns:
         A summary dict (also written to ``job.out/metrics.json``): training time, final losses and,
         on held-out views (crop pixels, ``input_size`` wide): ``reprojection_px_median`` (detected
@@ -417,27 +416,26 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
 
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
-    from paz6d.keypointnet.pipeline import (DECODERS, MODEL_FILE, decode_keypoints, keypoint_spread,
-                                               read_keypoints, write_object)
+    from paz6d.keypointnet.keypoints import DECODERS, decode_keypoints, keypoint_spread
     from paz6d.keypointnet.views import (ViewSampling, hull_points, render_test_images, render_views,
                                                training_batch)
 
     settings = job.settings()
     settings["precision"] = resolve_precision(settings.get("precision", "float32"))
     started = time.perf_counter()
-    mesh = load_mesh(job.mesh_path, job.mesh_scale)
+    mesh = load_mesh(job.mesh, job.mesh_scale)
     object_diameter = diameter(np.asarray(mesh.vertices))
     sampling = ViewSampling(input_size=settings["input_size"])
     _prepare_run_dir(job, settings, object_diameter, sampling)
     out = job.out
-    write_object(out, object_diameter, hull_points(np.asarray(mesh.vertices)))
+    run_files.write_object(out, object_diameter, hull_points(np.asarray(mesh.vertices)))
 
     def render(count, seed):
-        return lambda: render_views(job.mesh_path, count, seed, sampling, job.mesh_scale, job.workers,
+        return lambda: render_views(job.mesh, count, seed, sampling, job.mesh_scale, job.workers,
                                     progress=job.progress)
 
-    train_views = views if views is not None else _cached_views(out / "views_train.npz", render(settings["views"], job.seed))
-    validation_views = _cached_views(out / "views_val.npz", render(settings["validation_views"], job.seed + 10_000))
+    train_views = views if views is not None else _cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
+    validation_views = _cached_views(run_files.views_path(out, "val"), render(settings["validation_views"], job.seed + 10_000))
     render_seconds = time.perf_counter() - started
 
     keypoints_model = None
@@ -473,19 +471,19 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
                       sample_callback=_sample_drawer(sample_images, sample_targets), progress=job.progress,
                       prefetch=1)
     training = trainer.fit()
-    kp.save_keypointnet(model, out / MODEL_FILE)
+    kp.save_keypointnet(model, run_files.model_path(out))
     train_seconds = time.perf_counter() - started - render_seconds
 
     if views is None:  # rendered views: lift from unseen whole images cropped as at inference
         lifting_crops = _cached_lifting_crops(
-            out / "views_lift.npz", lambda: render_test_images(job.mesh_path, settings["lift_views"], job.seed + 20_000,
+            run_files.views_path(out, "lift"), lambda: render_test_images(job.mesh, settings["lift_views"], job.seed + 20_000,
                                                                sampling, job.mesh_scale, job.workers,
                                                                progress=job.progress),
             sampling.camera.K, sampling.margin, settings["input_size"])
     else:  # crops cut from a data set's images: already made as at inference
         lifting_crops = fixed_crops(train_views, job.seed + 1, settings["lift_views"])
     lifting = lift_run_keypoints(model, lifting_crops, settings, object_diameter, out, keypoints_model)
-    points_model, usable = read_keypoints(out)
+    points_model, usable = run_files.read_keypoints(out)
 
     images, K, T = fixed_crops(validation_views, job.seed + 2)
     outputs = predict_crops(model, images)
@@ -505,5 +503,5 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         summary[f"cross_view_px_mean{suffix}"] = float(np.mean(consistency))
         summary[f"reprojection_px_median{suffix}"] = float(np.median(reprojection)) if reprojection.size else None
     summary["spread_px_median"] = float(np.median(keypoint_spread(outputs["probabilities"], outputs["uv"], downsample)))
-    write_json_atomically(out / "metrics.json", summary, indent=2)
+    run_files.write_metrics(out, summary)
     return summary
