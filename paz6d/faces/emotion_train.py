@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,7 @@ from paz6d.abstract import SequentialProcessor
 from paz6d.abstract.processor import random_processors
 from paz6d.backend.files import (save_figure_atomically, save_keras_model_atomically, write_json_atomically,
                                  write_text_atomically)
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.fer2013 import FER2013_CLASSES, load_fer2013_csv, load_image_folder
 from paz6d.processors.affine import RandomAffine
 from paz6d.processors.image import ConvertColorSpace, RandomBrightness, RandomContrast, RandomFlipLeftRight
@@ -35,24 +37,39 @@ from paz6d.processors.image import ConvertColorSpace, RandomBrightness, RandomCo
 VALIDATION_LOG = "validation.csv"
 
 
+@dataclass(frozen=True)
+class EmotionTraining:
+    """One ``paz6d train emotion`` run (each field is a flag, see :mod:`paz6d.cli_options`)."""
+
+    data: Path = option(help="FER-2013 CSV file or image folder DIR/<class>/*")
+    out: Path = option(help="run folder (created; an existing run resumes)")
+    epochs: int = option(30, "passes over the training set")
+    batch_size: int = option(32, "faces per step")
+    learning_rate: float = option(1e-3, "Adam learning rate")
+    input_size: int = option(48, "square network input side (pixels)")
+    val_fraction: float = option(0.1, "held-out fraction when the data has no validation split")
+    checkpoint_every: int = option(500, "steps between checkpoints")
+    validate_every: int = option(500, "steps between validation confusion matrices (0: only at the end)")
+    augment: bool = option(True, "augment the training faces (brightness, contrast, flip, rotation/zoom/shift)")
+    seed: int = option(0, "seed of the validation split, the augmentation and the initialisation")
+    eager: bool = option(False, "run steps eagerly (no tf.function compile): for debugging and tiny runs")
+    progress: bool = option(True, "progress bar")
+
+    def __post_init__(self):
+        for name in ("epochs", "batch_size", "input_size", "checkpoint_every"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or int(value) != value or value < 1:
+                raise ValueError(f"{name}: expected a positive integer, got {value!r}")
+        if self.validate_every < 0:
+            raise ValueError(f"validate_every: expected 0 (only at the end) or a number of steps, "
+                             f"got {self.validate_every}")
+        if not np.isfinite(self.learning_rate) or self.learning_rate <= 0:
+            raise ValueError(f"learning_rate: expected a positive number, got {self.learning_rate}")
+
+
 def configure(parser: argparse.ArgumentParser) -> None:
-    """Adds the ``paz6d train emotion`` arguments."""
-    parser.add_argument("--data", required=True, type=Path, help="FER-2013 CSV file or image folder DIR/<class>/*")
-    parser.add_argument("--out", required=True, type=Path, help="run folder (created; an existing run resumes)")
-    parser.add_argument("--epochs", type=int, default=30, help="passes over the training set (default 30)")
-    parser.add_argument("--batch-size", type=int, default=32, help="faces per step (default 32)")
-    parser.add_argument("--learning-rate", type=float, default=1e-3, help="Adam learning rate")
-    parser.add_argument("--input-size", type=int, default=48, help="square network input side in pixels")
-    parser.add_argument("--val-fraction", type=float, default=0.1,
-                        help="held-out fraction when the data has no validation split")
-    parser.add_argument("--checkpoint-every", type=int, default=500, help="steps between checkpoints")
-    parser.add_argument("--validate-every", type=int, default=500,
-                        help="steps between validation confusion matrices (0: only at the end)")
-    parser.add_argument("--no-augment", action="store_true", help="train without augmentation")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--eager", action="store_true",
-                        help="run steps eagerly (no tf.function compile): for debugging and tiny runs")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    """Adds the ``paz6d train emotion`` flags (the fields of :class:`EmotionTraining`)."""
+    add_config_arguments(parser, EmotionTraining)
 
 
 def _split_per_class(labels: np.ndarray, fraction: float, seed: int) -> np.ndarray:
@@ -226,27 +243,33 @@ def _append_validation_row(run_dir: Path, step: int, accuracy: float) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Trains, then writes ``model.keras``, ``classes.json``, ``metrics.json`` and ``confusion_matrix.png``."""
-    for name in ("epochs", "batch_size", "input_size", "checkpoint_every"):
-        if getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')}: expected a positive integer, got {getattr(args, name)}")
-    data = load_emotion_data(args.data, args.val_fraction, args.seed)  # before TensorFlow: bad data fails fast
+    """Runs ``paz6d train emotion``; bad input raises ``ValueError`` naming the flag."""
+    job = config_from_args(EmotionTraining, args)
+    with flags_in_errors(EmotionTraining):
+        train_emotion(job)
+    return 0
+
+
+def train_emotion(job: EmotionTraining) -> dict:
+    """Trains (or resumes) ``job`` and writes ``model.keras``, ``classes.json``, ``metrics.json`` and
+    ``confusion_matrix.png`` into ``job.out``; returns the metrics."""
+    data = load_emotion_data(job.data, job.val_fraction, job.seed)  # before TensorFlow: bad data fails fast
     from paz6d.backend.tensorflow_guard import import_keras
     from paz6d.faces.xception import mini_xception, preprocess_faces
     from paz6d.training.trainer import Trainer
 
     keras = import_keras()
-    keras.utils.set_random_seed(args.seed)
+    keras.utils.set_random_seed(job.seed)
     class_names = data["class_names"]
-    train_faces = resize_faces(data["train"][0], args.input_size)
-    validation_faces = resize_faces(data["validation"][0], args.input_size)
+    train_faces = resize_faces(data["train"][0], job.input_size)
+    validation_faces = resize_faces(data["validation"][0], job.input_size)
     validation_inputs = preprocess_faces(validation_faces)
     validation_labels = data["validation"][1]
-    sampler = BatchSampler(train_faces, data["train"][1], len(class_names), args.batch_size,
-                           None if args.no_augment else build_augmentation(args.seed), args.seed)
-    model = mini_xception((args.input_size, args.input_size, 1), len(class_names))
-    optimizer = keras.optimizers.Adam(args.learning_rate)
-    run_dir = Path(args.out)
+    sampler = BatchSampler(train_faces, data["train"][1], len(class_names), job.batch_size,
+                           build_augmentation(job.seed) if job.augment else None, job.seed)
+    model = mini_xception((job.input_size, job.input_size, 1), len(class_names))
+    optimizer = keras.optimizers.Adam(job.learning_rate)
+    run_dir = Path(job.out)
 
     def loss_fn(model, batch):
         inputs, targets = batch
@@ -264,10 +287,10 @@ def run(args: argparse.Namespace) -> int:
         return matrix
 
     trainer = Trainer(model, optimizer, loss_fn, data=sampler, run_dir=run_dir,
-                      steps=args.epochs * sampler.steps_per_epoch, checkpoint_every=args.checkpoint_every,
-                      log_every=min(10, sampler.steps_per_epoch), sample_every=max(args.validate_every, 0),
-                      sample_callback=validate if args.validate_every > 0 else None,
-                      progress=not args.no_progress, compile_step=not args.eager)
+                      steps=job.epochs * sampler.steps_per_epoch, checkpoint_every=job.checkpoint_every,
+                      log_every=min(10, sampler.steps_per_epoch), sample_every=max(job.validate_every, 0),
+                      sample_callback=validate if job.validate_every > 0 else None,
+                      progress=job.progress, compile_step=not job.eager)
     summary = trainer.fit()
     matrix = validate(model, summary.final_step, run_dir / "confusion_matrix.png")
     save_keras_model_atomically(model, run_dir / "model.keras")
@@ -278,4 +301,4 @@ def run(args: argparse.Namespace) -> int:
     write_json_atomically(run_dir / "metrics.json", metrics, indent=2)
     print(f"emotion: step {summary.final_step}, validation accuracy {metrics['validation_accuracy']:.3f} "
           f"on {metrics['validation_count']} faces; model in {run_dir / 'model.keras'}")
-    return 0
+    return metrics
