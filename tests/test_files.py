@@ -7,8 +7,8 @@ import stat
 import numpy as np
 import pytest
 
-from paz6d.backend.files import (TEMPORARY_PREFIX, atomic_output, load_json, save_npz_atomically,
-                                 write_csv_atomically, write_json_atomically)
+from paz6d.backend.files import (TEMPORARY_PREFIX, atomic_output, finite_or_none, load_json, null_non_finite,
+                                 save_npz_atomically, write_csv_atomically, write_json_atomically)
 
 
 def leftovers(folder):
@@ -56,6 +56,16 @@ def test_csv_round_trip(tmp_path):
     with path.open(newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert rows == [{"step": str(step), "loss": str(0.5 * step)} for step in range(3)]
+
+
+def test_unmeasured_values_become_null(tmp_path):
+    report = {"speed": float("inf"), "errors": [np.float64("nan"), 0.25, -np.inf], "nested": ({"n": 3},),
+              "ok": np.float32(0.5)}
+    write_json_atomically(tmp_path / "report.json", null_non_finite(report))
+    assert load_json(tmp_path / "report.json") == {"speed": None, "errors": [None, 0.25, None],
+                                                   "nested": [{"n": 3}], "ok": 0.5}
+    assert finite_or_none(float("nan")) is None and finite_or_none(None) is None
+    assert finite_or_none(np.float32(1.23456), 2) == 1.23
 
 
 def test_json_rejects_nan_without_writing(tmp_path):

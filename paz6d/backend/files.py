@@ -111,6 +111,26 @@ def json_bytes(data: Any, indent: int | None = None) -> bytes:
     return (text + "\n").encode() if indent else text.encode()
 
 
+def finite_or_none(value: float | None, digits: int | None = None) -> float | None:
+    """``float(value)`` (rounded to ``digits``), or ``None`` (JSON ``null``) for ``None``, NaN and ±inf,
+    e.g. a median over misses or a throughput when nothing ran."""
+    if value is None or not np.isfinite(value):
+        return None
+    return float(value) if digits is None else round(float(value), digits)
+
+
+def null_non_finite(data: Any) -> Any:
+    """``data`` with every NaN/±inf float (Python or NumPy, inside dicts, lists and tuples) replaced by
+    ``None``: a report that may hold unmeasured values becomes valid JSON for :func:`json_bytes`."""
+    if isinstance(data, dict):
+        return {key: null_non_finite(value) for key, value in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [null_non_finite(value) for value in data]
+    if isinstance(data, (float, np.floating)):
+        return finite_or_none(data)
+    return data
+
+
 def load_json(path: str | Path) -> Any:
     """Parses a JSON file; ``ValueError`` naming the file when it is missing or malformed."""
     path = Path(path)

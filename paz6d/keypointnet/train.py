@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import save_npz_atomically
+from paz6d.backend.files import finite_or_none, save_npz_atomically
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.keypointnet import run_dir as run_files
 
@@ -491,8 +491,8 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     summary = {"mode": job.mode, "config": job.config, "steps": training.final_step,
                "train_seconds": round(train_seconds, 1), "render_seconds": round(render_seconds, 1),
                "final_losses": training.metrics,
-               "loader_samples_per_second": round(training.loader_samples_per_second, 1),
-               "model_samples_per_second": round(training.model_samples_per_second, 1),
+               "loader_samples_per_second": finite_or_none(training.loader_samples_per_second, 1),
+               "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1),
                **lifting, "validation_views": len(images), "input_size": settings["input_size"]}
     for method in DECODERS:  # "local" is what KeypointPose6D uses by default
         uv = decode_keypoints(outputs, downsample, method)

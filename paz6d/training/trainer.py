@@ -79,13 +79,14 @@ class TrainingSummary:
         loader_samples_per_second: samples per second of time the loop waited for data (with prefetching
             this is the wait, not the loader's own speed: large means the data path keeps up).
         model_samples_per_second: samples per second of time spent in the optimisation step.
+        Both are ``None`` when no step ran (a finished run re-run): nothing was measured.
     """
 
     start_step: int
     final_step: int
     metrics: dict[str, float]
-    loader_samples_per_second: float
-    model_samples_per_second: float
+    loader_samples_per_second: float | None
+    model_samples_per_second: float | None
 
 
 class Trainer:
@@ -350,8 +351,8 @@ class Trainer:
         if step == self.steps and getattr(self.optimizer, "use_ema", False):
             self.optimizer.finalize_variable_values(self.model.trainable_variables)
         return TrainingSummary(start_step=start_step, final_step=step, metrics=last_metrics,
-                               loader_samples_per_second=samples / data_seconds if data_seconds > 0 else float("inf"),
-                               model_samples_per_second=samples / step_seconds if step_seconds > 0 else float("inf"))
+                               loader_samples_per_second=samples / data_seconds if samples and data_seconds > 0 else None,
+                               model_samples_per_second=samples / step_seconds if samples and step_seconds > 0 else None)
 
     def _draw_sample(self, step: int) -> None:
         folder = self.run_dir / "samples"
