@@ -36,7 +36,7 @@ sys.path.insert(0, str(REPO))
 from data_gen.config import GenerationConfig  # noqa: E402
 from data_gen.generator import generate, render_indices  # noqa: E402
 from data_gen.producer import ImageProducer, image_generator  # noqa: E402
-from data_gen.scene import sample_scene  # noqa: E402
+from paz6d.synthesis.scene import sample_scene  # noqa: E402
 from renderers import select_platform  # noqa: E402
 from renderers.conventions import FLIP_YZ  # noqa: E402
 

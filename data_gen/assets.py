@@ -10,14 +10,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import trimesh
-from scipy.spatial import ConvexHull, QhullError
 
 from data_gen.config import GenerationConfig, list_backgrounds
 from paz6d.backend.files import load_json
 from paz6d.backend.mesh import MeshError, diameter, load_mesh
-
-#: Camera near plane (metres) used by the generator's renderers.
-ZNEAR = 0.01
+from paz6d.synthesis.occluders import distractor_library
+from paz6d.synthesis.sampling import hull_points
+from paz6d.synthesis.scene import ZNEAR
 _OBJECT_ID = re.compile(r"^obj_(\d+)$")
 _SYMMETRY_FIELDS = ("symmetries_discrete", "symmetries_continuous")
 
@@ -55,14 +54,6 @@ class Assets:
     symmetries: dict[int, dict]
 
 
-def hull_vertices(mesh: trimesh.Trimesh) -> np.ndarray:
-    """Vertices of the convex hull of ``mesh`` (all vertices when the hull is degenerate)."""
-    try:
-        return mesh.vertices[ConvexHull(mesh.vertices).vertices]
-    except QhullError:
-        return np.asarray(mesh.vertices)
-
-
 def object_ids_for(paths) -> list[int]:
     """Ids from ``obj_XXXXXX`` stems when all files are named so (and distinct), else 1..M."""
     matches = [_OBJECT_ID.match(Path(path).stem) for path in paths]
@@ -84,20 +75,6 @@ def _load_meshes(config: GenerationConfig) -> list[trimesh.Trimesh]:
             raise ValueError(f"mesh: {path}: all triangles are degenerate (zero surface area)")
         meshes.append(mesh)
     return meshes
-
-
-def _distractor_library(size: float) -> list[trimesh.Trimesh]:
-    """Boxes, cylinders, spheres and capsules at three sizes relative to ``size`` (metres)."""
-    library = []
-    for factor in (0.3, 0.6, 1.0):
-        side = size * factor
-        library += [trimesh.creation.box((side, 0.6 * side, 0.4 * side)),
-                    trimesh.creation.cylinder(radius=0.25 * side, height=side, sections=24),
-                    trimesh.creation.icosphere(subdivisions=2, radius=0.4 * side),
-                    trimesh.creation.capsule(height=0.6 * side, radius=0.2 * side, count=(12, 12))]
-    for mesh in library:
-        mesh.visual.vertex_colors = np.full((len(mesh.vertices), 4), 255, dtype=np.uint8)
-    return library
 
 
 def _projected_radius_px(radius: float, distance: float, focal: float) -> float:
@@ -169,10 +146,10 @@ def load_assets(config: GenerationConfig) -> Assets:
     centres = np.array([mesh.bounds.mean(axis=0) for mesh in meshes])
     radii = np.array([np.linalg.norm(mesh.vertices - centre, axis=1).max() for mesh, centre in zip(meshes, centres)])
     diameters = np.array([diameter(mesh.vertices) for mesh in meshes])
-    distractors = _distractor_library(float(np.mean(diameters))) if config.distractors or \
+    distractors = distractor_library(float(np.mean(diameters))) if config.distractors or \
         config.occluder_probability > 0 else []
     distractor_radii = np.array([np.linalg.norm(mesh.vertices, axis=1).max() for mesh in distractors])
     backgrounds = check_backgrounds(config.backgrounds) if config.backgrounds is not None else []
-    return Assets(meshes, object_ids, centres, radii, diameters, [hull_vertices(mesh) for mesh in meshes],
-                  distractors, distractor_radii, [hull_vertices(mesh) for mesh in distractors], backgrounds,
+    return Assets(meshes, object_ids, centres, radii, diameters, [hull_points(mesh.vertices) for mesh in meshes],
+                  distractors, distractor_radii, [hull_points(mesh.vertices) for mesh in distractors], backgrounds,
                   _distance_range(config, radii, diameters), _load_symmetries(config.symmetries, object_ids))

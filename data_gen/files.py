@@ -1,4 +1,4 @@
-"""Data-set file output: image encoding and clean-up of a killed run's temporaries (atomic writers in
+"""Data-set file output: image encoder settings and clean-up of a killed run's temporaries (atomic writers in
 :mod:`paz6d.backend.files`)."""
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from paz6d.backend.files import TEMPORARY_PREFIX
+from paz6d.backend.image import encode_image
 
 #: PNG settings (zlib level 1, run-length strategy; deterministic output). Measured on a 640x480
 #: rendered image with sensor noise: the "sub" row filter makes the RGB file ~10 % smaller than
@@ -21,19 +22,11 @@ JPEG_PARAMETERS = [cv2.IMWRITE_JPEG_QUALITY, 95]
 
 
 def image_bytes(image: np.ndarray, image_format: str = "png") -> bytes:
-    """``png`` or ``jpg`` encoding of uint8 RGB ``(H, W, 3)``, uint8/uint16 ``(H, W)`` or bool
-    ``(H, W)`` (written as {0, 255})."""
-    png_parameters = PNG_PARAMETERS
-    if image.dtype == bool:
-        image = image.view(np.uint8) * np.uint8(255)
-        png_parameters = MASK_PNG_PARAMETERS
-    elif image.ndim == 3:
-        image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
-    parameters = png_parameters if image_format == "png" else JPEG_PARAMETERS
-    ok, encoded = cv2.imencode("." + image_format, image, parameters)
-    if not ok:
-        raise ValueError(f"image: OpenCV could not encode a {image.dtype} {image.shape} array as {image_format}")
-    return encoded.tobytes()
+    """``png`` or ``jpg`` file bytes of uint8 RGB ``(H, W, 3)``, uint8/uint16 ``(H, W)`` or bool
+    ``(H, W)`` (written as {0, 255}) with the data set's encoder settings."""
+    if image_format != "png":
+        return encode_image(image, "." + image_format, JPEG_PARAMETERS)
+    return encode_image(image, ".png", MASK_PNG_PARAMETERS if image.dtype == bool else PNG_PARAMETERS)
 
 
 def remove_stale_temporaries(root: Path) -> int:

@@ -1,4 +1,5 @@
-"""Runs a generation: checks inputs, renders the missing images in worker processes, merges.
+"""Runs a generation: checks inputs, renders the missing images in worker processes
+(:mod:`paz6d.synthesis.workers`), merges.
 
 Resumable: an image whose shard exists is not redone; re-running the same command after a crash
 (even SIGKILL) completes the set. Deterministic: image ``i`` depends only on ``(seed, i)``, so
@@ -7,20 +8,16 @@ the files are byte-identical for any number of workers or backend.
 
 from __future__ import annotations
 
-import multiprocessing
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
-from tqdm import tqdm
-
 from data_gen import bop_writer
 from data_gen.assets import Assets, load_assets
 from data_gen.config import BACKENDS, GenerationConfig, check_output_writable
 from data_gen.files import remove_stale_temporaries
-
+from paz6d.synthesis.workers import chunks, progress_bar, run_in_workers
 
 
 @dataclass
@@ -58,56 +55,23 @@ def render_indices(producer, indices: Iterable[int], output, on_image: Callable[
     return written
 
 
-_worker_producer = None
+def _render_chunk(producer, indices: list[int]) -> tuple[int, int]:
+    """Worker task: renders and writes ``indices``; returns ``(images, files written)``."""
+    return len(indices), render_indices(producer, indices, producer.config.out, lambda count: None)
 
 
-def raster_threads(cores: int, workers: int) -> int:
-    """llvmpipe raster threads per worker process (``LP_NUM_THREADS``): Mesa starts one per core
-    in every process by default, so ``workers`` processes would oversubscribe the cores. Each
-    worker gets ``cores // workers``, and 0 (rasterize in the worker's own thread) instead of 1: a
-    single extra thread only adds hand-offs (2 workers on 2 cores, 1,000 images at 640x480:
-    36.4 images/s with 1 raster thread each, 40.9 with 0)."""
-    threads = max(1, cores) // workers
-    return threads if threads >= 2 else 0
-
-
-def _start_worker(config: GenerationConfig, raster_threads: int) -> None:
-    """Worker process set-up: ``LP_NUM_THREADS = raster_threads`` (see :func:`raster_threads`)
-    unless the user set it."""
-    global _worker_producer
-    os.environ.setdefault("LP_NUM_THREADS", str(raster_threads))
+def _run_local(config: GenerationConfig, assets: Assets, pending: list[int], workers: int, progress) -> int:
     from data_gen.producer import ImageProducer
 
-    _worker_producer = ImageProducer(config)
-
-
-def _work(indices: list[int]) -> tuple[int, int]:
-    written = render_indices(_worker_producer, indices, _worker_producer.config.out, lambda count: None)
-    return len(indices), written
-
-
-def _chunks(indices: list[int], size: int) -> list[list[int]]:
-    return [indices[start:start + size] for start in range(0, len(indices), size)]
-
-
-def _run_local(config: GenerationConfig, assets: Assets, pending: list[int], workers: int, progress: tqdm) -> int:
     if workers == 1:
-        from data_gen.producer import ImageProducer
-
         producer = ImageProducer(config, assets)
         try:
             return render_indices(producer, pending, config.out, progress.update)
         finally:
             producer.close()
     chunk = max(1, min(8, len(pending) // (4 * workers)))
-    written = 0
-    context = multiprocessing.get_context("spawn")  # fresh processes: one GL context each, no inherited state
-    threads = raster_threads(os.cpu_count() or 1, workers)
-    with context.Pool(workers, initializer=_start_worker, initargs=(config, threads)) as pool:
-        for images, files in pool.imap_unordered(_work, _chunks(pending, chunk)):
-            written += files
-            progress.update(images)
-    return written
+    results = run_in_workers(ImageProducer, (config,), _render_chunk, chunks(pending, chunk), workers, progress)
+    return sum(files for _, files in results)
 
 
 def generate(config: GenerationConfig, workers: int = 1, backend: str = "local", ray_address: str | None = None,
@@ -140,8 +104,8 @@ def generate(config: GenerationConfig, workers: int = 1, backend: str = "local",
     remove_stale_temporaries(config.out)
     written = len(bop_writer.write_static_files(config, assets))
     pending = [index for index in range(config.num_images) if not bop_writer.shard_path(config, index).exists()]
-    with tqdm(total=config.num_images, initial=config.num_images - len(pending), unit="img",
-              desc="paz6d generate", disable=not show_progress) as progress:
+    with progress_bar(config.num_images, "paz6d generate", "img", show_progress,
+                      initial=config.num_images - len(pending)) as progress:
         if pending and backend == "local":
             written += _run_local(config, assets, pending, int(workers), progress)
         elif pending:

@@ -8,14 +8,19 @@ from pathlib import Path
 import numpy as np
 
 from data_gen import bop_writer
-from data_gen.assets import ZNEAR, Assets, load_assets
+from data_gen.assets import Assets, load_assets
 from data_gen.config import GenerationConfig
 from data_gen.files import image_bytes
+from paz6d.abstract.processor import SequentialProcessor
 from paz6d.backend.files import write_bytes_atomically
-from data_gen.randomization import (background_image, composite, degrade, random_colors, random_lighting,
-                                    random_tints)
-from data_gen.scene import sample_scene
+from paz6d.backend.image import alpha_blend
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, square_window
+from paz6d.datasets.bop.writer import depth_png_from_lengths, gt_info_entry, pose_entry
+from paz6d.synthesis.augment import RandomGaussianBlur, RandomSensorNoise, share_generator
+from paz6d.synthesis.backgrounds import background_image
+from paz6d.synthesis.lighting import random_lighting, random_tints
+from paz6d.synthesis.occluders import random_colors
+from paz6d.synthesis.scene import ZNEAR, sample_scene
 
 CROP_MARGIN = 1.2
 
@@ -38,6 +43,14 @@ class RenderedImage:
     poses: np.ndarray
 
 
+def degradation(config: GenerationConfig) -> SequentialProcessor:
+    """The camera's degradations of a composited image: a Gaussian blur (kernel 5, sigma 0.4-1.2 px)
+    with ``blur_probability``, then, for half of the images, sensor noise up to ``noise_std`` grey
+    levels."""
+    return SequentialProcessor([RandomGaussianBlur((5,), config.blur_probability, sigma=(0.4, 1.2)),
+                                RandomSensorNoise(config.noise_std, probability=0.5)], name="degrade")
+
+
 class ImageProducer:
     """Owns the assets (loaded here unless given) and one :class:`renderers.Renderer` (one GL
     context) of a worker."""
@@ -51,6 +64,7 @@ class ImageProducer:
         zfar = 2.0 * (self.assets.distance[1] + float(self.assets.radii.max()))
         self.renderer = Renderer(config.width, config.height, platform=config.platform, znear=ZNEAR, zfar=zfar,
                                  antialias=config.antialias)
+        self.degrade = degradation(config)
 
     def close(self) -> None:
         self.renderer.close()
@@ -60,7 +74,7 @@ class ImageProducer:
         config, assets = self.config, self.assets
         generator = image_generator(config.seed, index)
         scene = sample_scene(generator, assets, config)
-        lighting = random_lighting(generator, config, float(np.mean(assets.distance)))
+        lighting = random_lighting(generator, "scene", config.light_count, float(np.mean(assets.distance)))
         tints = np.concatenate([random_tints(generator, len(scene.object_indices), config.color_jitter),
                                 random_colors(generator, len(scene.clutter_indices))])
         objects = [(assets.meshes[i], pose) for i, pose in zip(scene.object_indices, scene.poses)]
@@ -68,9 +82,9 @@ class ImageProducer:
         out = self.renderer.render(self.K, objects, lighting=lighting, tints=tints,
                                    masked_objects=len(scene.object_indices))
         background = background_image(generator, assets.backgrounds, config.width, config.height)
-        rgb = degrade(generator, composite(out.rgb, out.alpha, background), config)
-        depth_png = np.round(out.depth * (1000.0 / config.depth_scale))
-        return RenderedImage(index, rgb, np.minimum(depth_png, 65535).astype(np.uint16), out.masks,
+        share_generator(self.degrade, generator)
+        rgb = self.degrade(alpha_blend(out.rgb, out.alpha, background))
+        return RenderedImage(index, rgb, depth_png_from_lengths(out.depth, config.depth_scale, units="m"), out.masks,
                              out.visible_masks, [assets.object_ids[i] for i in scene.object_indices], scene.poses)
 
     def encode(self, image: RenderedImage) -> dict[str, bytes]:
@@ -85,7 +99,7 @@ class ImageProducer:
         for instance, (full, visible) in enumerate(zip(image.masks, image.visible_masks)):
             files[paths[f"mask/{instance}"]] = image_bytes(full)
             files[paths[f"mask_visib/{instance}"]] = image_bytes(visible)
-            info = bop_writer.instance_annotations(visible, full, depth_valid)
+            info = gt_info_entry(visible, full, depth_valid)
             infos.append(info)
             if config.crop_size and info["px_count_visib"] > 0:
                 x, y, w, h = info["bbox_obj"]
@@ -96,8 +110,7 @@ class ImageProducer:
                 pose = image.poses[instance]
                 crops.append({"inst_id": instance, "obj_id": image.object_ids[instance], "window": list(window),
                               "cam_K": crop_intrinsics(self.K, window, config.crop_size).ravel().tolist(),
-                              "cam_R_m2c": pose[:3, :3].ravel().tolist(),
-                              "cam_t_m2c": (pose[:3, 3] * 1000.0).tolist(), "visib_fract": info["visib_fract"]})
+                              **pose_entry(pose, units="m"), "visib_fract": info["visib_fract"]})
         files[bop_writer.shard_relative_path(config, image.index)] = bop_writer.image_shard(
             config, image.index, self.K, image.object_ids, image.poses, infos, image.visible_masks, crops)
         return files

@@ -24,10 +24,10 @@ from data_gen.assets import load_assets
 from data_gen.config import GenerationConfig
 from data_gen.generator import generate
 from data_gen.producer import image_generator
-from data_gen.scene import random_rotation, sample_scene
 from paz6d.backend.camera import transform_and_project
 from paz6d.backend.mesh import diameter, load_mesh
 from paz6d.datasets.bop import BOPDataset, load_models_info
+from paz6d.synthesis.scene import sample_scene
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -250,23 +250,6 @@ def test_sampled_objects_stay_in_frame_and_apart(lmo_meshes, tmp_path):
                 assert np.linalg.norm(centres[i][0] - centres[j][0]) >= centres[i][1] + centres[j][1] - 1e-9
 
 
-def test_rotation_sampling_modes(lmo_meshes, tmp_path):
-    so3 = tiny_config(lmo_meshes, tmp_path / "unused")
-    generator = np.random.default_rng(0)
-    rotations = np.array([random_rotation(generator, so3) for _ in range(4000)])
-    # Haar-uniform rotations have E[R] = 0; 4000 samples put each entry's mean within ~0.03.
-    assert np.abs(rotations.mean(axis=0)).max() < 0.04
-    view = dataclasses.replace(so3, rotation="view-sphere", elevation_degrees=(10.0, 60.0), inplane_degrees=20.0)
-    for _ in range(300):
-        R = random_rotation(generator, view)
-        eye = -R.T @ np.array([0.0, 0.0, 1.0])  # camera direction seen from the model
-        elevation = np.degrees(np.arcsin(eye[2]))
-        assert 10.0 - 1e-6 <= elevation <= 60.0 + 1e-6
-        up_in_image = R @ np.array([0.0, 0.0, 1.0])  # model +z should point image-up, up to in-plane angle
-        angle = np.degrees(np.arctan2(up_in_image[0], -up_in_image[1]))
-        assert abs(angle) <= 20.0 + 1e-6
-
-
 def test_occluders_and_distractors_hide_objects(lmo_meshes, tmp_path):
     config = tiny_config(lmo_meshes, tmp_path / "occluded", num_images=6, occluder_probability=1.0, distractors=3,
                          objects_per_image=(1, 1), crop_size=0)
@@ -290,16 +273,6 @@ def test_backgrounds_come_from_the_folder(lmo_meshes, tmp_path):
     np.testing.assert_array_equal(sample.image[background], np.broadcast_to([0, 200, 0], (background.sum(), 3)))
 
 
-def test_procedural_backgrounds_are_seeded_and_varied():
-    from data_gen.randomization import procedural_background
-
-    first = procedural_background(np.random.default_rng(1), 64, 48)
-    assert first.shape == (48, 64, 3) and first.dtype == np.uint8
-    np.testing.assert_array_equal(first, procedural_background(np.random.default_rng(1), 64, 48))
-    assert not np.array_equal(first, procedural_background(np.random.default_rng(2), 64, 48))
-    assert first.std() > 5
-
-
 def test_jpg_rgb_and_symmetries_are_written(lmo_meshes, tmp_path):
     symmetries = tmp_path / "symmetries.json"
     symmetries.write_text(json.dumps({"5": {"symmetries_continuous": [{"axis": [0, 0, 1], "offset": [0, 0, 10]}]}}))
@@ -317,62 +290,3 @@ def test_jpg_rgb_and_symmetries_are_written(lmo_meshes, tmp_path):
     assert sample.image.shape == (72, 96, 3)
     coco = json.loads((folder / "scene_gt_coco.json").read_text())
     assert coco["images"][0]["file_name"] == "rgb/000000.jpg"
-
-
-def test_composite_matches_the_backend_alpha_blend():
-    from data_gen.randomization import composite
-    from paz6d.backend.image import alpha_blend
-
-    generator = np.random.default_rng(0)
-    foreground, background = generator.integers(0, 256, (2, 30, 40, 3), dtype=np.uint8)
-    alpha = generator.integers(0, 256, (30, 40), dtype=np.uint8)
-    alpha[:10] = 0
-    alpha[10:20] = 255
-    result = composite(foreground, alpha, background)
-    np.testing.assert_array_equal(result[:10], background[:10])
-    np.testing.assert_array_equal(result[10:20], foreground[10:20])
-    assert np.abs(result.astype(int) - alpha_blend(foreground, alpha, background).astype(int)).max() <= 1
-
-
-def test_sensor_noise_is_gaussian_seeded_rounded_and_clipped():
-    from scipy import stats
-
-    from data_gen.randomization import gaussian_noise
-
-    grey = np.full((200, 300, 3), 100, dtype=np.uint8)
-    noisy = gaussian_noise(np.random.default_rng(3), grey, 4.0)
-    assert noisy.dtype == np.uint8 and noisy.shape == grey.shape
-    np.testing.assert_array_equal(noisy, gaussian_noise(np.random.default_rng(3), grey, 4.0))
-    difference = noisy.astype(float) - 100
-    assert abs(difference.mean()) < 0.05 and abs(difference.std() - np.hypot(4.0, 1 / np.sqrt(12))) < 0.1
-    # Compare the quantized draws with the normal CDF at the rounding boundaries k + 1/2.
-    levels = np.arange(-8, 8)
-    empirical = np.array([(difference <= k).mean() for k in levels])
-    np.testing.assert_allclose(empirical, stats.norm.cdf(levels + 0.5, scale=4.0), atol=0.01)
-    extremes = gaussian_noise(np.random.default_rng(4), np.array([[0, 255]] * 1000, dtype=np.uint8), 20.0)
-    assert extremes[:, 0].min() == 0 and extremes[:, 1].max() == 255 and extremes[:, 0].max() > 10
-    assert gaussian_noise(np.random.default_rng(5), grey[..., 0], 2.0).shape == (200, 300)
-
-
-@pytest.mark.parametrize("preset", [None, "3"])
-def test_workers_split_the_llvmpipe_raster_threads(monkeypatch, preset):
-    """Each spawned worker gets its share of raster threads unless the user set LP_NUM_THREADS."""
-    import data_gen.generator as generator
-    import data_gen.producer as producer
-
-    if preset is None:
-        monkeypatch.delenv("LP_NUM_THREADS", raising=False)
-    else:
-        monkeypatch.setenv("LP_NUM_THREADS", preset)
-    seen = {}
-    monkeypatch.setattr(producer, "ImageProducer", lambda config: seen.setdefault("threads", os.environ["LP_NUM_THREADS"]))
-    generator._start_worker(GenerationConfig(meshes=(Path("unused.ply"),), out=Path("unused"), num_images=1), 1)
-    assert seen["threads"] == (preset or "1")
-
-
-def test_raster_threads_share_the_cores_and_skip_a_lone_helper_thread():
-    from data_gen.generator import raster_threads
-
-    assert [raster_threads(2, workers) for workers in (1, 2, 3)] == [2, 0, 0]
-    assert [raster_threads(16, workers) for workers in (1, 2, 4, 8, 16)] == [16, 8, 4, 2, 0]
-    assert raster_threads(0, 1) == 0

@@ -262,6 +262,24 @@ def test_alpha_blend_uint8_alpha_rounds_like_the_float_formula(picture):
     background = np.random.default_rng(2).integers(0, 256, picture.shape, dtype=np.uint8)
     expected = np.rint(alpha[..., None] / 255 * picture + (1 - alpha[..., None] / 255) * background)
     np.testing.assert_array_equal(image.alpha_blend(picture, alpha, background), expected)
+    # Only the box of alpha > 0 is blended: outside it the result is the background, untouched.
+    alpha[:10], alpha[:, :7] = 0, 0
+    blended = image.alpha_blend(picture, alpha, background)
+    np.testing.assert_array_equal(blended[:10], background[:10])
+    np.testing.assert_array_equal(blended, np.rint(alpha[..., None] / 255 * picture
+                                                   + (1 - alpha[..., None] / 255) * background))
+    np.testing.assert_array_equal(image.alpha_blend(picture, np.zeros_like(alpha), background), background)
+
+
+def test_encode_image_matches_the_saved_file_and_takes_encoder_parameters(tmp_path, picture):
+    saved = image.save_image(tmp_path / "picture.png", picture)
+    assert image.encode_image(picture) == saved.read_bytes()
+    fast = image.encode_image(picture, ".png", [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    assert fast != saved.read_bytes()
+    np.testing.assert_array_equal(cv2.imdecode(np.frombuffer(fast, np.uint8), cv2.IMREAD_COLOR)[..., ::-1], picture)
+    mask = picture[..., 0] > 100
+    decoded = cv2.imdecode(np.frombuffer(image.encode_image(mask), np.uint8), cv2.IMREAD_UNCHANGED)
+    np.testing.assert_array_equal(decoded, mask.astype(np.uint8) * 255)
 
 
 def test_nonzero_window_is_the_tight_box_grown_and_clipped():

@@ -13,7 +13,7 @@ import pytest
 HEAVY = ("tensorflow", "keras", "pyrender", "OpenGL", "open3d")
 DOCUMENTED_MODULES = ["paz6d.backend.quaternion", "paz6d.backend.boxes", "paz6d.backend.image",
                       "paz6d.backend.keypoints", "paz6d.abstract.processor", "paz6d.abstract.sequence",
-                      "paz6d.processors.image"]
+                      "paz6d.processors.image", "paz6d.synthesis.augment"]
 
 
 def import_in_fresh_interpreter(statement: str) -> dict:

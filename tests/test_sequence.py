@@ -13,7 +13,7 @@ import pytest
 
 from paz6d.abstract import Processor
 from paz6d.abstract.sequence import BatchDispatcher, collate
-from paz6d.processors.image import RandomBrightness, RandomImageNoise
+from paz6d.synthesis.augment import RandomBrightness, RandomImageNoise
 
 SAMPLES = [(np.full((4, 4, 3), 20 * index, np.uint8), index) for index in range(10)]
 
@@ -117,7 +117,7 @@ def test_dispatcher_validation():
 
 
 def test_importing_the_sequence_module_does_not_import_tensorflow():
-    code = ("import sys, paz6d.abstract, paz6d.abstract.sequence, paz6d.processors.image; "
+    code = ("import sys, paz6d.abstract, paz6d.abstract.sequence, paz6d.synthesis.augment; "
             "print(sorted(name for name in ('tensorflow', 'keras') if name in sys.modules))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
     assert result.stdout.strip() == "[]"

@@ -63,28 +63,39 @@ def load_image(path: str | Path, grayscale: bool = False) -> np.ndarray:
     return decoded if grayscale else cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
 
 
-def save_image(path: str | Path, image) -> Path:
-    """Writes an image atomically (temporary file in the same folder, then ``os.replace``).
+def encode_image(image, extension: str = ".png", parameters: list[int] | tuple[int, ...] = ()) -> bytes:
+    """The bytes of an image file (``extension`` such as ``".png"`` or ``".jpg"``; OpenCV ``imwrite``
+    ``parameters`` such as PNG compression).
 
-    Accepts ``uint8`` RGB ``(H, W, 3)``, ``uint8``/``uint16`` single-channel ``(H, W)`` and
-    ``bool`` masks ``(H, W)`` (written as ``{0, 255}``). The format follows the suffix.
+    Accepts ``uint8`` RGB ``(H, W, 3)``, ``uint8``/``uint16`` single-channel ``(H, W)`` and ``bool``
+    masks ``(H, W)`` (written as ``{0, 255}``).
     """
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in _WRITABLE_SUFFIXES:
-        raise ValueError(f"{path}: unsupported image suffix {path.suffix!r}; expected one of {_WRITABLE_SUFFIXES}")
     array = np.asarray(image)
     if array.dtype == bool and array.ndim == 2:
-        array = array.astype(np.uint8) * 255
+        array = array.view(np.uint8) * np.uint8(255)
     if array.ndim == 3:
         array = cv2.cvtColor(as_image(array), cv2.COLOR_RGB2BGR)
     elif array.ndim != 2 or array.dtype not in (np.uint8, np.uint16) or 0 in array.shape:
         raise ValueError(f"image: expected uint8 RGB (H, W, 3), uint8/uint16 (H, W) or bool (H, W), "
                          f"got {array.dtype} {array.shape}")
-    ok, encoded = cv2.imencode(suffix, array)
+    ok, encoded = cv2.imencode(extension, array, list(parameters))
     if not ok:
-        raise ValueError(f"{path}: OpenCV could not encode a {array.dtype} {array.shape} image as {suffix}")
-    return write_bytes_atomically(path, encoded.tobytes())
+        raise ValueError(f"image: OpenCV could not encode a {array.dtype} {array.shape} array as {extension}")
+    return encoded.tobytes()
+
+
+def save_image(path: str | Path, image) -> Path:
+    """Writes an image atomically (temporary file in the same folder, then ``os.replace``); the format
+    follows the suffix (see :func:`encode_image` for the accepted arrays)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in _WRITABLE_SUFFIXES:
+        raise ValueError(f"{path}: unsupported image suffix {path.suffix!r}; expected one of {_WRITABLE_SUFFIXES}")
+    try:
+        data = encode_image(image, suffix)
+    except ValueError as error:
+        raise ValueError(f"{path}: {error}") from error
+    return write_bytes_atomically(path, data)
 
 
 def resize(image, size: tuple[int, int], interpolation: str = "linear") -> np.ndarray:
@@ -333,10 +344,16 @@ def alpha_blend(foreground, alpha, background) -> np.ndarray:
         raise ValueError(f"alpha: expected shape {foreground.shape[:2]}, got {alpha.shape}")
     if alpha.dtype == bool:
         return np.where(alpha[..., None], foreground, background)
-    if alpha.dtype == np.uint8:  # exact integer form of round(fg * a / 255 + bg * (1 - a / 255))
-        weight = alpha[..., None].astype(np.uint16)
-        blended = (foreground * weight + background * (255 - weight) + 127) // 255
-        return blended.astype(np.uint8)
+    if alpha.dtype == np.uint8:
+        # Exact integer form of round(fg * a / 255 + bg * (1 - a / 255)), computed only inside the box
+        # of alpha > 0 (outside it the result is the background): several times faster for an object.
+        image = background.copy()
+        window = nonzero_window(alpha)
+        if window is not None:
+            weight = alpha[window].astype(np.uint16)[..., None]
+            blended = (foreground[window].astype(np.uint16) * weight + background[window] * (255 - weight) + 127) // 255
+            image[window] = blended.astype(np.uint8)
+        return image
     weight = alpha.astype(np.float32)
     if not np.all((weight >= 0) & (weight <= 1)):
         raise ValueError("alpha: expected values in [0, 1] (or a uint8/bool mask)")

@@ -32,7 +32,8 @@ from paz6d.backend.files import (save_figure_atomically, save_keras_model_atomic
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.fer2013 import FER2013_CLASSES, load_fer2013_csv, load_image_folder
 from paz6d.processors.affine import RandomAffine
-from paz6d.processors.image import ConvertColorSpace, RandomBrightness, RandomContrast, RandomFlipLeftRight
+from paz6d.processors.image import ConvertColorSpace
+from paz6d.synthesis.augment import RandomBrightness, RandomContrast, RandomFlipLeftRight
 
 VALIDATION_LOG = "validation.csv"
 

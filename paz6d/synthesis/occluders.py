@@ -1,0 +1,72 @@
+"""Things that hide part of an object: distractor primitives rendered with it (and placed between
+the camera and an object) and flat polygons drawn over a crop."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import trimesh
+
+from paz6d.backend import quaternion
+from paz6d.backend.transform import from_rotation_translation
+
+
+def distractor_library(size: float) -> list[trimesh.Trimesh]:
+    """Boxes, cylinders, spheres and capsules at three sizes relative to ``size`` (metres), centred at
+    the origin, with white vertex colours (a random colour tints each when rendered)."""
+    library = []
+    for factor in (0.3, 0.6, 1.0):
+        side = size * factor
+        library += [trimesh.creation.box((side, 0.6 * side, 0.4 * side)),
+                    trimesh.creation.cylinder(radius=0.25 * side, height=side, sections=24),
+                    trimesh.creation.icosphere(subdivisions=2, radius=0.4 * side),
+                    trimesh.creation.capsule(height=0.6 * side, radius=0.2 * side, count=(12, 12))]
+    for mesh in library:
+        mesh.visual.vertex_colors = np.full((len(mesh.vertices), 4), 255, dtype=np.uint8)
+    return library
+
+
+def random_colors(generator: np.random.Generator, count: int) -> np.ndarray:
+    """``(count, 3)`` saturated random colours (linear factors) for white distractor primitives."""
+    return generator.uniform(0.05, 1.0, size=(count, 3))
+
+
+def occluder_pose(generator: np.random.Generator, target_centre: np.ndarray, target_radius: float,
+                  occluder_radius: float, znear: float) -> np.ndarray | None:
+    """``T_model2cam (4, 4)`` of a primitive (bounding radius ``occluder_radius``) on the way from
+    the camera to an object (bounding sphere ``target_centre`` in the camera frame, ``target_radius``,
+    metres): 50-80 % of the way, shifted sideways by up to 0.6 radius; ``None`` when it would come
+    closer to the camera than ``2 * znear``."""
+    fraction = generator.uniform(0.5, 0.8)
+    offset = generator.uniform(-0.6, 0.6, size=2) * target_radius * fraction
+    centre = target_centre * fraction + np.array([offset[0], offset[1], 0.0])
+    if centre[2] - occluder_radius <= 2 * znear:
+        return None
+    rotation = quaternion.to_rotation_matrix(quaternion.random(seed=generator))
+    return from_rotation_translation(rotation, centre)
+
+
+def draw_polygon_occluders(crop: np.ndarray, generator: np.random.Generator, probability: float,
+                           max_count: int, size: tuple[float, float], object_side: float) -> None:
+    """With ``probability``, draws 1..``max_count`` flat-coloured random polygons (3-6 corners) over
+    the outskirts of an object centred in ``crop`` ``(S, S, 3)`` uint8 (in place).
+
+    Args:
+        size: polygon diameter range as fractions of ``object_side`` (pixels).
+
+    Measured on the AAE demo (3,000 steps): larger, more central, textured occluders (up to 0.8 of the
+    object, 3 of them) raised the ADD AUC (0.83 -> 0.84) but also the median rotation error
+    (4.9 -> 6.5 deg); ADD(-S) recall at 0.1 d fell from 71 % to 64 % (validation set: 59 % -> 57 %).
+    """
+    if generator.random() >= probability:
+        return
+    side = crop.shape[0]
+    for _ in range(int(generator.integers(1, max_count + 1))):
+        radius = 0.5 * generator.uniform(*size) * object_side
+        angle = generator.uniform(0, 2 * np.pi)
+        centre = side / 2 + generator.uniform(0.25, 0.6) * object_side * np.array([np.cos(angle), np.sin(angle)])
+        count = int(generator.integers(3, 7))
+        angles = np.sort(generator.uniform(0, 2 * np.pi, count))
+        radii = radius * generator.uniform(0.5, 1.2, count)
+        polygon = centre + np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=1)
+        cv2.fillPoly(crop, [np.round(polygon).astype(np.int32)], generator.uniform(0, 255, 3).tolist())
