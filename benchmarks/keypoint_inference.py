@@ -15,7 +15,6 @@ Run: ``.venv/bin/python benchmarks/keypoint_inference.py [--repeats 20]``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import tempfile
 from pathlib import Path
@@ -27,18 +26,18 @@ from timing import median_seconds
 def _random_run(folder: Path, settings: dict) -> Path:
     """A run directory with a randomly initialised KeypointNet of ``settings`` and a random 3D keypoint set."""
     from paz6d.keypointnet.model import build_keypointnet, save_keypointnet
-    from paz6d.keypointnet.pipeline import write_keypoints
+    from paz6d.keypointnet import run_dir as run_files
     from paz6d.keypointnet.train import resolve_precision
 
     model = build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
                               settings["downsample"], tuple(settings["dilations"]),
                               context_stride=settings.get("context_stride"),
                               compute_dtype=resolve_precision(settings.get("precision", "float32")))
-    save_keypointnet(model, folder / "model.keras")
-    (folder / "config.json").write_text(json.dumps({"input_size": settings["input_size"], "margin": 1.25,
-                                                    "downsample": settings["downsample"]}))
+    save_keypointnet(model, run_files.model_path(folder))
+    run_files.write_config(folder, {"input_size": settings["input_size"], "margin": 1.25,
+                                    "downsample": settings["downsample"]})
     points = np.random.default_rng(0).uniform(-0.05, 0.05, (settings["num_keypoints"], 3))
-    write_keypoints(folder, points, np.ones(len(points), bool), "farthest-point")
+    run_files.write_keypoints(folder, points, np.ones(len(points), bool), "farthest-point")
     return folder
 
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from paz6d.backend.camera import opengl_projection
 from paz6d.backend.checks import as_array, as_camera_matrix
 
 #: Homogeneous change of axes between the OpenCV and OpenGL camera frames (its own inverse).
@@ -31,9 +30,25 @@ def emitter_pose_to_opengl(T_emitter2cam) -> np.ndarray:
 
 
 def projection_matrix(K, width: int, height: int, znear: float, zfar: float) -> np.ndarray:
-    """OpenGL projection ``(4, 4)`` that puts OpenCV pixel centres of ``K`` at OpenGL pixel centres."""
-    K_edges = as_camera_matrix(K).copy()
-    K_edges[0, 2] += 0.5
-    K_edges[1, 2] += 0.5
-    return opengl_projection(K_edges, width, height, znear, zfar)
+    """OpenGL projection ``(4, 4)`` equivalent to the OpenCV intrinsics ``K`` for a ``width x height`` image.
 
+    The OpenGL camera looks down -z with y up and NDC in ``[-1, 1]``. OpenCV's integer pixel
+    coordinates are pixel centres and OpenGL's window coordinates count pixel edges, so the
+    principal point moves by half a pixel: a camera-frame point lands in the pixel whose centre
+    :func:`paz6d.backend.camera.project_points` gives. ``znear``/``zfar`` are metres.
+    """
+    K = as_camera_matrix(K)
+    if not 0 < znear < zfar:
+        raise ValueError(f"znear/zfar: expected 0 < znear < zfar, got znear={znear}, zfar={zfar}")
+    fx, fy, skew = K[0, 0], K[1, 1], K[0, 1]
+    cx, cy = K[0, 2] + 0.5, K[1, 2] + 0.5  # pixel centres -> window coordinates (edges)
+    P = np.zeros((4, 4))
+    P[0, 0] = 2 * fx / width
+    P[0, 1] = -2 * skew / width
+    P[0, 2] = 1 - 2 * cx / width
+    P[1, 1] = 2 * fy / height
+    P[1, 2] = 2 * cy / height - 1
+    P[2, 2] = -(zfar + znear) / (zfar - znear)
+    P[2, 3] = -2 * zfar * znear / (zfar - znear)
+    P[3, 2] = -1
+    return P

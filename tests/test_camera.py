@@ -143,24 +143,6 @@ def test_scaled_camera_keeps_pixel_centre_convention():
     np.testing.assert_allclose(half.project(points), (original.project(points) + 0.5) * 0.5 - 0.5, atol=1e-9)
 
 
-def test_opengl_projection_maps_pixels_to_ndc_and_back():
-    width, height, near, far = 640, 480, 0.1, 10.0
-    P = camera.opengl_projection(K, width, height, near, far)
-    np.testing.assert_allclose(camera.camera_matrix_from_opengl(P, width, height), K, atol=1e-9)
-    points = points_in_front(5)
-    pixels = camera.project_points(points, K)
-    opengl_points = np.column_stack([points[:, 0], -points[:, 1], -points[:, 2], np.ones(len(points))])
-    clip = opengl_points @ P.T
-    ndc = clip[:, :3] / clip[:, 3:]
-    # K's pixel coordinates are window coordinates: u = 0 at the left edge, v measured downwards.
-    np.testing.assert_allclose((ndc[:, 0] + 1) / 2 * width, pixels[:, 0], atol=1e-9)
-    np.testing.assert_allclose((1 - ndc[:, 1]) / 2 * height, pixels[:, 1], atol=1e-9)
-    depth_ndc = [(P @ [0, 0, -z, 1])[2] / (P @ [0, 0, -z, 1])[3] for z in (near, far)]
-    np.testing.assert_allclose(depth_ndc, [-1.0, 1.0], atol=1e-12)
-    with pytest.raises(ValueError, match="near/far"):
-        camera.opengl_projection(K, width, height, 1.0, 0.5)
-
-
 def test_from_bop_json_reads_lmo_camera(shared_data):
     root = shared_data / "bop_lmo"
     lens = Camera.from_bop_json(root / "camera.json")

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import skimage.data
 
+from paz6d.abstract import KeyedStep
 from paz6d.datasets.fer2013 import load_image_folder
 from paz6d.faces.emotion import FER_CLASS_NAMES, DetectEmotion, EmotionClassifier, fer_model_path
 
@@ -100,6 +101,20 @@ def test_detect_emotion_on_the_smiling_astronaut(classifier):
         detector(np.dstack([astronaut, astronaut[..., 0]]))
     with pytest.raises(ValueError, match="faces"):
         classifier(np.zeros((2, 64, 64, 3), np.uint8))
+
+
+@needs_fer
+def test_detect_emotion_steps_can_be_replaced_by_name():
+    detector = DetectEmotion()
+    assert detector.names == ["to_grey", "detect_faces", "crop", "classify", "label"]
+    surprised = np.eye(len(FER_CLASS_NAMES), dtype=np.float32)[FER_CLASS_NAMES.index("surprise")]
+    detector.replace("classify", KeyedStep(lambda crops: np.repeat(surprised[None], len(crops), axis=0), "crops",
+                                           "probabilities", "classify"))
+    [(box, label, scores)] = detector(skimage.data.astronaut())
+    assert label == box.class_name == "surprise" and box.score == 1.0
+    detector.remove("detect_faces")
+    detector.insert("crop", KeyedStep(lambda image: [], "image", "faces", "no_faces"))
+    assert detector(skimage.data.astronaut()) == []
 
 
 def test_missing_model_is_explained(monkeypatch, tmp_path):

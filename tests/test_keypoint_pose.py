@@ -14,8 +14,9 @@ from paz6d.backend.farthest_points import farthest_point_sampling
 from paz6d.backend.pnp import PnPError
 from paz6d.backend.square_crop import (crop_intrinsics, crop_square, crop_transform, projected_box, square_window,
                                       to_full_image)
-from paz6d.keypointnet.pipeline import (depth_from_box, keypoint_spread, lift_keypoints, read_keypoints,
-                                          read_object, write_keypoints, write_object)
+from paz6d.keypointnet.keypoints import keypoint_spread, lift_keypoints
+from paz6d.keypointnet.run_dir import read_keypoints, read_object, write_keypoints, write_object
+from paz6d.processors.pose import DepthFromBox
 
 K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
 
@@ -177,7 +178,7 @@ def run_dir(tmp_path_factory):
 def test_pnp_lifting_recovers_a_known_pose_from_perfect_keypoints(run_dir):
     from paz6d.keypointnet.pipeline import KeypointPose6D
 
-    estimator = KeypointPose6D(run_dir, K)
+    estimator = KeypointPose6D(run_dir, Camera(K, 640, 480))
     T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
     perfect = Keypoints2D(transform_and_project(estimator.points_model, T, K), np.ones(8))
     pose = estimator.pose_from_keypoints(perfect, window_side=100)
@@ -193,7 +194,7 @@ def test_pnp_lifting_recovers_a_known_pose_from_perfect_keypoints(run_dir):
 def test_fewer_than_four_usable_keypoints_is_a_clear_error(run_dir, tmp_path):
     from paz6d.keypointnet.pipeline import KeypointPose6D
 
-    estimator = KeypointPose6D(run_dir, K)
+    estimator = KeypointPose6D(run_dir, Camera(K, 640, 480))
     T = _pose([0.1, 0.2, 0.3], [0.0, 0.0, 0.5])
     scores = np.array([1, 1, 1, 0, 0, 0, 0, 0], float)
     keypoints = Keypoints2D(transform_and_project(estimator.points_model, T, K), scores)
@@ -242,7 +243,7 @@ def test_corrupt_or_incomplete_run_directory_is_a_clear_error(run_dir, tmp_path)
 
 
 def test_local_expectation_ignores_mass_far_from_the_peak():
-    from paz6d.keypointnet.pipeline import local_expectation
+    from paz6d.keypointnet.keypoints import local_expectation
 
     probabilities = np.zeros((1, 8, 8, 2))
     probabilities[0, 2, 1, 0], probabilities[0, 2, 2, 0] = 0.3, 0.1  # a weaker mode far from the peak
@@ -256,7 +257,7 @@ def test_local_expectation_ignores_mass_far_from_the_peak():
 
 
 def test_triangulate_keypoints_recovers_points_and_drops_outlier_views():
-    from paz6d.keypointnet.pipeline import triangulate_keypoints
+    from paz6d.keypointnet.keypoints import triangulate_keypoints
 
     points_model = np.random.default_rng(4).uniform(-0.05, 0.05, (5, 3))
     uv, _, intrinsics, poses = _views(points_model, 12, seed=2)
@@ -278,7 +279,7 @@ def test_depth_from_box_moves_the_object_to_fit_its_box(run_dir):
     box = projected_box(hull, T, K)
     too_far = T.copy()
     too_far[:3, 3] *= 1.08
-    fitted = depth_from_box(Pose6D.from_matrix(too_far), hull, box, K)
+    fitted = DepthFromBox(hull)(Pose6D.from_matrix(too_far), box, Camera(K, 640, 480))
     np.testing.assert_allclose(fitted.to_matrix()[:3, :3], T[:3, :3], atol=1e-9)  # rotation unchanged
     # three fixed-point steps on a perspective projection: close, not exact
     np.testing.assert_allclose(fitted.translation, T[:3, 3], rtol=2e-3)
@@ -291,20 +292,23 @@ def test_depth_from_box_moves_the_object_to_fit_its_box(run_dir):
 def test_estimator_with_depth_from_box_uses_the_box(run_dir):
     from paz6d.keypointnet.pipeline import KeypointPose6D
 
-    estimator = KeypointPose6D(run_dir, K, depth_from_box=True)
+    camera = Camera(K, 640, 480)
+    estimator = KeypointPose6D(run_dir, camera, depth_from_box=True)
     T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
     keypoints = Keypoints2D(transform_and_project(estimator.points_model, T, K), np.ones(8))
     box = projected_box(estimator.hull_points, T, K)
     shrunk = Keypoints2D((keypoints.points - keypoints.points.mean(0)) * 0.95 + keypoints.points.mean(0), np.ones(8))
-    plain = KeypointPose6D(run_dir, K)._estimate(shrunk, box)
-    fitted = estimator._estimate(shrunk, box)
+    plain = KeypointPose6D(run_dir, camera).estimate_from_keypoints(shrunk, box)
+    fitted = estimator.estimate_from_keypoints(shrunk, box)
     assert abs(plain.translation[2] - 0.5) > 0.015  # a 5 % smaller constellation reads as 5 % farther
     assert abs(fitted.translation[2] - 0.5) < 0.003
 
 
 
-def test_predict_keypoints_decodes_in_batches():
-    from paz6d.keypointnet.pipeline import local_expectation, predict_keypoints
+def test_predict_and_decode_steps_work_in_batches():
+    from paz6d.keypointnet.keypoints import local_expectation
+    from paz6d.keypointnet.pipeline import DecodeKeypoints
+    from paz6d.processors.predict import Predict
 
     def infer(batch):  # probability maps: the stride-4 cells' share of the first channel
         cells = batch[..., 0].reshape(len(batch), 4, 4, 4, 4).sum(axis=(2, 4))
@@ -312,8 +316,79 @@ def test_predict_keypoints_decodes_in_batches():
         return {"probabilities": probabilities, "uv": np.zeros((len(batch), 1, 2))}
 
     crops = np.random.default_rng(0).uniform(0, 255, (7, 16, 16, 3))
-    uv, spread = predict_keypoints(infer, crops, 4, batch_size=3)
+    uv, spread = DecodeKeypoints(4)(Predict(infer, batch_size=3)(crops))
     expected = local_expectation(infer(crops)["probabilities"], 4)
     np.testing.assert_allclose(uv, expected)
     np.testing.assert_allclose(spread, keypoint_spread(infer(crops)["probabilities"], expected, 4))
     assert uv.shape == (7, 1, 2) and spread.shape == (7, 1)
+
+
+def test_pipeline_steps_can_be_read_replaced_inserted_and_removed(run_dir):
+    from paz6d.abstract import KeyedStep
+    from paz6d.keypointnet.pipeline import KeypointPose6D
+
+    camera = Camera(K, 640, 480)
+    estimator = KeypointPose6D(run_dir, camera, depth_from_box=True)
+    assert estimator.names == ["crop", "predict", "decode", "score", "to_image", "to_keypoints2d", "solve_pnp",
+                               "depth_from_box"]
+    T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
+    perfect = transform_and_project(estimator.points_model, T, K)
+    image = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    box = projected_box(estimator.hull_points, T, K)
+    # the untrained network's keypoints are replaced by perfect ones: the rest of the chain runs as is
+    old = estimator.replace("to_image", KeyedStep(lambda uv, window: perfect, ("uv", "windows"), "points",
+                                                  "to_image", per_sample=True))
+    assert old.name == "to_image" and estimator["to_image"] is not old
+    estimator.replace("score", KeyedStep(lambda spread: np.ones(len(spread)), "spread", "scores", "score",
+                                         per_sample=True))
+    pose = estimator(image, box)
+    np.testing.assert_allclose(pose.to_matrix(), T, atol=1e-6)
+    # a step inserted after the keypoints corrupts them: the pose changes
+    shift = KeyedStep(lambda keypoints: Keypoints2D(keypoints.points * 1.05, keypoints.scores), "keypoints",
+                      "keypoints", "shrink", per_sample=True)
+    estimator.insert("to_keypoints2d", shift, after=True)
+    assert estimator.names.index("shrink") == estimator.names.index("to_keypoints2d") + 1
+    assert np.abs(estimator(image, box).translation - T[:3, 3]).max() > 1e-3
+    estimator.remove("shrink")
+    # a constant pose in place of PnP is what comes out, then moved along its ray by depth_from_box
+    fixed = Pose6D.from_matrix(_pose([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]))
+    estimator.replace("solve_pnp", KeyedStep(lambda keypoints, window, camera: fixed,
+                                             ("keypoints", "windows", "cameras"), "poses", "solve_pnp",
+                                             per_sample=True))
+    moved = estimator(image, box)
+    np.testing.assert_allclose(moved.quaternion, fixed.quaternion)
+    assert moved.translation[2] != 1.0
+    estimator.remove("depth_from_box")
+    assert estimator(image, box) == fixed
+    with pytest.raises(ValueError, match=r"no step named 'missing'; steps are \['crop'"):
+        estimator.remove("missing")
+
+
+def test_camera_per_call_defaults_to_the_constructor_camera(run_dir):
+    from paz6d.abstract import KeyedStep
+    from paz6d.keypointnet.pipeline import KeypointPose6D
+
+    T = _pose([0.2, 0.3, -0.1], [0.01, 0.02, 0.5])
+    other = Camera(K * [[1.2], [1.2], [1]], 640, 480)
+    image = np.random.default_rng(1).integers(0, 256, (480, 640, 3), dtype=np.uint8)
+
+    def with_perfect_keypoints(estimator):
+        perfect = transform_and_project(estimator.points_model, T, K)
+        estimator.replace("to_image", KeyedStep(lambda uv, window: perfect, ("uv", "windows"), "points", "to_image",
+                                                per_sample=True))
+        estimator.replace("score", KeyedStep(lambda spread: np.ones(len(spread)), "spread", "scores", "score",
+                                             per_sample=True))
+        return estimator
+
+    by_matrix = with_perfect_keypoints(KeypointPose6D(run_dir, K))
+    without_camera = with_perfect_keypoints(KeypointPose6D(run_dir))
+    box = (200, 150, 400, 330)
+    np.testing.assert_allclose(by_matrix(image, box).to_matrix(), T, atol=1e-6)
+    assert by_matrix(image, box, camera=other) == without_camera(image, box, camera=other)
+    assert by_matrix(image, box, camera=other) != by_matrix(image, box)
+    assert by_matrix.estimate_batch([image, image], [box, box], [None, other]) == [by_matrix(image, box),
+                                                                                  by_matrix(image, box, other)]
+    with pytest.raises(ValueError, match="camera: none given"):
+        without_camera(image, box)
+    with pytest.raises(ValueError, match="does not match the camera"):
+        by_matrix(image, box, camera=Camera(K, 320, 240))

@@ -1,8 +1,7 @@
-"""paz6d.backend.keypoints: normalization, projection and left-right flips consistent with images."""
+"""paz6d.backend.keypoints: normalization and left-right flips consistent with images."""
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -35,22 +34,8 @@ def test_normalized_coordinates_survive_resizing():
     lens = Camera(K, 640, 480)
     half = lens.scaled(0.5)
     points = np.random.default_rng(0).uniform([-0.2, -0.2, 0.5], [0.2, 0.2, 1.5], (10, 3))
-    np.testing.assert_allclose(keypoints.normalize(keypoints.project(points, lens), (640, 480)),
-                               keypoints.normalize(keypoints.project(points, half), (320, 240)), atol=1e-12)
-
-
-def test_project_with_camera_matrix_pose_and_distortion():
-    model = np.random.default_rng(2).uniform(-0.05, 0.05, (15, 3))
-    rotation_vector, translation = np.array([0.1, 0.4, -0.2]), np.array([0.01, 0.02, 0.6])
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = cv2.Rodrigues(rotation_vector)[0], translation
-    distortion = np.array([-0.2, 0.05, 0.001, 0.0, 0.0])
-    for lens, coefficients in ((K, None), (Camera(K, 640, 480, distortion), distortion)):
-        expected, _ = cv2.projectPoints(model, rotation_vector, translation, K, coefficients)
-        np.testing.assert_allclose(keypoints.project(model, lens, T), expected.reshape(-1, 2), atol=1e-9)
-    camera_points = model + translation
-    expected, _ = cv2.projectPoints(camera_points, np.zeros(3), np.zeros(3), K, None)
-    np.testing.assert_allclose(keypoints.project(camera_points, K), expected.reshape(-1, 2), atol=1e-9)
+    np.testing.assert_allclose(keypoints.normalize(lens.project(points), (640, 480)),
+                               keypoints.normalize(half.project(points), (320, 240)), atol=1e-12)
 
 
 def test_flip_left_right_follows_the_image_flip():
@@ -82,7 +67,5 @@ def test_bad_keypoint_input_names_the_argument():
         keypoints.normalize(np.zeros((4, 2)), (10, -1))
     with pytest.raises(ValueError, match=r"value_range: expected one of"):
         keypoints.denormalize(np.zeros((4, 2)), (10, 10), (-0.5, 0.5))
-    with pytest.raises(ValueError, match=r"points3d: expected at least 1 points of shape \(N, 3\), got 0"):
-        keypoints.project(np.zeros((0, 3)), K)
     with pytest.raises(ValueError, match=r"keypoints: contains NaN"):
         keypoints.flip_left_right([[np.nan, 1.0]], 10)

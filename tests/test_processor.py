@@ -8,17 +8,21 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from paz6d.abstract import Box2D, Keypoints2D, Pose6D, Processor, RandomProcessor, SequentialProcessor
+from paz6d.abstract import Box2D, KeyedStep, Keypoints2D, Pose6D, Processor, RandomProcessor, SequentialProcessor
 from paz6d.abstract import random_processors, reseed
 from paz6d.backend import boxes as boxes_backend
 from paz6d.backend import camera as camera_backend
 from paz6d.backend import image as image_backend
-from paz6d.backend import keypoints as keypoints_backend
 from paz6d.backend.camera import Camera
+from paz6d.backend.pnp import PnPError
+from paz6d.backend.square_crop import crop_square, projected_box, square_window, to_full_image
 from paz6d.processors import boxes as box_processors
+from paz6d.processors import crops as crop_processors
 from paz6d.processors import image as image_processors
 from paz6d.processors import keypoints as keypoint_processors
 from paz6d.processors import pose as pose_processors
+from paz6d.processors.predict import Predict, predict_in_batches
+from paz6d.synthesis import augment
 
 K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
 
@@ -92,6 +96,61 @@ def test_sequential_processor_list_operations():
         pipeline.pop()
 
 
+def test_sequential_processor_steps_by_name():
+    pipeline = SequentialProcessor([AddOne(), Scale(10, "ten"), double])
+    assert pipeline.names == ["AddOne", "ten", "double"] and pipeline["ten"].factor == 10
+    assert pipeline.index("double") == 2
+    pipeline.insert("ten", Scale(-1, "negate"))
+    pipeline.insert("ten", Scale(3, "three"), after=True)
+    pipeline.insert(-1, Scale(5, "five"), after=True)
+    assert pipeline.names == ["AddOne", "negate", "ten", "three", "double", "five"]
+    assert pipeline(1) == -(1 + 1) * 10 * 3 * 2 * 5
+    old = pipeline.replace("three", Scale(0.5, "half"))
+    assert old.name == "three" and pipeline.names[3] == "half"
+    assert pipeline(1) == -(1 + 1) * 10 * 0.5 * 2 * 5
+    assert pipeline.remove("five").name == "five" and pipeline.names[-1] == "double"
+    assert "steps=['AddOne', 'negate', 'ten', 'half', 'double']" in repr(pipeline)
+    for operation in (lambda: pipeline.replace("absent", double), lambda: pipeline.insert("absent", double),
+                      lambda: pipeline["absent"]):
+        with pytest.raises(ValueError, match=r"name: no step named 'absent'; steps are \['AddOne'"):
+            operation()
+    with pytest.raises(ValueError, match="step: expected a callable"):
+        pipeline.replace("ten", 3)
+
+
+def test_keyed_step_reads_and_writes_named_values():
+    add = KeyedStep(lambda a, b: a + b, ("a", "b"), "total", name="add")
+    values = {"a": 1, "b": 2}
+    assert add(values) == {"a": 1, "b": 2, "total": 3} and values == {"a": 1, "b": 2}  # a copy
+    split = KeyedStep(divmod, ("a", "b"), ("quotient", "remainder"), name="split")
+    assert split({"a": 7, "b": 2}) == {"a": 7, "b": 2, "quotient": 3, "remainder": 1}
+    assert KeyedStep(AddOne(), "a", "a").name == "AddOne"
+    with pytest.raises(ValueError, match=r"step 'add': needs \['b'\], but the values are \['a'\]"):
+        add({"a": 1})
+    with pytest.raises(ValueError, match=r"step 'split': expected a tuple of 2 results"):
+        KeyedStep(lambda a: a, "a", ("x", "y"), name="split")({"a": 1})
+    with pytest.raises(ValueError, match="expected a dict of named values"):
+        add(3)
+
+
+def test_keyed_step_per_sample_passes_failures_on():
+    def invert(x):
+        if x == 0:
+            raise ZeroDivisionError("x: zero")
+        return 1 / x
+
+    pipeline = SequentialProcessor([
+        KeyedStep(invert, "x", "inverse", "invert", per_sample=True, failures=(ZeroDivisionError,)),
+        KeyedStep(lambda inverse, y: inverse * y, ("inverse", "y"), "product", "multiply", per_sample=True)])
+    result = pipeline({"x": [2, 0, 4], "y": [1, 1, 8]})
+    assert result["product"][0] == 0.5 and result["product"][2] == 2.0
+    assert isinstance(result["product"][1], ZeroDivisionError) and result["inverse"][1] is result["product"][1]
+    with pytest.raises(ZeroDivisionError):
+        KeyedStep(invert, "x", "inverse", per_sample=True)({"x": [0]})
+    with pytest.raises(ValueError, match=r"inputs \['inverse', 'y'\] have different batch sizes \[1, 2\]"):
+        pipeline[1]({"inverse": [1], "y": [1, 2]})
+
+
 def test_sequential_processor_nesting_and_arguments():
     inner = SequentialProcessor([AddOne(), AddOne()], name="add_two")
     outer = SequentialProcessor([lambda a, b: a * b, inner, double])
@@ -125,9 +184,11 @@ def test_random_processor_seeding_and_reseed():
 
 
 def test_random_processors_found_inside_attributes():
-    holder = pose_processors.PoseFromKeypoints(np.eye(3) + 0.1, K)
+    holder = KeyedStep(pose_processors.SolvePnP(), ("a", "b", "c"), "pose")
     assert random_processors(holder) == []
-    flip = image_processors.RandomFlipLeftRight(seed=0)
+    inner = Jitter(seed=0)
+    assert random_processors(KeyedStep(inner, "x", "y")) == [inner]
+    flip = augment.RandomFlipLeftRight(seed=0)
 
     class Holder(Processor):
         def __init__(self):
@@ -157,11 +218,11 @@ def test_image_processors_wrap_the_backend(picture, tmp_path):
 
 
 @pytest.mark.parametrize("processor, backend, arguments", [
-    (image_processors.RandomBrightness(20.0, seed=5), image_backend.random_brightness, (20.0,)),
-    (image_processors.RandomContrast(0.6, 1.4, seed=5), image_backend.random_contrast, (0.6, 1.4)),
-    (image_processors.RandomSaturation(0.6, 1.4, seed=5), image_backend.random_saturation, (0.6, 1.4)),
-    (image_processors.RandomHue(30.0, seed=5), image_backend.random_hue, (30.0,)),
-    (image_processors.RandomImageNoise(8.0, seed=5), image_backend.random_image_noise, (8.0,)),
+    (augment.RandomBrightness(20.0, seed=5), image_backend.random_brightness, (20.0,)),
+    (augment.RandomContrast(0.6, 1.4, seed=5), image_backend.random_contrast, (0.6, 1.4)),
+    (augment.RandomSaturation(0.6, 1.4, seed=5), image_backend.random_saturation, (0.6, 1.4)),
+    (augment.RandomHue(30.0, seed=5), image_backend.random_hue, (30.0,)),
+    (augment.RandomImageNoise(8.0, seed=5), image_backend.random_image_noise, (8.0,)),
 ])
 def test_random_photometric_processors_use_their_generator(picture, processor, backend, arguments):
     expected = backend(picture, np.random.default_rng(5), *arguments)
@@ -173,20 +234,20 @@ def test_random_photometric_processors_use_their_generator(picture, processor, b
 
 
 def test_random_gaussian_blur_probability(picture):
-    never = image_processors.RandomGaussianBlur(probability=0.0, seed=0)
+    never = augment.RandomGaussianBlur(probability=0.0, seed=0)
     assert never(picture) is picture
-    always = image_processors.RandomGaussianBlur(kernel_sizes=(5,), probability=1.0, seed=0)
+    always = augment.RandomGaussianBlur(kernel_sizes=(5,), probability=1.0, seed=0)
     np.testing.assert_array_equal(always(picture), cv2.GaussianBlur(picture, (5, 5), 0))
 
 
 def test_random_flip_left_right_moves_boxes_with_the_image(picture):
     boxes = np.array([[2.0, 3.0, 10.0, 8.0, 7.0]])
-    flipped, moved = image_processors.RandomFlipLeftRight(probability=1.0, seed=0)(picture, boxes)
+    flipped, moved = augment.RandomFlipLeftRight(probability=1.0, seed=0)(picture, boxes)
     np.testing.assert_array_equal(flipped, picture[:, ::-1])
     np.testing.assert_array_equal(moved, [[22.0, 3.0, 30.0, 8.0, 7.0]])
     np.testing.assert_array_equal(image_backend.crop(flipped, moved[0, :4]),
                                   image_backend.crop(picture, boxes[0, :4])[:, ::-1])
-    unchanged, same = image_processors.RandomFlipLeftRight(probability=0.0, seed=0)(picture, boxes)
+    unchanged, same = augment.RandomFlipLeftRight(probability=0.0, seed=0)(picture, boxes)
     np.testing.assert_array_equal(unchanged, picture)
     np.testing.assert_array_equal(same, boxes)
 
@@ -195,7 +256,7 @@ def test_random_crop_keeps_boxes_whose_centre_is_inside(picture):
     boxes = np.array([[0.0, 0.0, 32.0, 24.0, 1.0], [0.0, 0.0, 2.0, 2.0, 2.0], [30.0, 22.0, 32.0, 24.0, 3.0]])
     for seed in range(10):
         window = image_backend.random_crop_box((32, 24), np.random.default_rng(seed))
-        cropped, kept = image_processors.RandomCrop(seed=seed)(picture, boxes)
+        cropped, kept = augment.RandomCrop(seed=seed)(picture, boxes)
         np.testing.assert_array_equal(cropped, image_backend.crop(picture, window))
         centers = (boxes[:, :2] + boxes[:, 2:4]) / 2
         inside = np.all((centers >= window[:2]) & (centers < window[2:]), axis=1)
@@ -203,95 +264,91 @@ def test_random_crop_keeps_boxes_whose_centre_is_inside(picture):
         assert np.all(kept[:, :4] >= 0) and np.all(kept[:, [2, 3]] <= [cropped.shape[1], cropped.shape[0]])
         assert 1.0 in kept[:, 4]  # the full-image box always survives, clipped to the crop
         np.testing.assert_array_equal(kept[kept[:, 4] == 1.0, :4], [[0, 0, cropped.shape[1], cropped.shape[0]]])
-    assert image_processors.RandomCrop(seed=0)(picture).ndim == 3
+    assert augment.RandomCrop(seed=0)(picture).ndim == 3
     with pytest.raises(ValueError, match=r"boxes: expected shape \(N, 4 \+ k\)"):
-        image_processors.RandomCrop(seed=0)(picture, [1, 2, 3])
+        augment.RandomCrop(seed=0)(picture, [1, 2, 3])
 
 
 def test_blend_background_composites_over_a_background_patch(picture):
     background = np.full((50, 60, 3), 200, np.uint8)
     alpha = np.zeros((24, 32), bool)
     alpha[5:10, 5:10] = True
-    blended = image_processors.BlendBackground([background], seed=0)(picture, alpha)
+    blended = augment.BlendBackground([background], seed=0)(picture, alpha)
     np.testing.assert_array_equal(blended[alpha], picture[alpha])
     assert np.all(blended[~alpha] == 200)
     with pytest.raises(ValueError, match="backgrounds: expected at least one"):
-        image_processors.BlendBackground([])
+        augment.BlendBackground([])
 
 
 def test_box_processors_wrap_the_backend():
-    boxes = np.array([[10.0, 20.0, 50.0, 60.0], [-5.0, 0.0, 700.0, 30.0]])
-    np.testing.assert_array_equal(box_processors.ConvertBoxFormat("xyxy", "xywh")(boxes),
-                                  boxes_backend.convert(boxes, "xyxy", "xywh"))
-    normalized = box_processors.NormalizeBoxes((640, 480))(boxes)
-    np.testing.assert_allclose(box_processors.DenormalizeBoxes((640, 480))(normalized), boxes)
-    np.testing.assert_array_equal(box_processors.ClipBoxes((640, 480))(boxes)[1], [0, 0, 640, 30])
-    kept_boxes, kept_scores, kept_ids = box_processors.NonMaximumSuppression(0.5, 0.1)(
-        [[0, 0, 10, 10], [1, 1, 10, 10], [0, 0, 10, 10], [50, 50, 60, 60]], [0.9, 0.8, 0.7, 0.05], [0, 0, 1, 0])
-    np.testing.assert_array_equal(kept_scores, [0.9, 0.7])
-    np.testing.assert_array_equal(kept_ids, [0, 1])
-    np.testing.assert_array_equal(kept_boxes, [[0, 0, 10, 10], [0, 0, 10, 10]])
-    messages = box_processors.ToBoxes2D(["duck", "cat"])(kept_boxes, kept_scores, kept_ids)
-    assert messages == [Box2D(0, 0, 10, 10, 0.9, "duck"), Box2D(0, 0, 10, 10, 0.7, "cat")]
-    assert box_processors.ToBoxes2D()(boxes[:1]) == [Box2D(10, 20, 50, 60)]
+    boxes = np.array([[10.0, 20.0, 40.0, 40.0], [0.0, 0.0, 5.0, 30.0]])
+    converted = box_processors.ConvertBoxFormat("xywh", "xyxy")(boxes)
+    np.testing.assert_array_equal(converted, boxes_backend.convert(boxes, "xywh", "xyxy"))
+    messages = box_processors.ToBoxes2D(["duck", "cat"])(converted, [0.9, 0.7], [0, 1])
+    assert messages == [Box2D(10, 20, 50, 60, 0.9, "duck"), Box2D(0, 0, 5, 30, 0.7, "cat")]
+    assert box_processors.ToBoxes2D()(boxes[:1]) == [Box2D(10, 20, 40, 40)]
+    assert box_processors.ToBoxes2D(class_name="face")(converted[:1]) == [Box2D(10, 20, 50, 60, 1.0, "face")]
+    assert box_processors.ToBoxes2D()(np.zeros((0, 4))) == []
     with pytest.raises(ValueError, match="class_ids: given without class_names"):
         box_processors.ToBoxes2D()(boxes, None, [0, 1])
 
 
-def test_encode_and_decode_boxes_processors_round_trip():
-    priors = boxes_backend.prior_boxes(300, [3], [100], [60], [150], [[2]])
-    truth = np.array([[0.1, 0.1, 0.4, 0.5], [0.6, 0.5, 0.95, 0.9]])
-    targets = box_processors.EncodeBoxes(priors, iou_threshold=0.4)(truth, [0, 4])
-    assert targets.shape == (len(priors), 5)
-    matched = boxes_backend.match(truth, priors, 0.4)
-    np.testing.assert_array_equal(targets[:, 4], np.where(matched >= 0, np.array([1, 5])[matched], 0))
-    decoded = box_processors.DecodeBoxes(priors)(targets[:, :4])
-    positive = matched >= 0
-    np.testing.assert_allclose(decoded[positive], truth[matched[positive]], atol=1e-12)
-    with pytest.raises(ValueError, match="class_ids: expected 2 ids matching boxes, got 1"):
-        box_processors.EncodeBoxes(priors)(truth, [0])
-
-
-def test_keypoint_processors_wrap_the_backend():
+def test_keypoint_processors_make_messages():
     points = np.array([[0.0, 0.0], [31.0, 23.0], [10.5, 4.0]])
-    normalized = keypoint_processors.NormalizeKeypoints((32, 24))(points)
-    np.testing.assert_array_equal(normalized, keypoints_backend.normalize(points, (32, 24)))
-    np.testing.assert_allclose(keypoint_processors.DenormalizeKeypoints((32, 24))(normalized), points)
-    np.testing.assert_array_equal(keypoint_processors.FlipKeypointsLeftRight(32, [1, 0, 2])(points),
-                                  [[0.0, 23.0], [31.0, 0.0], [20.5, 4.0]])
     message = keypoint_processors.ToKeypoints2D("face")(points, [1, 1, 0.5])
     assert message == Keypoints2D(points, [1, 1, 0.5], "face")
 
 
-def test_pose_processors_solve_project_and_convert():
+def test_crop_processors_cut_the_square_window_and_map_back(picture):
+    crop, window = crop_processors.SquareCrop(1.25, 16)(picture, Box2D(4, 3, 20, 15))
+    assert window == square_window((4, 3, 20, 15), 1.25)
+    np.testing.assert_array_equal(crop, crop_square(picture, window, 16))
+    assert crop_processors.SquareCrop(1.25, 16)(picture, (4, 3, 20, 15))[1] == window
+    points = np.array([[0.0, 0.0], [15.0, 7.5]])
+    np.testing.assert_array_equal(crop_processors.CropToImage(16)(points, window), to_full_image(points, window, 16))
+    with pytest.raises(ValueError, match="margin"):
+        crop_processors.SquareCrop(0.0, 16)
+    with pytest.raises(ValueError, match="size"):
+        crop_processors.SquareCrop(1.0, 0)
+
+
+def test_predict_runs_in_batches_of_arrays_or_dicts():
+    calls = []
+
+    def network(batch):
+        calls.append(len(batch))
+        assert batch.dtype == np.float32
+        return {"sum": batch.sum(axis=1), "first": batch[:, 0]}
+
+    inputs = np.arange(14.0).reshape(7, 2)
+    outputs = Predict(network, batch_size=3)(list(inputs))
+    assert calls == [3, 3, 1]
+    np.testing.assert_array_equal(outputs["sum"], inputs.sum(axis=1))
+    np.testing.assert_array_equal(predict_in_batches(lambda batch: 2 * batch, inputs, 4), 2 * inputs)
+    with pytest.raises(ValueError, match="batch_size"):
+        predict_in_batches(network, inputs, 0)
+
+
+def test_pose_processors_solve_pnp_and_fit_depth_to_a_box():
     rotation = Rotation.from_rotvec([0.3, -0.2, 0.5])
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = rotation.as_matrix(), [0.02, -0.01, 0.7]
     model = np.random.default_rng(1).uniform(-0.05, 0.05, (12, 3))
     lens = Camera(K, 640, 480, [-0.1, 0.01, 0.0, 0.0, 0.0])
-    pixels = pose_processors.ProjectPoints(lens)(model, T)
-    np.testing.assert_allclose(pixels, camera_backend.transform_and_project(model, T, K, lens.distortion))
-    pose = pose_processors.SolvePnP(lens, class_name="box")(model, pixels)
+    pixels = camera_backend.transform_and_project(model, T, K, lens.distortion)
+    pose = pose_processors.SolvePnP(class_name="box")(model, pixels, lens)
+    assert isinstance(pose, Pose6D) and pose.class_name == "box" and pose.score == 1.0
     np.testing.assert_allclose(pose.to_matrix(), T, atol=1e-8)
-    assert pose.class_name == "box"
-    np.testing.assert_allclose(pose_processors.ProjectPoints(K)(model, pose),
-                               camera_backend.transform_and_project(model, T, K), atol=1e-6)
-    camera_points = pose_processors.TransformPoints()(model, pose)
-    np.testing.assert_allclose(pose_processors.ProjectPoints(K)(camera_points),
-                               camera_backend.project_points(camera_points, K))
-    from_keypoints = pose_processors.PoseFromKeypoints(model, lens)(pixels)
-    np.testing.assert_allclose(from_keypoints.to_matrix(), T, atol=1e-8)
-    to_pose = pose_processors.ToPose6D(class_name="box", score=0.5)
-    reference = Pose6D(rotation.as_quat(), T[:3, 3], "box", 0.5)
-    for encoding in (T, np.concatenate([rotation.as_quat(), T[:3, 3]]), (rotation.as_matrix(), T[:3, 3]),
-                     (rotation.as_quat(), T[:3, 3]), (rotation.as_rotvec(), T[:3, 3]), reference):
-        converted = to_pose(encoding)
-        np.testing.assert_allclose(converted.to_matrix(), T, atol=1e-12)
-        assert (converted.class_name, converted.score) == ("box", 0.5)
-    np.testing.assert_array_equal(pose_processors.PoseToMatrix()(reference), reference.to_matrix())
-    with pytest.raises(ValueError, match=r"pose\[0\]: expected a \(3, 3\) matrix"):
-        to_pose((np.zeros(5), T[:3, 3]))
-    with pytest.raises(ValueError, match=r"pose: expected Pose6D, \(4, 4\), \(7,\) or \(rotation, translation\)"):
-        to_pose(np.zeros(6))
-    with pytest.raises(ValueError, match="pose: expected a Pose6D, got ndarray"):
-        pose_processors.PoseToMatrix()(T)
+    outliers = pixels.copy()
+    outliers[:2] += 50.0
+    robust = pose_processors.SolvePnP(method="epnp", ransac=True)(model, outliers, lens, 2.0)
+    assert robust.score == pytest.approx(10 / 12)
+    np.testing.assert_allclose(robust.to_matrix(), T, atol=1e-6)
+    with pytest.raises(ValueError, match="a 3x3 K needs the image size"):
+        pose_processors.SolvePnP()(model, pixels, K)
+    with pytest.raises(PnPError, match="at least 4 correspondences"):
+        pose_processors.SolvePnP()(model[:3], pixels[:3], lens)
+    far = Pose6D.from_rotation_matrix(T[:3, :3], T[:3, 3] * 1.1)
+    fitted = pose_processors.DepthFromBox(model)(far, projected_box(model, T, K), Camera(K, 640, 480))
+    np.testing.assert_allclose(fitted.translation, T[:3, 3], rtol=2e-3)
+    np.testing.assert_allclose(fitted.rotation_matrix, T[:3, :3], atol=1e-12)

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from paz6d.backend.checks import as_array, as_camera_matrix, as_points
+from paz6d.backend.transform import apply
 
 
 def _as_distortion(distortion) -> np.ndarray | None:
@@ -50,8 +51,6 @@ def project_points(points_cam, K, distortion=None) -> np.ndarray:
 
 def transform_and_project(points_model, T_model2cam, K, distortion=None) -> np.ndarray:
     """Projects ``(N, 3)`` model points posed by ``T_model2cam`` ``(4, 4)`` to ``(N, 2)`` pixels."""
-    from paz6d.backend.transform import apply
-
     return project_points(apply(T_model2cam, points_model), K, distortion)
 
 
@@ -78,43 +77,6 @@ def depth_to_points(depth, K) -> np.ndarray:
     rows, cols = np.nonzero(depth > 0)
     pixels = np.stack([cols, rows], axis=-1).astype(np.float64)
     return unproject(pixels, depth[rows, cols], K)
-
-
-def opengl_projection(K, width: int, height: int, near: float, far: float) -> np.ndarray:
-    """OpenGL projection matrix (4×4) equivalent to ``K`` for an image of ``width×height`` px.
-
-    Assumes the OpenGL camera looks down -z with y up and NDC in [-1, 1]; the matching change
-    of camera axes lives in ``renderers``. Pixel coordinates of ``K`` are taken as OpenGL window
-    coordinates (``u = 0`` is the left *edge* of the image): for an OpenCV ``K``, whose integer
-    coordinates are pixel centres, add 0.5 to ``cx`` and ``cy`` first
-    (``renderers.conventions.projection_matrix`` does).
-    """
-    K = as_camera_matrix(K)
-    if not 0 < near < far:
-        raise ValueError(f"near/far: expected 0 < near < far, got near={near}, far={far}")
-    fx, fy, cx, cy, skew = K[0, 0], K[1, 1], K[0, 2], K[1, 2], K[0, 1]
-    P = np.zeros((4, 4))
-    P[0, 0] = 2 * fx / width
-    P[0, 1] = -2 * skew / width
-    P[0, 2] = 1 - 2 * cx / width
-    P[1, 1] = 2 * fy / height
-    P[1, 2] = 2 * cy / height - 1
-    P[2, 2] = -(far + near) / (far - near)
-    P[2, 3] = -2 * far * near / (far - near)
-    P[3, 2] = -1
-    return P
-
-
-def camera_matrix_from_opengl(P, width: int, height: int) -> np.ndarray:
-    """Inverse of :func:`opengl_projection` for the intrinsics part: returns 3×3 ``K``."""
-    P = as_array(P, "P", (4, 4))
-    K = np.eye(3)
-    K[0, 0] = P[0, 0] * width / 2
-    K[0, 1] = -P[0, 1] * width / 2
-    K[0, 2] = (1 - P[0, 2]) * width / 2
-    K[1, 1] = P[1, 1] * height / 2
-    K[1, 2] = (P[1, 2] + 1) * height / 2
-    return K
 
 
 @dataclass(frozen=True)
@@ -162,10 +124,6 @@ class Camera:
             return image
         return cv2.undistort(image, self.K, self.distortion)
 
-    def opengl_projection(self, near: float = 0.01, far: float = 100.0) -> np.ndarray:
-        """OpenGL projection matrix for this camera (see :func:`opengl_projection`)."""
-        return opengl_projection(self.K, self.width, self.height, near, far)
-
     def scaled(self, factor: float) -> "Camera":
         """Camera for an image resized by ``factor`` (pixel-centre convention preserved)."""
         K = self.K.copy()
@@ -212,3 +170,25 @@ class Camera:
                 size = json.loads(candidate.read_text())
                 return cls(K, size["width"], size["height"])
         return cls(K, round(2 * K[0, 2] + 1), round(2 * K[1, 2] + 1))
+
+
+def as_camera(camera, width: int | None = None, height: int | None = None, name: str = "camera") -> Camera:
+    """The :class:`Camera` of an image of ``width x height`` pixels, from a Camera or a 3×3 ``K``.
+
+    Args:
+        camera: a :class:`Camera` (returned as is) or a ``(3, 3)`` intrinsics matrix.
+        width, height: the image's size in pixels; required with a ``K``, checked against a Camera.
+        name: argument name used in error messages.
+    Raises:
+        ValueError: a Camera of another size than the image, a ``K`` without the image size, or an invalid ``K``.
+    """
+    if isinstance(camera, Camera):
+        if (width is not None and int(width) != camera.width) or (height is not None and int(height) != camera.height):
+            raise ValueError(f"image: {width}x{height} pixels does not match the camera's "
+                             f"{camera.width}x{camera.height} (width x height)")
+        return camera
+    if camera is None:
+        raise ValueError(f"{name}: expected a paz6d.backend.camera.Camera or a 3x3 K, got None")
+    if width is None or height is None:
+        raise ValueError(f"{name}: a 3x3 K needs the image size (width, height); pass a Camera or the size")
+    return Camera(as_camera_matrix(camera, name), width, height)

@@ -1,4 +1,4 @@
-"""2D keypoints ``(..., 2)`` in pixels: normalization, projection and left-right flipping.
+"""2D keypoints ``(..., 2)`` in pixels: normalization and left-right flipping.
 
 Pixel coordinates follow the camera convention (OpenCV): integer coordinates are pixel centres,
 so an image of width ``W`` spans ``u`` in ``[-0.5, W - 0.5]``. Normalization maps that extent
@@ -17,8 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from paz6d.backend.camera import Camera, project_points, transform_and_project
-from paz6d.backend.checks import as_array, as_points
+from paz6d.backend.checks import as_array
 
 RANGES = ((-1.0, 1.0), (0.0, 1.0))
 
@@ -49,21 +48,6 @@ def denormalize(keypoints, image_size, value_range: tuple[float, float] = (-1.0,
     keypoints = as_array(keypoints, "keypoints", (2,))
     scale, offset = _scale_and_offset(image_size, value_range)
     return (keypoints - offset) / scale
-
-
-def project(points3d, camera: Camera | np.ndarray, T_model2cam=None) -> np.ndarray:
-    """Projects ``(N, 3)`` points (metres) to ``(N, 2)`` pixel keypoints.
-
-    Args:
-        points3d: camera-frame points, or model-frame points when ``T_model2cam`` is given.
-        camera: a :class:`Camera` (its distortion is applied) or a 3×3 ``K``.
-        T_model2cam: optional ``(4, 4)`` pose applied first.
-    """
-    points3d = as_points(points3d, "points3d", dimension=3)
-    K, distortion = (camera.K, camera.distortion) if isinstance(camera, Camera) else (camera, None)
-    if T_model2cam is None:
-        return project_points(points3d, K, distortion)
-    return transform_and_project(points3d, T_model2cam, K, distortion)
 
 
 def flip_left_right(keypoints, image_width: int, permutation: Sequence[int] | None = None) -> np.ndarray:

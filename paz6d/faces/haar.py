@@ -15,8 +15,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from paz6d.abstract import Box2D, Processor
+from paz6d.abstract import Box2D, KeyedStep, Processor, SequentialProcessor
 from paz6d.backend.image import as_image
+from paz6d.processors.boxes import ConvertBoxFormat, ToBoxes2D
 
 CASCADE_PREFIX = "haarcascade_"
 
@@ -72,7 +73,53 @@ def to_grey(image, name: str = "image") -> np.ndarray:
     raise ValueError(f"{name}: expected uint8 RGB (H, W, 3) or grey (H, W), got shape {array.shape}{hint}")
 
 
-class HaarCascadeDetector(Processor):
+def _as_size(size, name: str) -> tuple[int, int]:
+    values = np.asarray(size)
+    if values.shape != (2,) or np.any(values < 0) or not np.all(np.mod(values, 1) == 0):
+        raise ValueError(f"{name}: expected (width, height) non-negative integers, got {size}")
+    return int(values[0]), int(values[1])
+
+
+class RunCascade(Processor):
+    """``grey (H, W) uint8 -> (rectangles (N, 4) xywh pixels, counts (N,))``: one OpenCV cascade pass.
+
+    Args: see :class:`HaarCascadeDetector`. ``counts`` are OpenCV's ``numDetections``: the raw
+    detections merged into each rectangle.
+    """
+
+    def __init__(self, path: Path, scale_factor: float = 1.1, min_neighbors: int = 5,
+                 min_size: tuple[int, int] = (30, 30), max_size: tuple[int, int] | None = None,
+                 name: str | None = None):
+        super().__init__(name)
+        if not scale_factor > 1.0:
+            raise ValueError(f"scale_factor: expected a number > 1, got {scale_factor}")
+        if int(min_neighbors) < 0:
+            raise ValueError(f"min_neighbors: expected a non-negative integer, got {min_neighbors}")
+        self.min_size = _as_size(min_size, "min_size")
+        self.max_size = None if max_size is None else _as_size(max_size, "max_size")
+        try:
+            self.classifier = cv2.CascadeClassifier(str(path))
+        except (cv2.error, SystemError) as error:
+            raise ValueError(f"cascade: {path} is not a valid OpenCV cascade XML file ({error})") from error
+        if self.classifier.empty():
+            raise ValueError(f"cascade: {path} is not a valid OpenCV cascade XML file")
+        self.scale_factor = float(scale_factor)
+        self.min_neighbors = int(min_neighbors)
+
+    def call(self, grey: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        rectangles, counts = self.classifier.detectMultiScale2(
+            grey, scaleFactor=self.scale_factor, minNeighbors=self.min_neighbors,
+            minSize=self.min_size, maxSize=self.max_size or (0, 0))
+        return (np.reshape(np.asarray(rectangles, dtype=np.float64), (-1, 4)),
+                np.ravel(np.asarray(counts, dtype=np.float64)))
+
+
+def sort_by_score(boxes: list[Box2D]) -> list[Box2D]:
+    """Boxes by decreasing score (stable)."""
+    return sorted(boxes, key=lambda box: -box.score)
+
+
+class HaarCascadeDetector(SequentialProcessor):
     """Detects objects with a Haar cascade: ``image -> list[Box2D]`` (pixels, ``xyxy``).
 
     Args:
@@ -85,44 +132,29 @@ class HaarCascadeDetector(Processor):
 
     The boxes' ``score`` is the number of raw detections merged into each box (OpenCV's
     ``numDetections``), so larger is more certain. Boxes are sorted by decreasing score.
+
+    The steps pass a dict of named values along (each a :class:`~paz6d.abstract.KeyedStep`):
+    ``to_grey`` (``image`` -> ``grey``, :func:`to_grey`), ``detect`` (``grey`` -> ``rectangles``,
+    ``counts``, :class:`RunCascade`), ``to_xyxy`` (``rectangles`` -> ``corners``,
+    :class:`~paz6d.processors.boxes.ConvertBoxFormat`), ``to_boxes2d`` (``corners``, ``counts`` ->
+    ``boxes``, :class:`~paz6d.processors.boxes.ToBoxes2D`) and ``sort`` (``boxes`` -> ``boxes``,
+    :func:`sort_by_score`).
     """
 
     def __init__(self, cascade: str | Path = "frontalface_default", scale_factor: float = 1.1,
                  min_neighbors: int = 5, min_size: tuple[int, int] = (30, 30),
                  max_size: tuple[int, int] | None = None, class_name: str | None = None):
         path = cascade_path(cascade)
-        super().__init__(f"HaarCascadeDetector({path.stem})")
-        if not scale_factor > 1.0:
-            raise ValueError(f"scale_factor: expected a number > 1, got {scale_factor}")
-        if int(min_neighbors) < 0:
-            raise ValueError(f"min_neighbors: expected a non-negative integer, got {min_neighbors}")
-        self.min_size = self._as_size(min_size, "min_size")
-        self.max_size = None if max_size is None else self._as_size(max_size, "max_size")
-        try:
-            self.classifier = cv2.CascadeClassifier(str(path))
-        except (cv2.error, SystemError) as error:
-            raise ValueError(f"cascade: {path} is not a valid OpenCV cascade XML file ({error})") from error
-        if self.classifier.empty():
-            raise ValueError(f"cascade: {path} is not a valid OpenCV cascade XML file")
+        super().__init__(name=f"HaarCascadeDetector({path.stem})")
         self.path = path
-        self.scale_factor = float(scale_factor)
-        self.min_neighbors = int(min_neighbors)
         self.class_name = class_name or path.stem.removeprefix(CASCADE_PREFIX)
-
-    @staticmethod
-    def _as_size(size, name: str) -> tuple[int, int]:
-        values = np.asarray(size)
-        if values.shape != (2,) or np.any(values < 0) or not np.all(np.mod(values, 1) == 0):
-            raise ValueError(f"{name}: expected (width, height) non-negative integers, got {size}")
-        return int(values[0]), int(values[1])
+        self.add(KeyedStep(to_grey, "image", "grey", "to_grey"))
+        self.add(KeyedStep(RunCascade(path, scale_factor, min_neighbors, min_size, max_size), "grey",
+                           ("rectangles", "counts"), "detect"))
+        self.add(KeyedStep(ConvertBoxFormat("xywh", "xyxy"), "rectangles", "corners", "to_xyxy"))
+        self.add(KeyedStep(ToBoxes2D(class_name=self.class_name), ("corners", "counts"), "boxes", "to_boxes2d"))
+        self.add(KeyedStep(sort_by_score, "boxes", "boxes", "sort"))
 
     def call(self, image) -> list[Box2D]:
         """Runs the cascade on a ``uint8`` RGB ``(H, W, 3)`` or grey ``(H, W)`` image."""
-        grey = to_grey(image)
-        rectangles, neighbours = self.classifier.detectMultiScale2(
-            grey, scaleFactor=self.scale_factor, minNeighbors=self.min_neighbors,
-            minSize=self.min_size, maxSize=self.max_size or (0, 0))
-        boxes = [Box2D(x, y, x + width, y + height, float(count), self.class_name)
-                 for (x, y, width, height), count in zip(np.reshape(rectangles, (-1, 4)).tolist(),
-                                                         np.ravel(neighbours).tolist())]
-        return sorted(boxes, key=lambda box: -box.score)
+        return super().call({"image": image})["boxes"]

@@ -9,8 +9,9 @@ Steps: a Haar cascade finds faces (trying rotated copies of the image when the u
 none); a square region around each face, rotated so the eyes are level, is resampled to 192x192
 and fed to the landmark network (twice: the second region comes from the first landmarks);
 the 7 rigid landmarks (eye corners, nasion, nose tip, subnasale) are matched with the 3D points
-of :data:`FACE_MODEL_FILE` (metres) and
-:func:`paz6d.backend.pnp.solve_pnp` gives ``T_head2cam``.
+of :data:`FACE_MODEL_FILE` (metres) and PnP (:class:`paz6d.processors.pose.SolvePnP`) gives
+``T_head2cam``. :class:`HeadPose6D` is a sequence of named steps (``find_faces``, ``landmarks``,
+``solve_pnp``, ``merge``) that can be replaced, removed or extended.
 
 The head frame (see the asset file): origin between the outer eye corners, x towards the
 subject's left, y down, z into the head, so a face looking straight at the camera has the
@@ -33,13 +34,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from paz6d.abstract import Box2D, Keypoints2D, Pose6D, Processor
+from paz6d.abstract import Box2D, KeyedStep, Keypoints2D, Pose6D, Processor, SequentialProcessor
 from paz6d.backend import quaternion
-from paz6d.backend.camera import Camera
+from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.image import as_image
-from paz6d.backend.pnp import PnPError, reprojection_errors, solve_pnp
+from paz6d.backend.pnp import PnPError, reprojection_errors
 from paz6d.faces.haar import HaarCascadeDetector
 from paz6d.faces.packaged_models import packaged_file
+from paz6d.processors.pose import SolvePnP
 
 FACE_MODEL_FILE = Path(__file__).resolve().parents[1] / "assets" / "face_landmarks_3d.json"
 LANDMARK_MODEL_FILE = ("data", "face_landmark.tflite")
@@ -231,62 +233,23 @@ def _same_face(points: np.ndarray, other: np.ndarray) -> bool:
     return bool(np.linalg.norm(points.mean(axis=0) - other.mean(axis=0)) < 0.5 * eyes)
 
 
-def _as_camera(camera) -> Camera:
-    if isinstance(camera, Camera):
-        return camera
-    raise ValueError(f"camera: expected a paz6d.backend.camera.Camera (K, width, height), got {type(camera).__name__}")
+class FindFaces(Processor):
+    """``image -> [(Box2D, FaceRegion)]``: face candidates from ``face_detector`` run on the image rotated by
+    each of ``detection_angles`` (degrees).
 
-
-class HeadPose6D(Processor):
-    """``image -> list[Pose6D]``: ``T_head2cam`` (metres) of every face found, best score first.
-
-    Args:
-        camera: intrinsics of the images (their size must be ``camera.width x camera.height``).
-        face_detector: ``image -> list[Box2D]``; default frontal-face Haar cascade (min 40 px).
-        detection_angles: image rotations (degrees) in which faces are searched, so that tilted
-            faces, which upright Haar cascades miss beyond about 15 degrees, are still found.
-        landmark_model_path, face_model_path: override the face-mesh network / the 3D face.
-        min_score: smallest face-mesh face-presence probability kept.
-        pnp_method: see :func:`paz6d.backend.pnp.solve_pnp`.
-        rigid_only: fit only the landmarks fixed to the skull (eye corners, nose); mouth corners
-            and chin move with expression and made the pose 2-3 times less stable on rotated photographs.
+    A detection in a rotated copy is mapped back by its centre (an axis-aligned box of the
+    same size) and its region keeps the rotation, so the landmark network sees an upright
+    face. The same face found at several angles gives several candidates (merged by :class:`MergeHeads`).
     """
 
-    def __init__(self, camera: Camera, face_detector=None, detection_angles=(0.0, -30.0, 30.0),
-                 landmark_model_path: str | Path | None = None, face_model_path: str | Path = FACE_MODEL_FILE,
-                 min_score: float = 0.5, pnp_method: str = "sqpnp", rigid_only: bool = True):
-        super().__init__()
-        self.camera = _as_camera(camera)
-        self.face_detector = face_detector or HaarCascadeDetector("frontalface_default", min_size=(40, 40))
+    def __init__(self, face_detector, detection_angles=(0.0, -30.0, 30.0), name: str | None = None):
+        super().__init__(name)
+        self.face_detector = face_detector
         self.detection_angles = tuple(float(angle) for angle in detection_angles)
         if not self.detection_angles:
             raise ValueError("detection_angles: expected at least one angle (degrees), e.g. (0.0,)")
-        face_model = load_face_model(face_model_path)
-        self.face_model = face_model.subset(face_model.rigid) if rigid_only else face_model
-        if len(self.face_model.points) < 4:
-            raise ValueError(f"face_model_path: {face_model_path} has {len(self.face_model.points)} rigid landmarks; "
-                             "PnP needs at least 4 (or pass rigid_only=False)")
-        self.landmarker = FaceMeshLandmarks(landmark_model_path, min_score=min_score)
-        self.pnp_method = pnp_method
 
-    def _check_image(self, image) -> np.ndarray:
-        array = np.asarray(image)
-        if array.ndim == 2:
-            raise ValueError(f"image: expected uint8 RGB (H, W, 3), got a grey image of shape {array.shape}; "
-                             "the landmark network needs colour (use np.dstack([grey] * 3) for grey input)")
-        array = as_image(array, "image", channels=3)
-        if array.shape[:2] != (self.camera.height, self.camera.width):
-            raise ValueError(f"image: shape {array.shape[:2]} (H, W) does not match the camera's "
-                             f"{self.camera.width}x{self.camera.height} (width x height)")
-        return array
-
-    def face_regions(self, image: np.ndarray) -> list[tuple[Box2D, FaceRegion]]:
-        """Face candidates from the detector run on the image rotated by each of ``detection_angles``.
-
-        A detection in a rotated copy is mapped back by its centre (an axis-aligned box of the
-        same size) and its region keeps the rotation, so the landmark network sees an upright
-        face. The same face found at several angles gives several candidates (merged in :meth:`detect`).
-        """
+    def call(self, image: np.ndarray) -> list[tuple[Box2D, FaceRegion]]:
         height, width = image.shape[:2]
         pivot = ((width - 1) / 2.0, (height - 1) / 2.0)
         found: list[tuple[Box2D, FaceRegion]] = []
@@ -305,29 +268,59 @@ class HeadPose6D(Processor):
                 found.append((original, FaceRegion(center, ROI_SCALE * 2.0 * half, region_angle)))
         return found
 
-    def detect(self, image) -> list[HeadDetection]:
-        """Like calling the pipeline, with boxes, landmarks and reprojection errors.
 
-        Candidates whose landmarks converge on the same face (landmark centres closer than half
-        the distance between the outer eye corners) are merged, keeping the most confident.
-        """
-        image = self._check_image(image)
-        detections: list[HeadDetection] = []
-        for box, region in self.face_regions(image):
-            landmarks = self.landmarker(image, region)
-            if landmarks is None:
-                continue
-            points2d = landmarks.points[self.face_model.mesh_indices]
-            try:
-                pose = solve_pnp(self.face_model.points, points2d, self.camera.K, method=self.pnp_method,
-                                 distortion=self.camera.distortion, class_name="head")
-            except PnPError:
-                continue
-            if pose.translation[2] <= 0:
-                continue
-            error = reprojection_errors(self.face_model.points, points2d, pose, self.camera.K, self.camera.distortion)
-            pose = Pose6D(pose.quaternion, pose.translation, "head", float(landmarks.scores[0]))
-            detections.append(HeadDetection(pose, box, landmarks, float(np.sqrt(np.mean(error ** 2)))))
+class LandmarksInRegions(Processor):
+    """``(image, [(Box2D, FaceRegion)]) -> [Keypoints2D | None]``: face-mesh landmarks of each candidate."""
+
+    def __init__(self, landmarker: FaceMeshLandmarks, name: str | None = None):
+        super().__init__(name)
+        self.landmarker = landmarker
+
+    def call(self, image: np.ndarray, candidates) -> list[Keypoints2D | None]:
+        return [self.landmarker(image, region) for _, region in candidates]
+
+
+class HeadPnP(Processor):
+    """``([Keypoints2D | None], camera) -> ([Pose6D | None], [rms error px | None])``: PnP of the face
+    model's landmarks; poses are ``T_head2cam`` with the face-presence probability as ``score``.
+    Candidates without landmarks, without a PnP solution or behind the camera get None."""
+
+    def __init__(self, face_model: FaceModel3D, method: str = "sqpnp", name: str | None = None):
+        super().__init__(name)
+        self.face_model = face_model
+        self.solve = SolvePnP(method=method, class_name="head")
+
+    def call(self, landmarks: list, camera: Camera) -> tuple[list, list]:
+        poses: list[Pose6D | None] = []
+        errors: list[float | None] = []
+        for found in landmarks:
+            pose, error = None, None
+            if found is not None:
+                points2d = found.points[self.face_model.mesh_indices]
+                try:
+                    pose = self.solve(self.face_model.points, points2d, camera)
+                except PnPError:
+                    pose = None
+                if pose is not None and pose.translation[2] > 0:
+                    residuals = reprojection_errors(self.face_model.points, points2d, pose.to_matrix(), camera.K,
+                                                    camera.distortion)
+                    error = float(np.sqrt(np.mean(residuals ** 2)))
+                    pose = Pose6D(pose.quaternion, pose.translation, "head", float(found.scores[0]))
+                else:
+                    pose = None
+            poses.append(pose)
+            errors.append(error)
+        return poses, errors
+
+
+class MergeHeads(Processor):
+    """``(candidates, landmarks, poses, errors) -> [HeadDetection]``, most confident first; candidates
+    whose landmarks converge on the same face (centres closer than half the distance between the
+    outer eye corners) are merged, keeping the most confident."""
+
+    def call(self, candidates, landmarks, poses, errors) -> list[HeadDetection]:
+        detections = [HeadDetection(pose, box, found, error)
+                      for (box, _), found, pose, error in zip(candidates, landmarks, poses, errors) if pose is not None]
         detections.sort(key=lambda detection: (-detection.pose.score, detection.reprojection_error))
         kept: list[HeadDetection] = []
         for detection in detections:
@@ -335,8 +328,72 @@ class HeadPose6D(Processor):
                 kept.append(detection)
         return kept
 
-    def call(self, image) -> list[Pose6D]:
-        return [detection.pose for detection in self.detect(image)]
+
+class HeadPose6D(SequentialProcessor):
+    """``image -> list[Pose6D]``: ``T_head2cam`` (metres) of every face found, best score first.
+
+    The steps pass a dict of named values along (each a :class:`~paz6d.abstract.KeyedStep`):
+
+    ==============  ==========================================  ============================  ======================
+    step            reads                                       writes                        processor
+    ==============  ==========================================  ============================  ======================
+    ``find_faces``  ``image``                                   ``candidates``                :class:`FindFaces`
+    ``landmarks``   ``image``, ``candidates``                   ``landmarks``                 :class:`LandmarksInRegions`
+    ``solve_pnp``   ``landmarks``, ``camera``                   ``poses``, ``errors``         :class:`HeadPnP`
+    ``merge``       ``candidates``, ``landmarks``, ``poses``,   ``detections``                :class:`MergeHeads`
+                    ``errors``
+    ==============  ==========================================  ============================  ======================
+
+    Args:
+        camera: default intrinsics of the images: a Camera (images must be ``camera.width x camera.height``)
+            or a ``3×3`` ``K`` (each image's size completes it); a call may pass another one.
+        face_detector: ``image -> list[Box2D]``; default frontal-face Haar cascade (min 40 px).
+        detection_angles: image rotations (degrees) in which faces are searched, so that tilted
+            faces, which upright Haar cascades miss beyond about 15 degrees, are still found.
+        landmark_model_path, face_model_path: override the face-mesh network / the 3D face.
+        min_score: smallest face-mesh face-presence probability kept.
+        pnp_method: see :func:`paz6d.backend.pnp.solve_pnp`.
+        rigid_only: fit only the landmarks fixed to the skull (eye corners, nose); mouth corners
+            and chin move with expression and made the pose 2-3 times less stable on rotated photographs.
+    """
+
+    def __init__(self, camera: Camera | np.ndarray | None = None, face_detector=None,
+                 detection_angles=(0.0, -30.0, 30.0), landmark_model_path: str | Path | None = None,
+                 face_model_path: str | Path = FACE_MODEL_FILE, min_score: float = 0.5, pnp_method: str = "sqpnp",
+                 rigid_only: bool = True):
+        super().__init__(name="HeadPose6D")
+        self.camera = camera
+        face_detector = face_detector or HaarCascadeDetector("frontalface_default", min_size=(40, 40))
+        face_model = load_face_model(face_model_path)
+        self.face_model = face_model.subset(face_model.rigid) if rigid_only else face_model
+        if len(self.face_model.points) < 4:
+            raise ValueError(f"face_model_path: {face_model_path} has {len(self.face_model.points)} rigid landmarks; "
+                             "PnP needs at least 4 (or pass rigid_only=False)")
+        self.add(KeyedStep(FindFaces(face_detector, detection_angles), "image", "candidates", "find_faces"))
+        self.add(KeyedStep(LandmarksInRegions(FaceMeshLandmarks(landmark_model_path, min_score=min_score)),
+                           ("image", "candidates"), "landmarks", "landmarks"))
+        self.add(KeyedStep(HeadPnP(self.face_model, pnp_method), ("landmarks", "camera"), ("poses", "errors"),
+                           "solve_pnp"))
+        self.add(KeyedStep(MergeHeads(), ("candidates", "landmarks", "poses", "errors"), "detections", "merge"))
+
+    def _values(self, image, camera) -> dict:
+        array = np.asarray(image)
+        if array.ndim == 2:
+            raise ValueError(f"image: expected uint8 RGB (H, W, 3), got a grey image of shape {array.shape}; "
+                             "the landmark network needs colour (use np.dstack([grey] * 3) for grey input)")
+        array = as_image(array, "image", channels=3)
+        camera = self.camera if camera is None else camera
+        if camera is None:
+            raise ValueError("camera: none given to the call and none to the constructor")
+        return {"image": array, "camera": as_camera(camera, array.shape[1], array.shape[0])}
+
+    def detect(self, image, camera=None) -> list[HeadDetection]:
+        """Like calling the pipeline, with boxes, landmarks and reprojection errors."""
+        return super().call(self._values(image, camera))["detections"]
+
+    def call(self, image, camera=None) -> list[Pose6D]:
+        """Head poses in ``image`` (uint8 RGB); ``camera``: this image's Camera or ``K`` (default: the constructor's)."""
+        return [detection.pose for detection in self.detect(image, camera)]
 
 
 def yaw_pitch_roll_degrees(rotation) -> np.ndarray:

@@ -1,6 +1,8 @@
-"""Thin :class:`~paz6d.abstract.Processor` classes over the backends, one module per backend:
-``image`` (loading, resizing, PAZ photometric augmentation), ``boxes`` (formats, NMS, SSD
-encoding), ``keypoints`` (normalization, flipping) and ``pose`` (PnP, projection, ``Pose6D``).
+"""Reusable pipeline steps: :class:`~paz6d.abstract.Processor` classes over the backends, one module
+per kind of step: ``image`` (loading, resizing, normalization; random augmentation is in
+:mod:`paz6d.synthesis.augment`), ``affine`` (random
+similarity warps), ``crops`` (square crop around a box and back), ``boxes`` (formats, ``Box2D``),
+``keypoints`` (``Keypoints2D``), ``pose`` (PnP, depth from a box, ``Pose6D``).
 
-Import the module you need (``from paz6d.processors.image import RandomContrast``).
+Import the module you need (``from paz6d.processors.pose import SolvePnP``).
 """
