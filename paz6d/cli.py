@@ -18,7 +18,7 @@ COMMANDS = {
               "train a model"),
     "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
     "estimate": ("paz6d.estimate", "run a trained pose model on a BOP data set (ground-truth boxes) -> BOP results CSV"),
-    "demo": ("paz6d.demo.aae_demo", "end-to-end demo: generate data, train, estimate poses, evaluate"),
+    "demo": ("paz6d.demo.command", "end-to-end demo: generate data, train, estimate poses, evaluate"),
 }
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -88,3 +89,98 @@ def test_main_dispatches_and_reports_value_errors(fake_command, capsys):
     assert exit_info.value.code == 2  # argparse: missing required argument
     with pytest.raises(SystemExit):
         cli.main([])
+
+
+# ------------------------------------------------------------------ flags derived from config dataclasses
+
+def _command_configs() -> dict[tuple[str, ...], list[tuple[type, tuple[str, ...]]]]:
+    """Each command's config dataclasses and the fields that are not flags."""
+    from data_gen.config import GenerationConfig, GenerationRun
+    from paz6d.aae.train import AAETraining
+    from paz6d.demo.command import DemoOptions
+    from paz6d.faces.emotion_train import EmotionTraining
+    from paz6d.keypointnet.train import KeypointTraining
+
+    return {("generate",): [(GenerationConfig, ()), (GenerationRun, ())], ("train", "aae"): [(AAETraining, ())],
+            ("train", "keypointnet"): [(KeypointTraining, ("overrides",))],
+            ("train", "emotion"): [(EmotionTraining, ())], ("demo",): [(DemoOptions, ())]}
+
+
+def _subparser(path: tuple[str, ...]) -> argparse.ArgumentParser:
+    parser = cli.build_parser()
+    for name in path:
+        parser = next(action for action in parser._actions
+                      if isinstance(action, argparse._SubParsersAction)).choices[name]
+    return parser
+
+
+def _flag_actions(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
+    return {action.dest: action for action in parser._actions if action.option_strings and action.dest != "help"}
+
+
+@pytest.mark.parametrize("path", list(_command_configs()), ids=" ".join)
+def test_every_config_field_is_a_flag_with_the_fields_default(path):
+    from paz6d.cli_options import field_default, flag_fields, flag_name
+
+    actions = _flag_actions(_subparser(path))
+    fields = [field for config_class, exclude in _command_configs()[path]
+              for field in flag_fields(config_class, exclude)]
+    assert sorted(actions) == sorted(field.name for field in fields)  # a new field is a new flag, and nothing else
+    for field in fields:
+        action = actions[field.name]
+        assert action.option_strings[0] == flag_name(field.name)
+        default = field_default(field)
+        if default is dataclasses.MISSING:
+            assert action.required, field.name
+        else:
+            assert action.default == default and not action.required, field.name
+
+
+@pytest.mark.parametrize("path", list(_command_configs()), ids=" ".join)
+def test_parsed_defaults_build_the_default_config(path, tmp_path):
+    """args -> config with only the required flags gives the dataclass's defaults."""
+    from paz6d.cli_options import config_from_args, field_default, flag_fields, flag_name
+
+    required = {("generate",): ["--meshes", "a.ply", "--out", "o", "--num-images", "3"],
+                ("train", "aae"): ["--mesh", "a.ply", "--out", "o"],
+                ("train", "keypointnet"): ["--mesh", "a.ply", "--out", "o"],
+                ("train", "emotion"): ["--data", "d.csv", "--out", "o"], ("demo",): []}[path]
+    args = _subparser(path).parse_args(required)
+    for config_class, exclude in _command_configs()[path]:
+        config = config_from_args(config_class, args, exclude)
+        for field in flag_fields(config_class, exclude):
+            default = field_default(field)
+            if flag_name(field.name) not in required and field.name != "mesh_scale":  # mesh_scale: by source
+                assert getattr(config, field.name) == default, field.name
+
+
+def test_one_spelling_for_the_same_setting_in_every_command():
+    retired = {"--scale", "--quiet", "--inplane", "--elevation", "--noise", "--mesh-path", "--output"}
+    for path in command_paths():
+        parser = _subparser(path)
+        strings = {string for action in parser._actions for string in action.option_strings}
+        for subparsers in (action for action in parser._actions if isinstance(action, argparse._SubParsersAction)):
+            strings |= {string for sub in subparsers.choices.values() for action in sub._actions
+                        for string in action.option_strings}
+        assert not strings & retired, (path, strings & retired)
+        assert ("--no-progress" in strings) == ("--progress" in strings), path
+
+
+def test_generate_round_trip_and_errors_name_the_flag(tmp_path):
+    from data_gen.config import GenerationConfig
+    from paz6d.cli_options import config_from_args
+
+    parser = _subparser(("generate",))
+    args = parser.parse_args(["--meshes", "a.ply", "b.ply", "--meshes", "c.ply", "--out", str(tmp_path),
+                              "--num-images", "4", "--mesh-scale", "0.001", "--objects-per-image", "2", "2",
+                              "--intrinsics", "500", "500", "320", "240", "--rotation", "view-sphere",
+                              "--no-progress", "--rgb-format", "jpg"])
+    config = config_from_args(GenerationConfig, args)
+    assert config.meshes == (Path("a.ply"), Path("b.ply"), Path("c.ply")) and config.mesh_scale == 0.001
+    assert config.objects_per_image == (2, 2) and config.intrinsics == (500.0, 500.0, 320.0, 240.0)
+    assert config.rotation == "view-sphere" and config.rgb_format == "jpg" and args.progress is False
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--meshes", "a.ply", "--out", "o", "--num-images", "1", "--rgb-format", "gif"])
+    args = parser.parse_args(["--meshes", "a.ply", "--out", "o", "--num-images", "1", "--mesh-scale", "-1"])
+    with pytest.raises(ValueError, match="^--mesh-scale: expected a positive number"):
+        config_from_args(GenerationConfig, args)

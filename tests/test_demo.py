@@ -57,9 +57,10 @@ def test_demo_smoke_run(tmp_path):
     metrics = stored["metrics"]
     estimates = stored["estimates"]
     assert metrics["count"] == len(estimates) == report["metrics"]["count"] >= 1
-    add = np.array([e["add_m"] for e in estimates])
+    add = np.array([e["error_m"] for e in estimates])
     rotation = np.array([e["rotation_error_deg"] for e in estimates])
-    assert metrics["add_recall_0.1d"] == pytest.approx(np.mean(add < 0.1 * metrics["diameter_m"]))
+    assert metrics["metric"] == "ADD" and metrics["failures"] == 0
+    assert metrics["recall_0.1d"] == pytest.approx(np.mean(add < 0.1 * metrics["diameter_m"]))
     assert metrics["rotation_error_deg"]["median"] == pytest.approx(np.median(rotation))
     assert sum(b["count"] for b in metrics["by_visible_fraction"].values()) == metrics["count"]
     # the stored ADD agrees with a direct computation from the stored poses and the mesh vertices
@@ -68,12 +69,17 @@ def test_demo_smoke_run(tmp_path):
     T_est, T_gt = np.array(first["T_est"]), np.array(first["T_gt"])
     direct = np.mean(np.linalg.norm(vertices @ T_est[:3, :3].T + T_est[:3, 3] - vertices @ T_gt[:3, :3].T - T_gt[:3, 3],
                                     axis=1))
-    assert first["add_m"] == pytest.approx(direct, rel=1e-9)
+    assert first["error_m"] == pytest.approx(direct, rel=1e-9)
     # the model directory is an ImplicitPose6D run dir
     from paz6d.aae.pipeline import ImplicitPose6D
 
     K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
     assert ImplicitPose6D(tmp_path / "model", K).crop_size == 16
+    # re-running the finished demo trains nothing: the unmeasured throughput is written as null, not inf
+    again = run_demo(tmp_path, toy, test_images=3, workers=0, grid_rows=2)
+    stored = json.loads((tmp_path / "report.json").read_text())
+    assert again["training"]["steps"] == 20 and stored["training"]["model_samples_per_second"] is None
+    assert stored["metrics"]["recall_0.1d"] == metrics["recall_0.1d"]
 
 
 def test_demo_keypoints_option_runs_the_keypoint_demo_on_the_demo_mesh(tmp_path, monkeypatch):
@@ -96,3 +102,39 @@ def test_demo_keypoints_option_runs_the_keypoint_demo_on_the_demo_mesh(tmp_path,
     calls.clear()
     args._run(args)
     assert "keypoints" not in calls
+
+
+def test_one_scorer_one_key_set_and_unmeasured_values_written_as_null(tmp_path, capsys):
+    from paz6d.demo.report import pose_rows, print_rows, score_poses, write_report
+
+    points = np.random.default_rng(0).uniform(-0.05, 0.05, (200, 3))
+    T_gt = np.tile(np.eye(4), (3, 1, 1))
+    T_gt[:, 2, 3] = 0.5
+    shifted = T_gt[1].copy()
+    shifted[2, 3] += 0.02  # 2 cm along z: ADD 0.02 m = 0.2 d
+    scores = score_poses([T_gt[0], shifted, None], T_gt, points, diameter=0.1)
+    metrics = scores.metrics
+    assert metrics.keys() == score_poses([T_gt[0], shifted, None], T_gt, points, 0.1, symmetric=True).metrics.keys()
+    assert metrics["metric"] == "ADD" and metrics["count"] == 3 and metrics["failures"] == 1
+    assert metrics["recall_0.1d"] == pytest.approx(1 / 3) and metrics["z_error_m_median"] == pytest.approx(0.02)
+    assert np.isinf(scores.errors_m[2]) and scores.errors_m[1] == pytest.approx(0.02)
+    write_report(tmp_path / "report.json", {"metrics": metrics, "speed": float("inf")})
+    stored = json.loads((tmp_path / "report.json").read_text())
+    assert stored["speed"] is None and stored["metrics"]["translation_error_m"]["mean"] is None  # a miss: inf
+    assert stored["metrics"]["translation_error_m"]["median"] == pytest.approx(0.02)
+    print_rows(pose_rows(stored["metrics"], ", PnP"))
+    assert "ADD recall @ 0.1 d, PnP" in capsys.readouterr().out
+
+
+def test_the_demos_do_not_import_each_other():
+    import subprocess
+    import sys
+
+    def demo_modules_after_importing(module: str) -> list[str]:
+        code = f"import sys, {module}; print([m for m in sorted(sys.modules) if m.startswith('paz6d.demo.')])"
+        return json.loads(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                         check=True).stdout.replace("'", '"'))
+
+    assert demo_modules_after_importing("paz6d.demo.keypoint_demo") == ["paz6d.demo.keypoint_demo",
+                                                                        "paz6d.demo.report"]
+    assert demo_modules_after_importing("paz6d.demo.aae_demo") == ["paz6d.demo.aae_demo", "paz6d.demo.report"]

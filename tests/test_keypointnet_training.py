@@ -287,10 +287,10 @@ def test_keypoint_demo_trains_evaluates_and_reports(mesh_path, tmp_path, capsys)
                                progress=False, overrides=TINY)
     result = report["modes"]["supervised"]
     for variant in ("pnp", "pnp_depth_from_box"):
-        assert result[variant]["images"] == 3 and 0.0 <= result[variant]["recall_0.1d"] <= 1.0
+        assert result[variant]["count"] == 3 and 0.0 <= result[variant]["recall_0.1d"] <= 1.0
         assert result[variant]["metric"] == "ADD"
         # 10 steps leave too few usable lifted keypoints: every image is a reported miss, not a crash
-        assert result[variant]["error"] is None or result[variant]["pnp_failures"] == 3
+        assert result[variant]["error"] is None or result[variant]["failures"] == 3
     assert result["training"]["steps"] == 10
     for name in ("keypoint_report.json", "keypoint_recall.png", "keypointnet_supervised/evaluation.json"):
         assert (tmp_path / name).exists(), name

@@ -1,4 +1,4 @@
-"""``paz6d demo``: from a mesh to a scored 6D pose estimator on a CPU, end to end.
+"""The AAE demo run by ``paz6d demo``: from a mesh to a scored 6D pose estimator on a CPU, end to end.
 
 1. writes the procedural, asymmetric, coloured demo object (``DIR/mesh/obj_000001.ply`` in
    millimetres + ``models_info.json``, BOP units);
@@ -6,42 +6,27 @@
    distractors, occluders; a seed different from training);
 3. trains an Augmented Autoencoder with the quick config (``DIR/model/``, an ``ImplicitPose6D`` run dir);
 4. estimates the pose of every test instance from its ground-truth box;
-5. scores them with ``evaluation.pose_errors`` (ADD(-S) recall at 0.1 d, rotation/translation errors,
-   AUC of the ADD(-S) accuracy curve up to 10 cm) and writes ``DIR/report.json``, a printed table and
-   PNGs (recall curves, input / reconstruction / estimate grid).
+5. scores them with :func:`paz6d.demo.report.score_poses` (ADD recall at 0.1 d, rotation/translation
+   errors, AUC of the ADD accuracy curve up to 10 cm; the demo object is asymmetric) and writes
+   ``DIR/report.json``, a printed table and PNGs (recall curves, input / reconstruction / estimate grid).
 
-Every stage resumes from what ``DIR`` already holds.
+Every stage resumes from what ``DIR`` already holds; re-running a finished demo redoes stages 4 and 5.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import write_json_atomically
+from paz6d.demo.report import AUC_MAX_THRESHOLD, number, pose_rows, print_rows, score_poses, write_report
 
 TRAIN_SEED = 0
 TEST_SEED = 1000
 MIN_VISIBLE_FRACTION = 0.1  # BOP's rule for evaluation targets
-AUC_MAX_THRESHOLD = 0.1  # metres (PoseCNN's ADD(-S) AUC)
 VISIBILITY_BINS = ((0.1, 0.7), (0.7, 0.95), (0.95, 1.01))  # breakdown by visible fraction (occlusion)
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    """Adds the ``paz6d demo`` arguments."""
-    parser.add_argument("--out", type=Path, default=Path("demo_output"), help="output folder (re-run to resume)")
-    parser.add_argument("--test-images", type=int, default=200, help="held-out synthetic test images")
-    parser.add_argument("--steps", type=int, default=None, help="training steps (default: the quick config's)")
-    parser.add_argument("--workers", type=int, default=2, help="rendering processes")
-    parser.add_argument("--platform", choices=("egl", "osmesa"), default=None, help="OpenGL platform")
-    parser.add_argument("--keypoints", action="store_true",
-                        help="also train and score KeypointNet (supervised, quick config; ~15 more minutes on 2 "
-                             "CPU cores) on the same object into OUT/keypoints")
 
 
 def _stage(message: str) -> None:
@@ -79,24 +64,17 @@ def _estimate(run_dir: Path, targets: list[dict]) -> tuple[list, float, object]:
     return poses, (time.perf_counter() - started) / len(targets), estimator
 
 
-def score(poses, targets, points, diameter: float) -> dict:
-    """ADD (the demo object is asymmetric, so ADD(-S) = ADD) recall at 0.1 d, rotation and translation
-    errors and the ADD AUC; lengths in metres, angles in degrees."""
-    from evaluation.pose_errors import accuracy_auc, add_error, rotation_error_deg, translation_error
-
-    T_est = np.stack([pose.to_matrix() for pose in poses])
-    T_gt = np.stack([target["T_gt"] for target in targets])
-    add = add_error(T_est, T_gt, points)
-    rotation = rotation_error_deg(T_est[:, :3, :3], T_gt[:, :3, :3])
-    translation = translation_error(T_est[:, :3, 3], T_gt[:, :3, 3])
-    return {"count": len(poses), "diameter_m": diameter,
-            "add_recall_0.1d": float(np.mean(add < 0.1 * diameter)),
-            "add_auc_10cm": accuracy_auc(add, AUC_MAX_THRESHOLD),
-            "rotation_error_deg": {"median": float(np.median(rotation)), "mean": float(np.mean(rotation)),
-                                   "below_5": float(np.mean(rotation < 5)), "below_10": float(np.mean(rotation < 10))},
-            "translation_error_m": {"median": float(np.median(translation)), "mean": float(np.mean(translation))},
-            "z_error_m_median": float(np.median(np.abs(T_est[:, 2, 3] - T_gt[:, 2, 3]))),
-            "_add": add, "_rotation": rotation}
+def by_visible_fraction(errors: np.ndarray, rotation: np.ndarray, visible: np.ndarray, diameter: float) -> dict:
+    """Recall at 0.1 d and median rotation error (degrees) per :data:`VISIBILITY_BINS` bin of visible
+    fraction; ``None`` for an empty bin."""
+    bins = {}
+    for low, high in VISIBILITY_BINS:
+        chosen = (visible >= low) & (visible < high)
+        bins[f"{low}-{min(high, 1.0)}"] = {
+            "count": int(chosen.sum()),
+            "recall_0.1d": float(np.mean(errors[chosen] < 0.1 * diameter)) if chosen.any() else None,
+            "median_rotation_error_deg": float(np.median(rotation[chosen])) if chosen.any() else None}
+    return bins
 
 
 def _plot_recall(path: Path, add: np.ndarray, rotation: np.ndarray, diameter: float) -> None:
@@ -161,31 +139,17 @@ def _plot_grid(path: Path, estimator, targets, poses, mesh_path: Path, rows: int
 
 
 def _print_table(report: dict) -> None:
-    metrics = report["metrics"]
-    lines = [("test instances", f"{metrics['count']}"),
-             ("ADD(-S) recall @ 0.1 d", f"{100 * metrics['add_recall_0.1d']:.1f} %"),
-             ("ADD(-S) AUC (0-10 cm)", f"{100 * metrics['add_auc_10cm']:.1f} %"),
-             ("median rotation error", f"{metrics['rotation_error_deg']['median']:.2f} deg"),
-             ("rotation error < 5 / 10 deg", f"{100 * metrics['rotation_error_deg']['below_5']:.1f} % / "
-                                             f"{100 * metrics['rotation_error_deg']['below_10']:.1f} %"),
-             ("median translation error", f"{1000 * metrics['translation_error_m']['median']:.1f} mm"),
-             ("median |z| error", f"{1000 * metrics['z_error_m_median']:.1f} mm"),
-             *[(f"  visible {name}: n / ADD / median rot",
-                f"{b['count']} / " + ("-" if b["count"] == 0 else
-                                      f"{100 * b['add_recall_0.1d']:.1f} % / {b['median_rotation_error_deg']:.1f} deg"))
-               for name, b in metrics["by_visible_fraction"].items()],
-             ("training steps", f"{report['training']['steps']}"),
-             ("loader samples/s (1 thread)", f"{report['training']['loader_samples_per_second_one_thread']:.0f}"),
-             ("model samples/s", f"{report['training']['model_samples_per_second']:.0f}"),
-             ("inference per object", f"{1000 * report['seconds_per_estimate']:.1f} ms"),
-             ("total time", f"{report['timings']['total_seconds'] / 60:.1f} min")]
-    print_rows(lines)
-
-
-def print_rows(rows: list[tuple[str, str]]) -> None:
-    """Prints ``(name, value)`` rows as an aligned two-column table."""
-    width = max(len(name) for name, _ in rows)
-    print("\n" + "\n".join(f"  {name:<{width}}  {value}" for name, value in rows))
+    metrics, training = report["metrics"], report["training"]
+    print_rows([("test instances", f"{metrics['count']}"), *pose_rows(metrics),
+                *[(f"  visible {name}: n / {metrics['metric']} / median rot",
+                   f"{b['count']} / {number(b['recall_0.1d'], 100, ' %')} / "
+                   f"{number(b['median_rotation_error_deg'], unit=' deg')}")
+                  for name, b in metrics["by_visible_fraction"].items()],
+                ("training steps", f"{training['steps']}"),
+                ("loader samples/s (1 thread)", number(training["loader_samples_per_second_one_thread"], digits=0)),
+                ("model samples/s", number(training["model_samples_per_second"], digits=0)),
+                ("inference per object", number(report["seconds_per_estimate"], 1000, " ms")),
+                ("total time", number(report["timings"]["total_seconds"], 1 / 60, " min"))])
 
 
 def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, platform: str | None = None,
@@ -201,7 +165,7 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
 
     config = QUICK if config is None else config
     if int(test_images) <= 0:
-        raise ValueError(f"--test-images: expected a positive number of images, got {test_images}")
+        raise ValueError(f"test_images: expected a positive number of images, got {test_images}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     timings = {}
@@ -239,16 +203,11 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     with np.load(out / "model" / "object.npz") as data:
         points = data["vertices"]
     diameter = load_models_info(out / "mesh" / "models_info.json")[OBJECT_ID].diameter
-    metrics = score(poses, targets, points, diameter)
-    add, rotation = metrics.pop("_add"), metrics.pop("_rotation")
+    scores = score_poses([pose.to_matrix() for pose in poses], np.stack([target["T_gt"] for target in targets]),
+                         points, diameter)
+    add, rotation = scores.errors_m, scores.rotation_errors_deg
     visible = np.array([target["visible_fraction"] for target in targets])
-    metrics["by_visible_fraction"] = {}
-    for low, high in VISIBILITY_BINS:
-        chosen = (visible >= low) & (visible < high)
-        metrics["by_visible_fraction"][f"{low}-{min(high, 1.0)}"] = {
-            "count": int(chosen.sum()),
-            "add_recall_0.1d": float(np.mean(add[chosen] < 0.1 * diameter)) if chosen.any() else None,
-            "median_rotation_error_deg": float(np.median(rotation[chosen])) if chosen.any() else None}
+    metrics = {**scores.metrics, "by_visible_fraction": by_visible_fraction(add, rotation, visible, diameter)}
     _plot_recall(out / "recall_curves.png", add, rotation, diameter)
     _plot_grid(out / "estimates_grid.png", estimator, targets, poses, mesh_path, grid_rows)
     timings["total_seconds"] = time.perf_counter() - started
@@ -259,30 +218,12 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
               "targets": {"instances_evaluated": len(targets), "min_visible_fraction": MIN_VISIBLE_FRACTION},
               "estimates": [{"scene_id": t["scene_id"], "im_id": t["im_id"], "box": list(t["box"]),
                              "T_est": p.to_matrix().tolist(), "T_gt": t["T_gt"].tolist(),
-                             "add_m": float(a), "rotation_error_deg": float(r),
+                             "error_m": float(a), "rotation_error_deg": float(r),
                              "visible_fraction": t["visible_fraction"]}
                             for t, p, a, r in zip(targets, poses, add, rotation)],
               "files": {"model": str(out / "model"), "mesh": str(mesh_path),
                         "recall_curves": str(out / "recall_curves.png"), "grid": str(out / "estimates_grid.png")}}
-    write_json_atomically(out / "report.json", report, indent=2)
+    write_report(out / "report.json", report)
     _print_table(report)
     print(f"\nreport: {out / 'report.json'}; plots: {out / 'recall_curves.png'}, {out / 'estimates_grid.png'}")
     return report
-
-
-def run(args: argparse.Namespace) -> int:
-    """Runs ``paz6d demo``."""
-    from paz6d.aae.train import QUICK
-
-    config = QUICK
-    if args.steps is not None:
-        if args.steps <= 0:
-            raise ValueError(f"--steps: expected a positive number of steps, got {args.steps}")
-        config = replace(QUICK, steps=args.steps)
-    report = run_demo(args.out, config, args.test_images, args.workers, args.platform)
-    if args.keypoints:
-        from paz6d.demo.keypoint_demo import run_keypoint_demo
-
-        run_keypoint_demo(Path(args.out) / "keypoints", Path(report["files"]["mesh"]), mesh_scale=0.001,
-                          test_images=args.test_images, workers=args.workers)
-    return 0

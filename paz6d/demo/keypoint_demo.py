@@ -20,15 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import new_figure, save_figure_atomically, write_json_atomically
+from paz6d.backend.files import finite_or_none, new_figure, save_figure_atomically
+from paz6d.demo.report import number, pose_rows, print_rows, score_poses, write_report
 
 TEST_SEED_OFFSET = 1_000_003  # test images never share a seed with training/validation views
-
-
-def _finite_or_none(value) -> float | None:
-    """``float(value)``, or ``None`` (JSON ``null``) for NaN and infinities (e.g. a median over misses)."""
-    value = float(value)
-    return value if np.isfinite(value) else None
 
 
 def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object_diameter: float, camera,
@@ -41,14 +36,13 @@ def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object
         symmetric: score with ADD-S (ADI) instead of ADD.
         depth_from_box: the :class:`KeypointPose6D` option of that name.
     Returns:
-        ``(metrics, poses)``: recall of ADD(-S) < 0.1·d, AUC (0–10 cm), median rotation (deg) and
-        translation (m) errors, PnP failures, milliseconds per crop, ``error`` (why no image could be
-        estimated, e.g. too few usable keypoints, else ``None``); poses are ``Pose6D`` or ``None``.
+        ``(metrics, poses)``: the :func:`~paz6d.demo.report.score_poses` summary (PnP failures are its
+        ``failures``) plus ``milliseconds_per_crop``, ``error`` (why no image could be estimated, e.g.
+        too few usable keypoints, else ``None``) and ``errors_m`` (per image, ``None`` for a miss);
+        poses are ``Pose6D`` or ``None``.
     """
-    from evaluation.pose_errors import accuracy_auc, add_error, adi_error, rotation_error_deg, translation_error
-    from paz6d.keypointnet.pipeline import KeypointPose6D
-
     from paz6d.backend.pnp import PnPError
+    from paz6d.keypointnet.pipeline import KeypointPose6D
 
     poses: list = [None] * len(test.images)
     problem = None
@@ -63,25 +57,10 @@ def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object
             poses.extend(estimator.estimate_batch(list(test.images[start:start + chunk]),
                                                   list(test.boxes[start:start + chunk])))
     milliseconds = 1000.0 * (time.perf_counter() - started) / len(test.images)
-    found = np.array([pose is not None for pose in poses])
-    T_est = np.stack([pose.to_matrix() if pose is not None else np.eye(4) for pose in poses])
-    errors = np.full(len(poses), np.inf)
-    rotation = np.full(len(poses), np.inf)
-    translation = np.full(len(poses), np.inf)
-    if found.any():
-        error_function = adi_error if symmetric else add_error
-        errors[found] = error_function(T_est[found], test.T_model2cam[found], points)
-        rotation[found] = rotation_error_deg(T_est[found, :3, :3], test.T_model2cam[found, :3, :3])
-        translation[found] = translation_error(T_est[found, :3, 3], test.T_model2cam[found, :3, 3])
-    metrics = {"metric": "ADD-S" if symmetric else "ADD", "images": len(poses),
-               "recall_0.1d": float(np.mean(errors < 0.1 * object_diameter)),
-               "recall_0.05d": float(np.mean(errors < 0.05 * object_diameter)),
-               "auc_10cm": accuracy_auc(errors, 0.1),
-               "median_error_m": _finite_or_none(np.median(errors)),
-               "median_rotation_error_deg": _finite_or_none(np.median(rotation)),
-               "median_translation_error_m": _finite_or_none(np.median(translation)),
-               "pnp_failures": int((~found).sum()), "milliseconds_per_crop": round(milliseconds, 2), "error": problem,
-               "errors_m": [_finite_or_none(value) for value in errors]}
+    scores = score_poses([None if pose is None else pose.to_matrix() for pose in poses], test.T_model2cam, points,
+                         object_diameter, symmetric)
+    metrics = {**scores.metrics, "milliseconds_per_crop": round(milliseconds, 2), "error": problem,
+               "errors_m": [finite_or_none(value) for value in scores.errors_m]}
     return metrics, poses
 
 
@@ -184,31 +163,25 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
             evaluations[variant] = metrics
             if not from_box and metrics["error"] is None:
                 _examples_png(out_dir / f"keypoint_{mode}_examples.png", run_dir, test, poses, sampling.camera, points)
-        write_json_atomically(run_dir / "evaluation.json", evaluations, indent=2)
+        write_report(run_dir / "evaluation.json", evaluations)
     _recall_png(out_dir / "keypoint_recall.png", curves, object_diameter, "ADD-S" if symmetric else "ADD")
     report["total_seconds"] = round(time.perf_counter() - started, 1)
-    write_json_atomically(out_dir / "keypoint_report.json", report, indent=2)
+    write_report(out_dir / "keypoint_report.json", report)
     _print_summary(report, out_dir)
     return report
 
 
 def _print_summary(report: dict, out_dir: Path) -> None:
-    from paz6d.demo.aae_demo import print_rows
-
-    def number(value, scale: float = 1.0, unit: str = "", digits: int = 1) -> str:
-        return "-" if value is None else f"{scale * value:.{digits}f}{unit}"
-
     rows = []
     for mode, result in report["modes"].items():
         plain, boxed = result["pnp"], result["pnp_depth_from_box"]
-        rows += [(f"KeypointNet ({mode}): test images", f"{plain['images']}"),
+        rows += [(f"KeypointNet ({mode}): test images", f"{plain['count']}"),
                  ("keypoint re-projection (median)", number(result["training"].get("reprojection_px_median"),
                                                             unit=" px", digits=2)),
-                 (f"{plain['metric']} recall @ 0.1 d, PnP", number(plain["recall_0.1d"], 100, " %")),
-                 (f"{plain['metric']} recall @ 0.1 d, PnP + depth_from_box", number(boxed["recall_0.1d"], 100, " %")),
-                 ("median rotation / translation error", f"{number(plain['median_rotation_error_deg'], unit=' deg')} / "
-                                                         f"{number(plain['median_translation_error_m'], 1000, ' mm')}"),
-                 ("PnP failures", f"{plain['pnp_failures']}" + (f" ({plain['error']})" if plain["error"] else ""))]
-    rows.append(("total time", f"{report['total_seconds'] / 60:.1f} min"))
+                 *pose_rows(plain, ", PnP"),
+                 (f"{boxed['metric']} recall @ 0.1 d, PnP + depth_from_box", number(boxed["recall_0.1d"], 100, " %"))]
+        if plain["error"]:
+            rows.append(("why no estimate, PnP", plain["error"]))
+    rows.append(("total time", number(report["total_seconds"], 1 / 60, " min")))
     print_rows(rows)
     print(f"\nreport: {out_dir / 'keypoint_report.json'}; plots: {out_dir / 'keypoint_recall.png'}")

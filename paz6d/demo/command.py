@@ -1,0 +1,50 @@
+"""``paz6d demo``: the README's end-to-end job (AAE, :mod:`paz6d.demo.aae_demo`); ``--keypoints`` adds
+KeypointNet on the same object (:mod:`paz6d.demo.keypoint_demo`). Each flag is a field of
+:class:`DemoOptions`. Cheap to import: the demos load TensorFlow and the renderers when they run.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from paz6d.aae.train import QUICK
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
+from paz6d.demo import aae_demo, keypoint_demo
+from renderers.platform import PLATFORMS
+
+
+@dataclass(frozen=True)
+class DemoOptions:
+    """One ``paz6d demo`` run."""
+
+    out: Path = option(Path("demo_output"), "output folder (re-run to resume)")
+    test_images: int = option(200, "held-out synthetic test images")
+    steps: int | None = option(None, "AAE training steps (default: the quick config's)")
+    workers: int = option(2, "rendering processes")
+    platform: str | None = option(None, "OpenGL platform of the renderers (default: auto)", choices=PLATFORMS)
+    keypoints: bool = option(False, "also train and score KeypointNet (supervised, quick config; ~15 more minutes "
+                                    "on 2 CPU cores) on the same object into OUT/keypoints")
+
+    def __post_init__(self):
+        if self.steps is not None and self.steps <= 0:
+            raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Adds the ``paz6d demo`` flags (the fields of :class:`DemoOptions`)."""
+    add_config_arguments(parser, DemoOptions)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Runs ``paz6d demo``."""
+    options = config_from_args(DemoOptions, args)
+    config = QUICK if options.steps is None else replace(QUICK, steps=options.steps)
+    with flags_in_errors(DemoOptions):
+        report = aae_demo.run_demo(options.out, config, options.test_images, options.workers, options.platform)
+        if options.keypoints:
+            keypoint_demo.run_keypoint_demo(Path(options.out) / "keypoints", Path(report["files"]["mesh"]),
+                                            mesh_scale=0.001, test_images=options.test_images,
+                                            workers=options.workers)
+    return 0
