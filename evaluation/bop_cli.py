@@ -57,7 +57,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "inst_count most visible, the BOP toolkit script's rule)")
     parser.add_argument("--vsd-delta", type=float, default=15.0, help="VSD visibility tolerance in mm (default 15)")
     parser.add_argument("--workers", type=int, default=1, help="threads for the ADD-S search (-1 = all cores; results do not depend on it)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
+                        help="progress bars (default: --progress)")
 
 
 def _choose_metrics(requested: tuple[str, ...] | None, data) -> tuple[tuple[str, ...], dict[str, str]]:
@@ -137,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     if results.skipped:
         print(f"warning: skipped {len(results.skipped)} invalid rows of {args.results} "
               f"(first: line {results.skipped[0][0]}: {results.skipped[0][1]})", file=sys.stderr)
-    evaluation = bop.evaluate(data, results, settings, progress=not args.quiet)
+    evaluation = bop.evaluate(data, results, settings, progress=args.progress)
     evaluation.skipped_metrics.update(skipped_metrics)
     print_table(evaluation, f"BOP'19 evaluation of {args.results} on {args.dataset}/{args.split} "
                             f"({len(data.targets)} targets, {len(results)} estimates read, "

@@ -254,7 +254,7 @@ def test_estimate_command_writes_bop_results_that_evaluate_scores(toy_run, tmp_p
     assert np.all(estimates.obj_ids == 1) and np.all(estimates.scores == 1.0)
     scores = tmp_path / "scores.json"
     assert main(["evaluate", "bop", "--dataset", str(dataset), "--results", str(results), "--metrics",
-                 "mssd,mspd,add", "--out", str(scores), "--quiet"]) == 0
+                 "mssd,mspd,add", "--out", str(scores), "--no-progress"]) == 0
     report = json.loads(scores.read_text())
     assert 0.0 <= report["AR_MSSD"] <= 1.0 and 0.0 <= report["ADD(-S)_recall"] <= 1.0
     assert main(["estimate", "--run", str(root / "run"), "--dataset", str(dataset), "--object-id", "7",

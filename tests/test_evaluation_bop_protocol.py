@@ -214,7 +214,7 @@ def test_greedy_matching_equals_the_literal_loop_on_random_groups():
 def test_cli_writes_json_errors_and_plots(tiny, tmp_path, capsys):
     out, errors_csv, plots = tmp_path / "out.json", tmp_path / "errors.csv", tmp_path / "plots"
     code = main(["evaluate", "bop", "--dataset", str(tiny[0]), "--results", str(tiny[1]), "--out", str(out),
-                 "--errors", str(errors_csv), "--plots", str(plots), "--quiet"])
+                 "--errors", str(errors_csv), "--plots", str(plots), "--no-progress"])
     assert code == 0
     captured = capsys.readouterr()
     assert "skipping VSD" in captured.err and "AR_MSSD" in captured.out
@@ -237,16 +237,16 @@ def test_cli_writes_json_errors_and_plots(tiny, tmp_path, capsys):
 def test_cli_rejects_vsd_without_depth_and_bad_rows(tiny, tmp_path, capsys):
     out = tmp_path / "out.json"
     code = main(["evaluate", "bop", "--dataset", str(tiny[0]), "--results", str(tiny[1]), "--out", str(out),
-                 "--metrics", "vsd,mssd", "--quiet"])
+                 "--metrics", "vsd,mssd", "--no-progress"])
     assert code == 2 and "VSD needs depth images" in capsys.readouterr().err and not out.exists()
     broken = tmp_path / "broken.csv"
     broken.write_text(tiny[1].read_text() + "1,1,1,0.5,1 0 0 0 1 0 0 0 1,0 0 nan,-1\n"
                       "1,1,9,0.5,1 0 0 0 1 0 0 0 1,0 0 1,-1\n")
     code = main(["evaluate", "bop", "--dataset", str(tiny[0]), "--results", str(broken), "--out", str(out),
-                 "--metrics", "mssd", "--quiet"])
+                 "--metrics", "mssd", "--no-progress"])
     assert code == 2 and f"{broken}:9: field 't'" in capsys.readouterr().err
     code = main(["evaluate", "bop", "--dataset", str(tiny[0]), "--results", str(broken), "--out", str(out),
-                 "--metrics", "mssd", "--skip-invalid", "--quiet"])
+                 "--metrics", "mssd", "--skip-invalid", "--no-progress"])
     assert code == 0
     summary = json.loads(out.read_text())
     assert summary["counts"]["estimates_skipped_invalid"] == 2
@@ -293,7 +293,7 @@ def test_vsd_average_recall_from_dataset_depth(rendered, capsys):
     exact = write_results(root / "exact.csv", [(im_id, 1, 0.5, T) for im_id, T in poses.items()])
     out = root / "exact.json"
     assert main(["evaluate", "bop", "--dataset", str(root / "data"), "--results", str(exact), "--out", str(out),
-                 "--quiet"]) == 0
+                 "--no-progress"]) == 0
     summary = json.loads(out.read_text())
     assert summary["AR_VSD"] == 1.0 and summary["AR"] == 1.0 and summary["skipped_metrics"] == {}
     # Second image: the estimate is moved sideways by 1.5 diameters, so the silhouettes do not
@@ -303,7 +303,7 @@ def test_vsd_average_recall_from_dataset_depth(rendered, capsys):
     moved = write_results(root / "moved.csv", [(im_id, 1, 0.5, T) for im_id, T in far.items()])
     out = root / "moved.json"
     assert main(["evaluate", "bop", "--dataset", str(root / "data"), "--results", str(moved), "--out", str(out),
-                 "--metrics", "vsd", "--quiet"]) == 0
+                 "--metrics", "vsd", "--no-progress"]) == 0
     summary = json.loads(out.read_text())
     assert summary["AR_VSD"] == 0.5 and "AR" not in summary
     assert summary["per_object"]["1"]["AR_VSD"] == 0.5

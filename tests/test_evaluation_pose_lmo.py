@@ -22,7 +22,7 @@ def lmo(shared_data, tmp_path_factory):
     out = tmp_path_factory.mktemp("lmo")
     code = main(["evaluate", "bop", "--dataset", str(root), "--split", "test",
                  "--results", str(root / "results" / "results_lmo-test.csv"), "--out", str(out / "scores.json"),
-                 "--errors", str(out / "errors.csv"), "--plots", str(out / "plots"), "--quiet"])
+                 "--errors", str(out / "errors.csv"), "--plots", str(out / "plots"), "--no-progress"])
     assert code == 0
     with open(out / "errors.csv") as file:
         rows = list(csv.DictReader(file))
