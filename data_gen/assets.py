@@ -95,11 +95,11 @@ def _distance_range(config: GenerationConfig, radii: np.ndarray, diameters: np.n
     if low <= largest_radius + ZNEAR:
         raise ValueError(f"distance: minimum {low:.4g} m puts the camera inside the largest object "
                          f"(bounding-sphere radius {largest_radius:.4g} m); use a minimum above "
-                         f"{largest_radius + ZNEAR:.4g} m (or check --scale: meshes in mm need 0.001)")
+                         f"{largest_radius + ZNEAR:.4g} m (or check --mesh-scale: meshes in mm need 0.001)")
     if half_side <= 0 or _projected_radius_px(largest_radius, high, focal) >= half_side:
         raise ValueError(f"distance: even at the maximum {high:.4g} m the largest object (radius "
                          f"{largest_radius:.4g} m) does not fit in the {config.width}x{config.height} image; "
-                         "increase the distance range (or check --scale)")
+                         "increase the distance range (or check --mesh-scale)")
     deepest = (high + largest_radius) * 1000.0 / config.depth_scale
     if deepest > 65535:
         raise ValueError(f"depth_scale: {config.depth_scale} mm per unit cannot store depths up to "
