@@ -1,4 +1,5 @@
-"""COCO run-length encoding of binary masks (pycocotools' uncompressed ``counts`` format).
+"""COCO run-length encoding of binary masks (pycocotools' uncompressed ``counts`` format), for the
+``scene_gt_coco.json`` files ``paz6d generate`` writes; ``evaluation.coco_masks.decode_rle`` decodes.
 
 COCO RLE runs over the mask in column-major (Fortran) order, alternating background and
 foreground runs and starting with a (possibly empty) background run.
@@ -7,8 +8,6 @@ foreground runs and starting with a (possibly empty) background run.
 from __future__ import annotations
 
 import numpy as np
-
-from paz6d.backend.image import nonzero_window
 
 
 def encode_rle(mask: np.ndarray) -> dict:
@@ -28,22 +27,3 @@ def encode_rle(mask: np.ndarray) -> dict:
     if flat.size and flat[0]:
         counts = [0] + counts
     return {"counts": counts, "size": [int(mask.shape[0]), int(mask.shape[1])]}
-
-
-def decode_rle(rle: dict) -> np.ndarray:
-    """Inverse of :func:`encode_rle` (uncompressed counts only)."""
-    height, width = rle["size"]
-    counts = np.asarray(rle["counts"], dtype=np.int64)
-    if counts.sum() != height * width:
-        raise ValueError(f"rle: counts sum to {counts.sum()}, expected {height * width} pixels")
-    values = np.arange(len(counts)) % 2 == 1
-    return np.repeat(values, counts).reshape((height, width), order="F")
-
-
-def bbox_xywh(mask: np.ndarray) -> list[int]:
-    """Tight ``[x, y, width, height]`` of a mask's pixels; ``[-1, -1, -1, -1]`` when empty (BOP)."""
-    window = nonzero_window(mask)
-    if window is None:
-        return [-1, -1, -1, -1]
-    rows, columns = window
-    return [columns.start, rows.start, columns.stop - columns.start, rows.stop - rows.start]

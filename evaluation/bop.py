@@ -5,9 +5,10 @@ The protocol of the BOP toolkit (``scripts/eval_bop19_pose.py``, ``eval_calc_err
 
 * Targets come from ``test_targets_bop19.json``. For each target ``(scene, image, object)`` only the
   ``inst_count`` estimates with the highest score are evaluated (stable order for equal scores).
-* A ground-truth instance counts (is *valid*) when its object is a target of the image and its
-  visible fraction is at least ``visib_gt_min`` (0.1; ``-1`` selects the ``inst_count`` most visible
-  instances instead, the toolkit's script default).
+* A ground-truth instance counts (is *valid*) when it is one of the ``inst_count`` most visible
+  instances of a target (``visib_gt_min = -1``, the default of the toolkit's
+  ``eval_bop19_pose.py``), or, with ``visib_gt_min >= 0``, when its object is a target of the image
+  and its visible fraction is at least ``visib_gt_min`` (e.g. 0.1).
 * For every error type and threshold, estimates are matched greedily in decreasing score to the
   still unmatched valid instance of the same object with the smallest error below the threshold
   (strictly). Recall = matched instances / valid instances.
@@ -18,7 +19,8 @@ The protocol of the BOP toolkit (``scripts/eval_bop19_pose.py``, ``eval_calc_err
 
 Besides the BOP scores: ADD(-S) recall (ADD, or ADI for objects with symmetries, < 0.1 diameter,
 same matching) and the YCB-Video AUC of ADD / ADD-S / ADD(-S) over [0, 100] mm. All lengths are
-millimetres; the errors are exact (no BOP "spheres do not overlap -> inf" shortcut).
+millimetres, as read from the BOP files (``units="mm"``, see :mod:`paz6d.datasets.bop`); the
+errors are exact (no BOP "spheres do not overlap -> inf" shortcut).
 """
 
 from __future__ import annotations
@@ -30,7 +32,8 @@ from tqdm import tqdm
 
 from evaluation import pose_errors
 from evaluation.bop_data import BopEvaluationData
-from evaluation.bop_results import PoseResults
+from paz6d.datasets.bop.results import PoseResults
+from paz6d.datasets.bop.units import MM_PER_M
 
 #: Error types with a BOP average recall, then the extra ADD(-S) group.
 AR_METRICS = ("vsd", "mssd", "mspd")
@@ -50,8 +53,9 @@ class BopSettings:
 
     Attributes:
         metrics: subset of :data:`METRICS` to compute.
-        visib_gt_min: minimum visible fraction of a counted GT instance (-1: the ``inst_count``
-            most visible instances of each target).
+        visib_gt_min: minimum visible fraction of a counted GT instance; -1 (the default, as the
+            BOP toolkit's ``eval_bop19_pose.py``): the ``inst_count`` most visible instances of
+            each target.
         vsd_delta: VSD visibility tolerance (mm; BOP uses 15 for LM-O and most data sets).
         vsd_taus: VSD misalignment tolerances (fractions of the diameter).
         correct_thresholds: correctness thresholds of VSD (values) and MSSD (fractions of the diameter).
@@ -62,7 +66,7 @@ class BopSettings:
     """
 
     metrics: tuple[str, ...] = METRICS
-    visib_gt_min: float = 0.1
+    visib_gt_min: float = -1.0
     vsd_delta: float = 15.0
     vsd_taus: tuple[float, ...] = BOP_FRACTIONS
     correct_thresholds: tuple[float, ...] = BOP_FRACTIONS
@@ -415,12 +419,12 @@ def _render_depth_mm(renderer, data: BopEvaluationData, obj_id: int, T_mm: np.nd
     """Rendered depth (mm) of the error mesh; a rounded (not exactly orthonormal) rotation, as BOP
     ground truth stores them, is rendered with its nearest rotation (the renderer needs a rigid pose)."""
     T = T_mm.copy()
-    T[:3, 3] /= 1000.0
+    T[:3, 3] /= MM_PER_M
     if np.abs(T[:3, :3].T @ T[:3, :3] - np.eye(3)).max() > 1e-9:
         left, _, right = np.linalg.svd(T[:3, :3])
         T[:3, :3] = left @ right
     depth = renderer.render(K, [(data.render_mesh(obj_id), T)], rgb=False, masks=False).depth
-    return depth.astype(np.float64) * 1000.0
+    return depth.astype(np.float64) * MM_PER_M
 
 
 def _vsd_errors(data: BopEvaluationData, results: PoseResults, pairs: EvaluationPairs, gt_keys: np.ndarray,
@@ -481,11 +485,18 @@ def evaluate(data: BopEvaluationData, results: PoseResults, settings: BopSetting
 
     Args:
         data: ground truth, targets and models (:func:`evaluation.bop_data.load_evaluation_data`).
-        results: estimates (:func:`evaluation.bop_results.read_pose_results`).
+        results: estimates in millimetres (:func:`paz6d.datasets.bop.read_pose_results` with
+            ``units="mm"``).
         settings: metrics and thresholds.
         renderer: depth renderer for VSD (created and closed here when ``None``).
         progress: show tqdm progress bars.
+
+    Raises:
+        ValueError: ``results`` were read in metres.
     """
+    if results.units != "mm":
+        raise ValueError(f"results: expected translations in millimetres (read_pose_results(..., units='mm')), "
+                         f"got units={results.units!r}")
     gt_keys, gt_obj_ids = valid_ground_truth(data, settings.visib_gt_min)
     pairs = build_pairs(data, results, gt_keys, gt_obj_ids)
     compute_errors(data, results, pairs, gt_keys, gt_obj_ids, settings, renderer, progress)

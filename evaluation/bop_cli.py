@@ -52,9 +52,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plots", type=Path, help="folder for PNG recall-vs-threshold plots")
     parser.add_argument("--skip-invalid", action="store_true",
                         help="skip malformed/unknown rows of the results CSV (counted in the JSON) instead of failing")
-    parser.add_argument("--visib-gt-min", type=_visibility, default=0.1,
-                        help="minimum visible fraction of a counted GT instance (default 0.1; -1 = the "
-                             "inst_count most visible, the BOP toolkit script's rule)")
+    parser.add_argument("--visib-gt-min", type=_visibility, default=-1.0,
+                        help="GT instances that count: -1 (default, as the BOP toolkit's eval_bop19_pose.py) = "
+                             "the inst_count most visible of each target; a fraction such as 0.1 = every "
+                             "instance of a target object at least that visible")
     parser.add_argument("--vsd-delta", type=float, default=15.0, help="VSD visibility tolerance in mm (default 15)")
     parser.add_argument("--workers", type=int, default=1, help="threads for the ADD-S search (-1 = all cores; results do not depend on it)")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
@@ -126,15 +127,15 @@ def run(args: argparse.Namespace) -> int:
     """
     from evaluation import bop
     from evaluation.bop_data import load_evaluation_data
-    from evaluation.bop_results import read_pose_results
     from paz6d.backend.files import write_json_atomically
+    from paz6d.datasets.bop.results import read_pose_results
 
     data = load_evaluation_data(args.dataset, args.split, args.targets)
     metrics, skipped_metrics = _choose_metrics(args.metrics, data)
     settings = bop.BopSettings(metrics=metrics, visib_gt_min=args.visib_gt_min, vsd_delta=args.vsd_delta,
                                workers=args.workers)
     results = read_pose_results(args.results, object_ids=data.object_ids, image_ids=data.images.keys(),
-                                skip_invalid=args.skip_invalid)
+                                skip_invalid=args.skip_invalid, units="mm")
     if results.skipped:
         print(f"warning: skipped {len(results.skipped)} invalid rows of {args.results} "
               f"(first: line {results.skipped[0][0]}: {results.skipped[0][1]})", file=sys.stderr)

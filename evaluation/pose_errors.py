@@ -28,16 +28,15 @@ from scipy.spatial.transform import Rotation
 
 from evaluation.point_tree import PointTree
 from paz6d.backend.checks import as_array, as_camera_matrix, as_points, as_rotation_matrix
+# Largest accepted max |R^T R - I| of a pose rotation (BOP's rounded rotations pass); errors are
+# computed with the matrices as given, as BOP does.
+from paz6d.datasets.bop.results import ROTATION_TOLERANCE
 
 #: Largest number of 3D points transformed at once (bounds the memory of the batched errors).
 CHUNK_POINTS = 1 << 21
 #: BOP's default discretization of continuous symmetries: the vertex farthest from the axis moves
 #: at most this fraction of the diameter between consecutive samples (ceil(pi / 0.01) = 315 steps).
 MAX_SYMMETRY_STEP = 0.01
-#: Largest accepted ``max |R^T R - I|`` of a pose rotation: loose enough for the rounded rotations
-#: stored in BOP ground truth (LM-O scene 2 reaches 0.0094), tight enough to reject scaled,
-#: sheared or reflected matrices. Errors are computed with the matrices as given, as BOP does.
-ROTATION_TOLERANCE = 0.05
 #: ``max |R^T R - I|`` below which an estimated rotation is treated as exactly orthonormal by ADI.
 ORTHONORMAL_TO_MACHINE = 1e-12
 

@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.datasets.bop import BOPDataset, Target, write_pose_results, write_targets
+
 METHODS = ("aae", "keypoints")
 BOXES = {"obj": "bbox_obj", "visib": "bbox_visib"}
 
@@ -40,14 +42,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="skip instances whose visible fraction is below this (BOP'19 uses 0.1)")
 
 
-def _estimator(method: str, run_dir: Path, camera):
+def _estimator(method: str, run_dir: Path):
+    """The method's pipeline, loaded once; each image's camera is given per call."""
     if method == "aae":
         from paz6d.aae.pipeline import ImplicitPose6D
 
-        return ImplicitPose6D(run_dir, camera)
+        return ImplicitPose6D(run_dir)
     from paz6d.keypointnet.pipeline import KeypointPose6D
 
-    return KeypointPose6D(run_dir, camera)
+    return KeypointPose6D(run_dir)
 
 
 def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_id: int, box: str = "obj",
@@ -55,20 +58,18 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
     """Estimates the pose of every visible-enough instance of ``obj_id`` from its ground-truth box.
 
     Returns:
-        ``{"scene_ids", "im_ids", "rotations" (E, 3, 3), "translations_mm" (E, 3), "seconds" (E,),
-        "targets" (BOP'19 targets of the estimated images), "skipped_images", "failed"}``; an
+        ``{"scene_ids", "im_ids", "rotations" (E, 3, 3), "translations" (E, 3) metres, "seconds" (E,),
+        "targets" (BOP'19 :class:`Target` of the estimated images), "skipped_images", "failed"}``; an
         estimate that fails (e.g. PnP with too few keypoints) is counted in ``failed`` and left out
         (BOP scores a missing estimate as a miss).
     """
     from tqdm.auto import tqdm
 
-    from paz6d.datasets.bop import BOPDataset
-
     if box not in BOXES:
         raise ValueError(f"box: expected one of {sorted(BOXES)}, got {box!r}")
     data = BOPDataset(dataset, split=split)
-    estimators: dict[bytes, object] = {}  # one per distinct camera matrix
-    found = {"scene_ids": [], "im_ids": [], "rotations": [], "translations_mm": [], "seconds": []}
+    estimator = None  # loaded at the first instance to estimate
+    found = {"scene_ids": [], "im_ids": [], "rotations": [], "translations": [], "seconds": []}
     skipped_images, failed, targets = 0, 0, []
     for sample in tqdm(data, desc=f"estimate obj {obj_id}", unit="image", disable=not progress, dynamic_ncols=True):
         instances = [instance for instance in sample.objects if instance.obj_id == obj_id
@@ -78,11 +79,9 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
         if sample.image is None:
             skipped_images += 1
             continue
-        targets.append({"scene_id": sample.scene_id, "im_id": sample.im_id, "obj_id": obj_id,
-                        "inst_count": len(instances)})
-        key = np.asarray(sample.K, dtype=np.float64).tobytes()
-        if key not in estimators:
-            estimators[key] = _estimator(method, run_dir, sample.camera)
+        targets.append(Target(sample.scene_id, sample.im_id, obj_id, len(instances)))
+        if estimator is None:
+            estimator = _estimator(method, run_dir)
         for instance in instances:
             if not instance.info or BOXES[box] not in instance.info:
                 raise ValueError(f"{dataset}: scene {sample.scene_id} image {sample.im_id} has no {BOXES[box]} in "
@@ -90,7 +89,8 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
             x, y, width, height = instance.info[BOXES[box]]
             started = time.perf_counter()
             try:
-                pose = estimators[key](sample.image, (float(x), float(y), float(x + width), float(y + height)))
+                pose = estimator(sample.image, (float(x), float(y), float(x + width), float(y + height)),
+                                 camera=sample.camera)
             except ValueError:
                 pose = None
             if pose is None:
@@ -100,7 +100,7 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
             found["scene_ids"].append(sample.scene_id)
             found["im_ids"].append(sample.im_id)
             found["rotations"].append(T[:3, :3])
-            found["translations_mm"].append(1000.0 * T[:3, 3])
+            found["translations"].append(T[:3, 3])
             found["seconds"].append(time.perf_counter() - started)
     result = {name: np.asarray(values) for name, values in found.items()}
     result.update(targets=targets, skipped_images=skipped_images, failed=failed)
@@ -111,8 +111,6 @@ def run(args: argparse.Namespace) -> int:
     from paz6d.backend.tensorflow_guard import import_tensorflow
 
     import_tensorflow()
-    from evaluation.bop_results import write_pose_results
-    from paz6d.backend.files import write_json_atomically
 
     if not args.run.is_dir():
         raise ValueError(f"--run: {args.run} is not a directory")
@@ -123,10 +121,10 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.dataset}: no instance of object {args.object_id} with an RGB image and visible "
                          f"fraction >= {args.min_visible} in split {args.split!r}")
     write_pose_results(args.out, found["scene_ids"], found["im_ids"], np.full(count, args.object_id),
-                       np.ones(count), found["rotations"].reshape(-1, 3, 3), found["translations_mm"].reshape(-1, 3),
-                       found["seconds"])
+                       np.ones(count), found["rotations"].reshape(-1, 3, 3), found["translations"].reshape(-1, 3),
+                       found["seconds"], units="m")
     if args.targets_out is not None:
-        write_json_atomically(args.targets_out, found["targets"])
+        write_targets(args.targets_out, found["targets"])
     print(f"wrote {args.out}: {count} estimates of object {args.object_id} ({found['failed']} failed, "
           f"{found['skipped_images']} images without RGB skipped)")
     return 0

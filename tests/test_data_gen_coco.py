@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from pycocotools import mask as mask_utils
 
-from data_gen.coco import bbox_xywh, decode_rle, encode_rle
+from data_gen.coco import encode_rle
+from evaluation.coco_masks import decode_rle
+from paz6d.datasets.bop.writer import bbox_xywh
 
 
 def masks():
@@ -47,5 +49,5 @@ def test_rle_matches_pycocotools(mask):
 def test_bad_rle_input_is_rejected():
     with pytest.raises(ValueError, match="mask: expected shape"):
         encode_rle(np.zeros((2, 2, 2), dtype=bool))
-    with pytest.raises(ValueError, match="counts sum"):
+    with pytest.raises(ValueError, match="RLE run lengths sum to 3, expected height\\*width = 4"):
         decode_rle({"counts": [1, 2], "size": [2, 2]})

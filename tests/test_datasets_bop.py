@@ -1,4 +1,5 @@
-"""BOP reader on real LM-O data (metres, missing parts) and its error messages."""
+"""The BOP boundary (``paz6d.datasets.bop``): the reader on real LM-O data (metres, missing parts),
+millimetre reads that keep the stored values, the camera, targets and writer, and error messages."""
 
 from __future__ import annotations
 
@@ -8,8 +9,12 @@ import numpy as np
 import pytest
 
 from paz6d.backend.camera import transform_and_project
-from paz6d.datasets.bop import (BOPDataset, BOPScene, load_model, load_models_info, load_scene_camera, load_scene_gt,
-                                load_scene_gt_info)
+from paz6d.datasets.bop import (MM_PER_M, BOPDataset, BOPScene, Target, load_camera, load_model, load_models_info,
+                                load_scene_camera, load_scene_gt, load_scene_gt_info, read_targets, write_targets)
+from paz6d.datasets.bop.scene import read_depth
+from paz6d.datasets.bop.targets import targets_from_gt
+from paz6d.datasets.bop.units import lengths_from_mm, mm_from_lengths
+from paz6d.datasets.bop.writer import depth_png_from_lengths, gt_entry, write_models
 
 
 @pytest.fixture(scope="module")
@@ -128,3 +133,109 @@ def test_missing_files_and_fields_are_named(tmp_path):
         load_scene_gt_info(tmp_path / "info.json")
     with pytest.raises(ValueError, match="split folder not found"):
         BOPDataset(tmp_path, split="test")
+
+
+def test_lmo_camera_json_gives_the_scene_intrinsics(lmo):
+    camera = load_camera(lmo / "camera.json")
+    assert (camera.width, camera.height) == (640, 480)
+    np.testing.assert_allclose(camera.K, load_scene_camera(lmo / "test" / "000002" / "scene_camera.json")[3].K)
+    np.testing.assert_allclose(camera.K, [[572.4114, 0, 325.2611], [0, 573.57043, 242.04899], [0, 0, 1]])
+
+
+def test_camera_json_errors(tmp_path):
+    with pytest.raises(ValueError, match="missing.json: camera file not found"):
+        load_camera(tmp_path / "missing.json")
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(ValueError, match="invalid JSON"):
+        load_camera(tmp_path / "bad.json")
+    (tmp_path / "partial.json").write_text(json.dumps({"fx": 1.0, "fy": 1.0, "cx": 0.5}))
+    with pytest.raises(ValueError, match="partial.json: missing field 'cy' of a BOP camera.json"):
+        load_camera(tmp_path / "partial.json")
+
+
+def test_millimetres_are_read_as_stored_and_metres_converted_once(lmo):
+    path = lmo / "test" / "000002" / "scene_gt.json"
+    raw = json.loads(path.read_text())
+    in_mm = load_scene_gt(path, snap_rotations=False, units="mm")
+    in_m = load_scene_gt(path, snap_rotations=False)
+    for im_id, entries in list(raw.items())[:20]:
+        for entry, mm, m in zip(entries, in_mm[int(im_id)], in_m[int(im_id)]):
+            np.testing.assert_array_equal(mm.T_model2cam[:3, 3], entry["cam_t_m2c"])  # bit for bit
+            np.testing.assert_array_equal(m.T_model2cam[:3, 3], np.asarray(entry["cam_t_m2c"]) * 0.001)
+    info_mm = load_models_info(lmo / "models" / "models_info.json", units="mm")
+    raw_info = json.loads((lmo / "models" / "models_info.json").read_text())
+    for obj_id, entry in raw_info.items():
+        assert info_mm[int(obj_id)].diameter == entry["diameter"]
+        assert info_mm[int(obj_id)].minimum.tolist() == [entry["min_x"], entry["min_y"], entry["min_z"]]
+    mesh_mm = load_model(lmo / "models", 1, units="mm")
+    np.testing.assert_allclose(load_model(lmo / "models", 1).vertices * MM_PER_M, mesh_mm.vertices, rtol=1e-12)
+    with pytest.raises(ValueError, match="units: expected one of \\('m', 'mm'\\), got 'cm'"):
+        load_scene_gt(path, units="cm")
+
+
+def test_unit_converters_are_exact_inverses_of_the_old_literals():
+    values = np.random.default_rng(3).normal(0, 500, 1000)
+    np.testing.assert_array_equal(lengths_from_mm(values, "m"), values * 0.001)
+    np.testing.assert_array_equal(mm_from_lengths(values, "m"), values * 1000.0)
+    np.testing.assert_array_equal(lengths_from_mm(values, "mm"), values)
+    np.testing.assert_array_equal(mm_from_lengths(values, "mm"), values)
+
+
+def test_depth_written_in_metres_reads_back_in_both_units(tmp_path):
+    import cv2
+
+    depth_m = np.array([[0.0, 0.5], [1.2345, 70.0]], dtype=np.float32)
+    stored = depth_png_from_lengths(depth_m, depth_scale=0.1)
+    np.testing.assert_array_equal(stored, [[0, 5000], [12345, 65535]])  # 0.1 mm units, clipped at 16 bits
+    cv2.imwrite(str(tmp_path / "000000.png"), stored)
+    np.testing.assert_allclose(read_depth(tmp_path / "000000.png", 0.1, units="mm"), stored * 0.1)
+    np.testing.assert_allclose(read_depth(tmp_path / "000000.png", 0.1), stored * 0.1 / 1000.0)
+
+
+def test_written_ground_truth_and_models_read_back_in_metres(tmp_path):
+    import trimesh
+
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    T[:3, 3] = [0.01, -0.02, 0.75]
+    entry = gt_entry(7, T)
+    assert entry["obj_id"] == 7 and entry["cam_t_m2c"] == [10.0, -20.0, 750.0]
+    (tmp_path / "scene_gt.json").write_text(json.dumps({"0": [entry]}))
+    (read,) = load_scene_gt(tmp_path / "scene_gt.json")[0]
+    assert read.obj_id == 7
+    np.testing.assert_allclose(read.T_model2cam, T, atol=1e-15)
+    box = trimesh.creation.box((0.02, 0.04, 0.06))
+    paths = write_models(tmp_path / "models", [box], [7], [0.08], {7: {"symmetries_discrete": []}})
+    assert [path.name for path in paths] == ["obj_000007.ply", "models_info.json"]
+    info = load_models_info(tmp_path / "models" / "models_info.json")[7]
+    assert info.diameter == pytest.approx(0.08)
+    np.testing.assert_allclose(info.minimum, [-0.01, -0.02, -0.03])
+    np.testing.assert_allclose(info.size, [0.02, 0.04, 0.06])
+    assert json.loads(paths[1].read_text())["7"]["size_z"] == pytest.approx(60.0)
+    np.testing.assert_allclose(load_model(tmp_path / "models", 7).bounds, box.bounds, atol=1e-7)
+
+
+def test_targets_round_trip_and_come_from_visible_instances(tmp_path):
+    targets = (targets_from_gt(1, 4, [5, 2, 5, 5], [0.9, 0.5, 0.05, 0.1])
+               + targets_from_gt(1, 5, [3], [0.0]))
+    assert targets == [Target(1, 4, 2, 1), Target(1, 4, 5, 2)]
+    path = write_targets(tmp_path / "targets.json", targets)
+    assert json.loads(path.read_text())[1] == {"scene_id": 1, "im_id": 4, "obj_id": 5, "inst_count": 2}
+    assert read_targets(path) == targets
+
+
+def test_duplicated_targets_are_rejected_naming_file_and_entry(tmp_path):
+    path = tmp_path / "test_targets_bop19.json"
+    entries = [{"scene_id": 2, "im_id": 3, "obj_id": 5, "inst_count": 1},
+               {"scene_id": 2, "im_id": 3, "obj_id": 6, "inst_count": 1},
+               {"scene_id": 2, "im_id": 3, "obj_id": 5, "inst_count": 1}]
+    path.write_text(json.dumps(entries))
+    with pytest.raises(ValueError, match=r"test_targets_bop19.json: target 2 repeats target 0: scene 2, image 3, "
+                                         r"object 5"):
+        read_targets(path)
+    path.write_text(json.dumps([{"scene_id": 2, "im_id": 3, "obj_id": 5, "inst_count": 0}]))
+    with pytest.raises(ValueError, match="target 0: field 'inst_count' must be positive"):
+        read_targets(path)
+    path.write_text(json.dumps([{"scene_id": 2, "im_id": "3", "obj_id": 5, "inst_count": 1}]))
+    with pytest.raises(ValueError, match="target 0: field 'im_id' must be a non-negative integer, got '3'"):
+        read_targets(path)

@@ -14,8 +14,8 @@ import trimesh
 
 from evaluation import bop
 from evaluation.bop_data import load_evaluation_data
-from evaluation.bop_results import read_pose_results, write_pose_results
 from paz6d.cli import main
+from paz6d.datasets.bop.results import read_pose_results, write_pose_results
 
 SIDE = 100.0  # mm
 DIAMETER = SIDE * np.sqrt(2.0)
@@ -78,7 +78,7 @@ def write_results(path: Path, estimates: list[tuple[int, int, float, np.ndarray]
     """estimates = [(im_id, obj_id, score, T (mm)), ...] of scene 1."""
     T = np.array([estimate[3] for estimate in estimates])
     return write_pose_results(path, [1] * len(estimates), [e[0] for e in estimates], [e[1] for e in estimates],
-                              [e[2] for e in estimates], T[:, :3, :3], T[:, :3, 3])
+                              [e[2] for e in estimates], T[:, :3, :3], T[:, :3, 3], units="mm")
 
 
 # Shifts along x (fractions of the diameter): a plate facing the camera at 1000 mm then has
@@ -109,12 +109,12 @@ def tiny(tmp_path_factory):
 
 def evaluate_tiny(tiny, **settings):
     data = load_evaluation_data(tiny[0])
-    results = read_pose_results(tiny[1], object_ids=data.object_ids, image_ids=data.images.keys())
+    results = read_pose_results(tiny[1], object_ids=data.object_ids, image_ids=data.images.keys(), units="mm")
     return bop.evaluate(data, results, bop.BopSettings(metrics=("mssd", "mspd", "add"), **settings))
 
 
 def test_average_recalls_of_the_hand_made_case(tiny):
-    evaluation = evaluate_tiny(tiny)
+    evaluation = evaluate_tiny(tiny, visib_gt_min=0.1)
     # 4 counted instances (C is 5 % visible). MSSD < t*d for t in 0.05..0.5: e1 (0.12) 8 thresholds,
     # e2 (0.33) 4, e5 (0.6) none, e6 (0.04) all 10 -> 22 / 40.
     assert evaluation.counts["gt_instances"] == 4
@@ -149,14 +149,14 @@ def test_most_visible_rule_counts_the_barely_visible_symmetric_instance(tiny):
 
 def test_results_order_does_not_change_the_scores(tiny, tmp_path):
     data = load_evaluation_data(tiny[0])
-    results = read_pose_results(tiny[1])
+    results = read_pose_results(tiny[1], units="mm")
     reversed_path = tmp_path / "reversed.csv"
     with open(tiny[1]) as file:
         lines = file.read().splitlines()
     reversed_path.write_text("\n".join([lines[0]] + lines[:0:-1]) + "\n")
     settings = bop.BopSettings(metrics=("mssd", "mspd", "add"))
     first = bop.evaluate(data, results, settings).to_dict()
-    second = bop.evaluate(data, read_pose_results(reversed_path), settings).to_dict()
+    second = bop.evaluate(data, read_pose_results(reversed_path, units="mm"), settings).to_dict()
     assert first == second
 
 
@@ -219,19 +219,26 @@ def test_cli_writes_json_errors_and_plots(tiny, tmp_path, capsys):
     captured = capsys.readouterr()
     assert "skipping VSD" in captured.err and "AR_MSSD" in captured.out
     summary = json.loads(out.read_text())
-    assert summary["AR_MSSD"] == pytest.approx(22 / 40) and summary["AR_MSPD"] == pytest.approx(27 / 40)
+    # Default: the BOP toolkit's rule (visib_gt_min -1), which also counts the 5 % visible instance C.
+    assert summary["settings"]["visib_gt_min"] == -1 and summary["counts"]["gt_instances"] == 5
+    assert summary["AR_MSSD"] == pytest.approx(32 / 50) and summary["AR_MSPD"] == pytest.approx(37 / 50)
     assert "AR" not in summary and "AR_VSD" not in summary and "vsd" in summary["skipped_metrics"]
-    assert summary["ADD(-S)_recall"] == pytest.approx(0.25)
+    assert summary["ADD(-S)_recall"] == pytest.approx(0.4)
     assert summary["per_object"]["1"]["AR_MSSD"] == pytest.approx(22 / 40)
     with open(errors_csv) as file:
         rows = list(csv.DictReader(file))
     assert list(rows[0]) == ["scene_id", "im_id", "obj_id", "score", "add", "adi", "mssd", "mspd", "re", "te", "proj"]
-    assert [(row["im_id"], row["score"]) for row in rows] == [("1", "0.9"), ("1", "0.8"), ("2", "0.5"), ("3", "0.6")]
+    assert [(row["im_id"], row["score"]) for row in rows] == [("1", "0.9"), ("1", "0.8"), ("1", "0.7"), ("2", "0.5"),
+                                                             ("3", "0.6")]
     assert float(rows[1]["mssd"]) == pytest.approx(SHIFTS["e2"] * DIAMETER, abs=1e-9)
     assert float(rows[1]["mspd"]) == pytest.approx(FX * SHIFTS["e2"] * DIAMETER / 1000, abs=1e-9)
     assert sorted(path.name for path in plots.iterdir()) == ["accuracy_add.png", "recall_add.png",
                                                             "recall_mspd.png", "recall_mssd.png"]
     assert all(path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for path in plots.iterdir())
+    assert main(["evaluate", "bop", "--dataset", str(tiny[0]), "--results", str(tiny[1]), "--out", str(out),
+                 "--visib-gt-min", "0.1", "--metrics", "mssd,mspd", "--no-progress"]) == 0
+    summary = json.loads(out.read_text())
+    assert summary["counts"]["gt_instances"] == 4 and summary["AR_MSSD"] == pytest.approx(22 / 40)
 
 
 def test_cli_rejects_vsd_without_depth_and_bad_rows(tiny, tmp_path, capsys):
@@ -252,7 +259,19 @@ def test_cli_rejects_vsd_without_depth_and_bad_rows(tiny, tmp_path, capsys):
     assert summary["counts"]["estimates_skipped_invalid"] == 2
     assert [row["line"] for row in summary["skipped_rows"]] == [9, 10]
     assert "unknown object id 9" in summary["skipped_rows"][1]["reason"]
-    assert summary["AR_MSSD"] == pytest.approx(22 / 40)
+    assert summary["AR_MSSD"] == pytest.approx(32 / 50)
+
+
+def test_cli_rejects_a_targets_file_listing_a_target_twice(tiny, tmp_path, capsys):
+    # Counted twice, the instances of image 2 would give recalls above 1.
+    targets = json.loads((tiny[0] / "test_targets_bop19.json").read_text())
+    duplicated = tmp_path / "targets.json"
+    duplicated.write_text(json.dumps(targets + [targets[2]]))
+    out = tmp_path / "out.json"
+    assert main(["evaluate", "bop", "--dataset", str(tiny[0]), "--results", str(tiny[1]), "--targets", str(duplicated),
+                 "--out", str(out), "--no-progress"]) == 2
+    assert f"{duplicated}: target 4 repeats target 2: scene 1, image 2, object 1" in capsys.readouterr().err
+    assert not out.exists()
 
 
 # --- VSD through the protocol, with depth images rendered from the ground truth ------------------

@@ -1,4 +1,5 @@
-"""BOP'19 results CSV: parsing, round trip and every kind of bad row (with its line number)."""
+"""BOP'19 results CSV (``paz6d.datasets.bop.results``): parsing, units, round trip and every kind of
+bad row (with its line number)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from evaluation.bop_results import HEADER, read_pose_results, write_pose_results
+from paz6d.datasets.bop.results import HEADER, read_pose_results, write_pose_results
 
 R_TEXT = " ".join(map(str, np.eye(3).ravel()))
 GOOD = f"2,3,5,0.5,{R_TEXT},1 2 1000,-1"
@@ -26,9 +27,9 @@ def test_round_trip_keeps_every_value(tmp_path):
     translations = generator.normal(0, 300, (5, 3))
     scores = generator.random(5)
     path = write_pose_results(tmp_path / "r.csv", [1, 1, 2, 2, 3], [0, 4, 7, 7, 9], [5, 6, 5, 1, 12], scores,
-                              rotations, translations, [0.5, 0.5, -1, -1, 2.0])
-    results = read_pose_results(path)
-    assert len(results) == 5 and results.skipped == ()
+                              rotations, translations, [0.5, 0.5, -1, -1, 2.0], units="mm")
+    results = read_pose_results(path, units="mm")
+    assert len(results) == 5 and results.skipped == () and results.units == "mm"
     np.testing.assert_array_equal(results.rotations, rotations)
     np.testing.assert_array_equal(results.translations, translations)
     np.testing.assert_array_equal(results.scores, scores)
@@ -37,9 +38,24 @@ def test_round_trip_keeps_every_value(tmp_path):
     np.testing.assert_array_equal(results.poses[:, :3, 3], translations)
 
 
+def test_metres_are_written_as_millimetres_and_read_back(tmp_path):
+    translations_m = np.array([[0.0123, -0.2, 1.5], [0.1, 0.0, 0.75]])
+    path = write_pose_results(tmp_path / "r.csv", [1, 1], [0, 1], [5, 5], [1.0, 0.5], np.tile(np.eye(3), (2, 1, 1)),
+                              translations_m)
+    with open(path, newline="") as file:
+        rows = list(csv.DictReader(file))
+    np.testing.assert_array_equal([[float(v) for v in row["t"].split()] for row in rows], translations_m * 1000.0)
+    np.testing.assert_array_equal(read_pose_results(path, units="mm").translations, translations_m * 1000.0)
+    in_metres = read_pose_results(path)
+    assert in_metres.units == "m"
+    np.testing.assert_allclose(in_metres.translations, translations_m, rtol=1e-15)
+    with pytest.raises(ValueError, match="units: expected one of \\('m', 'mm'\\), got 'cm'"):
+        read_pose_results(path, units="cm")
+
+
 def test_lmo_results_file_parses_like_the_csv_module(shared_data):
     path = shared_data / "bop_lmo" / "results" / "results_lmo-test.csv"
-    results = read_pose_results(path)
+    results = read_pose_results(path, units="mm")
     with open(path, newline="") as file:
         rows = list(csv.DictReader(file))
     assert len(results) == len(rows) == 1427

@@ -1,0 +1,40 @@
+"""The BOP boundary: every BOP file the project reads or writes goes through this package.
+
+Units are chosen once, here. BOP files store millimetres; every reader and writer takes
+``units="m"`` (the default: the library works in metres, see ``docs/conventions.md``) or
+``units="mm"`` and converts exactly once, when the file is read or written
+(:mod:`~paz6d.datasets.bop.units` holds the one constant, :data:`MM_PER_M`). Consumers:
+
+* the library (training data, ``paz6d estimate``, ``paz6d generate``) works in metres:
+  :class:`BOPDataset` returns metres, ``write_pose_results(..., units="m")`` and the
+  :mod:`~paz6d.datasets.bop.writer` functions take metres;
+* BOP evaluation (``evaluation.bop_data``, ``evaluation.bop``) works in millimetres, as the BOP
+  toolkit does and as BOP's thresholds are stated (MSSD/ADD as fractions of a diameter in mm,
+  VSD's tolerance delta in mm, MSPD in px): it reads ground truth, models, ``models_info.json``
+  and results with ``units="mm"``, so those values arrive exactly as stored (no conversion).
+
+Modules:
+
+* :mod:`~paz6d.datasets.bop.units`: :data:`MM_PER_M` and the two converters.
+* :mod:`~paz6d.datasets.bop.camera`: ``camera.json`` (:func:`load_camera` → ``Camera``) and
+  ``scene_camera.json``.
+* :mod:`~paz6d.datasets.bop.scene`: ``scene_gt.json``, ``scene_gt_info.json``, depth and masks.
+* :mod:`~paz6d.datasets.bop.models`: model meshes and ``models_info.json``.
+* :mod:`~paz6d.datasets.bop.targets`: ``test_targets_bop19.json``.
+* :mod:`~paz6d.datasets.bop.results`: BOP'19 results CSV (reader and writer).
+* :mod:`~paz6d.datasets.bop.reader`: :class:`BOPDataset` / :class:`BOPScene` samples in metres.
+* :mod:`~paz6d.datasets.bop.writer`: ``camera.json``, models and the scene JSON entries.
+"""
+
+from paz6d.datasets.bop.camera import SceneCamera, load_camera, load_scene_camera
+from paz6d.datasets.bop.models import ModelInfo, load_model, load_models_info, model_path
+from paz6d.datasets.bop.reader import BOPDataset, BOPObject, BOPSample, BOPScene
+from paz6d.datasets.bop.results import PoseResults, read_pose_results, write_pose_results
+from paz6d.datasets.bop.scene import GroundTruthPose, load_scene_gt, load_scene_gt_info, nearest_rotation, pose_from_bop
+from paz6d.datasets.bop.targets import Target, read_targets, write_targets
+from paz6d.datasets.bop.units import MM_PER_M
+
+__all__ = ["BOPDataset", "BOPObject", "BOPSample", "BOPScene", "GroundTruthPose", "MM_PER_M", "ModelInfo",
+           "PoseResults", "SceneCamera", "Target", "load_camera", "load_model", "load_models_info",
+           "load_scene_camera", "load_scene_gt", "load_scene_gt_info", "model_path", "nearest_rotation",
+           "pose_from_bop", "read_pose_results", "read_targets", "write_pose_results", "write_targets"]
