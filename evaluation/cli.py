@@ -14,10 +14,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
-import math
 from pathlib import Path
 
-from paz6d.backend.files import write_json_atomically
+from paz6d.backend.files import finite_or_none, write_json_atomically
 
 _BOP_MODULE = "evaluation.bop_cli"
 
@@ -59,8 +58,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     voc.add_argument("--method", choices=("11point", "allpoint"), default="allpoint",
                      help="11point = VOC2007, allpoint = VOC2010+")
     voc.add_argument("--box-format", choices=("xyxy", "xywh"), default="xyxy", help="box format of text files")
-    voc.add_argument("--no-plus-one", action="store_true",
-                     help="continuous-coordinate areas (x2 - x1) instead of the VOC '+1 pixel' convention")
+    voc.add_argument("--plus-one", action=argparse.BooleanOptionalAction, default=True,
+                     help="box areas with the VOC '+1 pixel' convention; --no-plus-one: continuous coordinates "
+                          "(x2 - x1) (default: --plus-one)")
     voc.add_argument("--class-names", type=Path, help="file with one class name per line to map integer class ids")
     voc.add_argument("--layout", choices=("auto", "per_image", "per_class"), default="auto",
                      help="detection file layout (auto-detected from file names by default)")
@@ -71,12 +71,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
     if bop_cli is not None:
         bop = subparsers.add_parser("bop", help="BOP 6D pose evaluation")
         bop_cli.configure(bop)
-
-
-def _json_value(value):
-    if isinstance(value, float) and math.isnan(value):
-        return None
-    return value
 
 
 def _run_coco(args: argparse.Namespace) -> int:
@@ -107,22 +101,22 @@ def _run_voc(args: argparse.Namespace) -> int:
 
     names = voc.read_class_names(args.class_names) if args.class_names is not None else None
     evaluation = voc.evaluate_directories(args.annotations, args.detections, args.iou, args.method, args.box_format,
-                                          not args.no_plus_one, names, args.layout)
-    print(f"VOC AP ({args.method}, IoU >= {args.iou:g}, {'+1 pixel' if not args.no_plus_one else 'continuous'} areas)")
+                                          args.plus_one, names, args.layout)
+    print(f"VOC AP ({args.method}, IoU >= {args.iou:g}, {'+1 pixel' if args.plus_one else 'continuous'} areas)")
     print(f"  {'class':<20s} {'AP':>8s} {'GT':>6s} {'dets':>6s} {'TP':>6s} {'FP':>6s}")
     per_class = {}
     for name, result in evaluation.per_class.items():
-        ap = _json_value(result.average_precision)
+        ap = finite_or_none(result.average_precision)
         print(f"  {name:<20s} {'-' if ap is None else f'{ap:.4f}':>8s} {result.ground_truth_count:6d} "
               f"{result.detection_count:6d} {result.true_positives:6d} {result.false_positives:6d}")
         per_class[name] = {"ap": ap, "ground_truth": result.ground_truth_count,
                            "detections": result.detection_count, "true_positives": result.true_positives,
                            "false_positives": result.false_positives}
-    mean = _json_value(evaluation.mean_average_precision)
+    mean = finite_or_none(evaluation.mean_average_precision)
     print(f"  {'mAP':<20s} {'-' if mean is None else f'{mean:.4f}':>8s}")
     write_json_atomically(args.out, {"annotations": str(args.annotations), "detections": str(args.detections),
                        "iou_threshold": args.iou, "method": args.method, "box_format": args.box_format,
-                       "plus_one": not args.no_plus_one, "per_class": per_class, "mAP": mean}, indent=2)
+                       "plus_one": args.plus_one, "per_class": per_class, "mAP": mean}, indent=2)
     print(f"wrote {args.out}")
     if args.plots is not None:
         from evaluation import detection_plots

@@ -53,7 +53,8 @@ def test_console_script_help_is_cheap():
     module = subprocess.run([sys.executable, "-m", "paz6d", "--help"], capture_output=True, text=True, timeout=120)
     assert module.returncode == 0 and module.stdout == result.stdout  # python -m paz6d is the same command
     code = ("import json, sys\nfrom paz6d.cli import build_parser\nbuild_parser()\n"
-            "print(json.dumps([name for name in ('tensorflow', 'keras', 'pyrender', 'OpenGL', 'open3d') "
+            "print(json.dumps([name for name in ('tensorflow', 'keras', 'pyrender', 'OpenGL', 'open3d', 'numba', "
+            "'matplotlib') "
             "if name in sys.modules]))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
