@@ -143,29 +143,6 @@ def test_scaled_camera_keeps_pixel_centre_convention():
     np.testing.assert_allclose(half.project(points), (original.project(points) + 0.5) * 0.5 - 0.5, atol=1e-9)
 
 
-def test_from_bop_json_reads_lmo_camera(shared_data):
-    root = shared_data / "bop_lmo"
-    lens = Camera.from_bop_json(root / "camera.json")
-    np.testing.assert_allclose(lens.K, K)
-    assert (lens.width, lens.height) == (640, 480)
-    scene = Camera.from_bop_json(root / "test" / "000002" / "scene_camera.json", image_id=3)
-    np.testing.assert_allclose(scene.K, K)
-    assert (scene.width, scene.height) == (640, 480)
-    with pytest.raises(ValueError, match="no 'cam_K' for image id 999999"):
-        Camera.from_bop_json(root / "test" / "000002" / "scene_camera.json", image_id=999999)
-
-
-def test_from_bop_json_errors(tmp_path):
-    with pytest.raises(ValueError, match="camera file not found"):
-        Camera.from_bop_json(tmp_path / "missing.json")
-    (tmp_path / "bad.json").write_text("{not json")
-    with pytest.raises(ValueError, match="invalid JSON"):
-        Camera.from_bop_json(tmp_path / "bad.json")
-    (tmp_path / "partial.json").write_text(json.dumps({"fx": 1.0, "fy": 1.0, "cx": 0.5}))
-    with pytest.raises(ValueError, match="missing field 'cy'"):
-        Camera.from_bop_json(tmp_path / "partial.json")
-
-
 def test_bad_camera_input_names_the_argument():
     with pytest.raises(ValueError, match=r"K: expected \[\[fx, s, cx\], \[0, fy, cy\], \[0, 0, 1\]\]"):
         Camera(np.diag([-1.0, 1.0, 1.0]), 10, 10)

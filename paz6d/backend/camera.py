@@ -6,9 +6,7 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -143,33 +141,6 @@ class Camera:
             if key not in data:
                 raise ValueError(f"camera dict: missing field {key!r}")
         return cls(np.asarray(data["K"], dtype=np.float64), data["width"], data["height"], data.get("distortion"))
-
-    @classmethod
-    def from_bop_json(cls, path: str | Path, image_id: int | None = None) -> "Camera":
-        """Loads a BOP ``camera.json`` (fx, fy, cx, cy, width, height) or, with ``image_id``, a
-        ``scene_camera.json`` entry (``cam_K``; width/height from the sibling dataset's camera.json
-        when present, else inferred as ``2 * (cx, cy)``)."""
-        from paz6d.backend.files import load_json
-
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"{path}: camera file not found")
-        data = load_json(path)
-        if image_id is None:
-            try:
-                K = np.array([[data["fx"], 0.0, data["cx"]], [0.0, data["fy"], data["cy"]], [0.0, 0.0, 1.0]])
-                return cls(K, data["width"], data["height"])
-            except KeyError as error:
-                raise ValueError(f"{path}: missing field {error.args[0]!r} of a BOP camera.json") from error
-        entry = data.get(str(image_id))
-        if entry is None or "cam_K" not in entry:
-            raise ValueError(f"{path}: no 'cam_K' for image id {image_id}")
-        K = np.asarray(entry["cam_K"], dtype=np.float64).reshape(3, 3)
-        for candidate in (path.parent.parent.parent / "camera.json", path.parent.parent / "camera.json"):
-            if candidate.exists():
-                size = json.loads(candidate.read_text())
-                return cls(K, size["width"], size["height"])
-        return cls(K, round(2 * K[0, 2] + 1), round(2 * K[1, 2] + 1))
 
 
 def as_camera(camera, width: int | None = None, height: int | None = None, name: str = "camera") -> Camera:
