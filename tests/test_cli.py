@@ -185,3 +185,23 @@ def test_generate_round_trip_and_errors_name_the_flag(tmp_path):
     args = parser.parse_args(["--meshes", "a.ply", "--out", "o", "--num-images", "1", "--mesh-scale", "-1"])
     with pytest.raises(ValueError, match="^--mesh-scale: expected a positive number"):
         config_from_args(GenerationConfig, args)
+
+
+def test_train_commands_resolve_the_mesh_scale_by_source_and_name_flags_in_errors():
+    from paz6d.aae.train import AAETraining
+    from paz6d.cli_options import config_from_args
+    from paz6d.faces.emotion_train import EmotionTraining
+
+    parser = _subparser(("train", "aae"))
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--mesh", "a.ply", "--dataset", "d", "--out", "o"])  # one source only
+    assert config_from_args(AAETraining, parser.parse_args(["--mesh", "a.ply", "--out", "o"])).mesh_scale == 1.0
+    job = config_from_args(AAETraining, parser.parse_args(["--dataset", "d", "--out", "o", "--steps", "7"]))
+    assert job.mesh_scale == 0.001 and job.model_config.steps == 7  # BOP meshes are millimetres
+    with pytest.raises(ValueError, match="^--steps: expected a positive number"):
+        config_from_args(AAETraining, parser.parse_args(["--mesh", "a.ply", "--out", "o", "--steps", "0"]))
+    parser = _subparser(("train", "emotion"))
+    job = config_from_args(EmotionTraining, parser.parse_args(["--data", "d", "--out", "o", "--no-augment", "--eager"]))
+    assert job.augment is False and job.eager is True and job.progress is True
+    with pytest.raises(ValueError, match="^--batch-size: expected a positive integer"):
+        config_from_args(EmotionTraining, parser.parse_args(["--data", "d", "--out", "o", "--batch-size", "0"]))
