@@ -14,6 +14,7 @@ import trimesh
 from data_gen.config import GenerationConfig, list_backgrounds
 from paz6d.backend.files import load_json
 from paz6d.backend.mesh import MeshError, diameter, load_mesh
+from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.synthesis.occluders import distractor_library
 from paz6d.synthesis.sampling import hull_points
 from paz6d.synthesis.scene import ZNEAR
@@ -100,11 +101,11 @@ def _distance_range(config: GenerationConfig, radii: np.ndarray, diameters: np.n
         raise ValueError(f"distance: even at the maximum {high:.4g} m the largest object (radius "
                          f"{largest_radius:.4g} m) does not fit in the {config.width}x{config.height} image; "
                          "increase the distance range (or check --mesh-scale)")
-    deepest = (high + largest_radius) * 1000.0 / config.depth_scale
+    deepest = (high + largest_radius) * MM_PER_M / config.depth_scale
     if deepest > 65535:
         raise ValueError(f"depth_scale: {config.depth_scale} mm per unit cannot store depths up to "
                          f"{high + largest_radius:.3g} m in 16-bit PNGs; use at least "
-                         f"{(high + largest_radius) * 1000.0 / 65535:.3g}")
+                         f"{(high + largest_radius) * MM_PER_M / 65535:.3g}")
     # Smallest distance at which the largest object fits inside the image.
     fits = largest_radius * math.sqrt(1 + (focal / half_side) ** 2)
     return max(low, fits * 1.0001), high

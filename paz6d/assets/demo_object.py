@@ -15,6 +15,7 @@ import trimesh
 
 from paz6d.backend.files import write_bytes_atomically, write_json_atomically
 from paz6d.backend.mesh import diameter
+from paz6d.datasets.bop.units import MM_PER_M
 
 OBJECT_ID = 1
 #: RGB per side (-x, +x, -y, +y, -z, +z) of each part: every side of the body differs.
@@ -69,7 +70,7 @@ def write_demo_object(directory: str | Path) -> Path:
     directory.mkdir(parents=True, exist_ok=True)
     mesh = make_demo_mesh()
     millimetres = mesh.copy()
-    millimetres.apply_scale(1000.0)
+    millimetres.apply_scale(MM_PER_M)
     path = directory / f"obj_{OBJECT_ID:06d}.ply"
     write_bytes_atomically(path, millimetres.export(file_type="ply", encoding="binary"))
     low, high = millimetres.bounds
