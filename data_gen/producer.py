@@ -16,7 +16,7 @@ from paz6d.backend.files import write_bytes_atomically
 from paz6d.backend.image import alpha_blend
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, square_window
 from paz6d.datasets.bop.writer import depth_png_from_lengths, gt_info_entry, pose_entry
-from paz6d.synthesis.augment import RandomGaussianBlur, RandomSensorNoise, share_generator
+from paz6d.synthesis.augment import RandomGaussianBlur, RandomImageNoise, share_generator
 from paz6d.synthesis.backgrounds import background_image
 from paz6d.synthesis.lighting import random_lighting, random_tints
 from paz6d.synthesis.occluders import random_colors
@@ -48,7 +48,7 @@ def degradation(config: GenerationConfig) -> SequentialProcessor:
     with ``blur_probability``, then, for half of the images, sensor noise up to ``noise_std`` grey
     levels."""
     return SequentialProcessor([RandomGaussianBlur((5,), config.blur_probability, sigma=(0.4, 1.2)),
-                                RandomSensorNoise(config.noise_std, probability=0.5)], name="degrade")
+                                RandomImageNoise(config.noise_std, probability=0.5, quantized=True)], name="degrade")
 
 
 class ImageProducer:

@@ -229,7 +229,7 @@ RANDOM_PROCESSORS = [
     lambda: augment.RandomBrightness(20.0), lambda: augment.RandomContrast(0.6, 1.4),
     lambda: augment.RandomSaturation(0.6, 1.4), lambda: augment.RandomHue(30.0), lambda: augment.RandomImageNoise(8.0),
     lambda: augment.RandomGaussianBlur((3, 5), probability=0.7), lambda: augment.RandomGaussianBlur((0,), 0.7, (0.4, 1.2)),
-    lambda: augment.RandomSensorNoise(6.0, probability=0.8), lambda: augment.RandomContrastBrightnessNoise(),
+    lambda: augment.RandomImageNoise(6.0, probability=0.8, quantized=True), lambda: augment.RandomContrastBrightnessNoise(),
     lambda: augment.RandomFlipLeftRight(), lambda: augment.RandomCrop(),
 ]
 
@@ -284,8 +284,11 @@ def test_sensor_noise_is_gaussian_seeded_rounded_and_clipped():
     extremes = augment.sensor_noise(np.random.default_rng(4), np.array([[0, 255]] * 1000, dtype=np.uint8), 20.0)
     assert extremes[:, 0].min() == 0 and extremes[:, 1].max() == 255 and extremes[:, 0].max() > 10
     assert augment.sensor_noise(np.random.default_rng(5), grey[..., 0], 2.0).shape == (200, 300)
-    silent = augment.RandomSensorNoise(0.0, probability=1.0, seed=0)
+    silent = augment.RandomImageNoise(0.0, probability=0.5, quantized=True, seed=0)
     assert silent(grey) is grey and silent.generator.random() == np.random.default_rng(0).random()  # no draw
+    always = augment.RandomImageNoise(4.0, quantized=True, seed=1)
+    generator = np.random.default_rng(1)
+    np.testing.assert_array_equal(always(grey), augment.sensor_noise(generator, grey, generator.uniform(0.0, 4.0)))
 
 
 def test_contrast_brightness_noise_without_noise_is_a_linear_map():

@@ -5,8 +5,10 @@ in-plane angle, rotates the view about the principal point, and makes
 
 * the target: :func:`paz6d.aae.model.crop_object` of the clean view (object on black) around its box;
 * the input: the object re-lit (per-channel gains, brightness gradient), composited over a random
-  procedural background, partly covered by random occluders, cropped around a shifted and rescaled
-  box, then colour-jittered (brightness, contrast, saturation, hue), blurred and noised.
+  procedural background (:class:`paz6d.synthesis.backgrounds.BackgroundBank`, ``"clutter"`` style),
+  partly covered by random occluders (:func:`paz6d.synthesis.occluders.draw_polygon_occluders`), cropped
+  around a shifted and rescaled box, then colour-jittered (brightness, contrast, saturation, hue), blurred
+  and noised (:func:`input_jitter`, processors of :mod:`paz6d.synthesis.augment`).
 
 Every batch is a pure function of ``(seed, step)``, so training resumes on the same data stream.
 """
@@ -15,12 +17,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-from paz6d.backend import image as image_backend
 from paz6d.aae.model import crop_object
 from paz6d.aae.views import mask_box, rotate_view
+from paz6d.abstract.processor import SequentialProcessor
+from paz6d.synthesis.augment import (RandomContrastBrightnessNoise, RandomGaussianBlur, RandomHue, RandomSaturation,
+                                     share_generator)
+from paz6d.synthesis.backgrounds import BackgroundBank
+from paz6d.synthesis.occluders import draw_polygon_occluders
 
 
 @dataclass(frozen=True)
@@ -71,43 +76,14 @@ class Augmentation:
                 raise ValueError(f"Augmentation.{name}: expected >= 0, got {getattr(self, name)}")
 
 
-def _stripes(size: int, rng: np.random.Generator) -> np.ndarray:
-    """Two-colour sinusoidal stripes of random period (3-40 px) and orientation, ``(size, size, 3)`` float32."""
-    angle = rng.uniform(0, np.pi)
-    period = np.exp(rng.uniform(np.log(3), np.log(40)))
-    grid = np.arange(size, dtype=np.float32)
-    phase = (np.cos(angle) * grid[None, :] + np.sin(angle) * grid[:, None]) * (2 * np.pi / period)
-    weight = (0.5 + 0.5 * np.sin(phase))[..., None]
-    first, second = rng.uniform(0, 255, (2, 3)).astype(np.float32)
-    return weight * first + (1 - weight) * second
-
-
-def procedural_background(size: int, rng: np.random.Generator) -> np.ndarray:
-    """``(size, size, 3)`` uint8 clutter: a smooth colour field or stripes, random shapes, noise texture."""
-    if rng.random() < 0.35:
-        background = _stripes(size, rng)
-    else:
-        cells = int(rng.integers(2, 9))
-        field = rng.uniform(0, 255, (cells, cells, 3)).astype(np.float32)
-        background = cv2.resize(field, (size, size), interpolation=cv2.INTER_CUBIC)
-    for _ in range(int(rng.integers(0, 8))):
-        color = rng.uniform(0, 255, 3).tolist()
-        kind = rng.integers(3)
-        if kind == 0:
-            corner = rng.uniform(-0.2, 1.0, 2) * size
-            extent = rng.uniform(0.05, 0.5, 2) * size
-            cv2.rectangle(background, tuple(int(v) for v in corner), tuple(int(v) for v in corner + extent), color, -1)
-        elif kind == 1:
-            centre = tuple(int(v) for v in rng.uniform(0, size, 2))
-            axes = tuple(int(v) for v in rng.uniform(0.03, 0.3, 2) * size)
-            cv2.ellipse(background, centre, axes, float(rng.uniform(0, 180)), 0, 360, color, -1)
-        else:
-            points = rng.uniform(0, size, (2, 2)).astype(int)
-            cv2.line(background, tuple(points[0].tolist()), tuple(points[1].tolist()), color,
-                     int(rng.integers(1, max(2, size // 16))))
-    texture = cv2.GaussianBlur(rng.normal(0, 1, (size, size)).astype(np.float32), (0, 0), float(rng.uniform(0.3, 2)))
-    background += (rng.uniform(0, 40) * texture)[..., None]
-    return np.clip(background, 0, 255).astype(np.uint8)
+def input_jitter(augmentation: Augmentation) -> SequentialProcessor:
+    """The input's photometric jitter: saturation, hue (when ``hue > 0``), blur (sigma 0.4-1.2 px) with
+    ``blur_probability``, then contrast, brightness and noise in float."""
+    a = augmentation
+    steps = [RandomSaturation(*a.saturation)] + ([RandomHue(a.hue)] if a.hue > 0 else [])
+    steps += [RandomGaussianBlur((0,), a.blur_probability, sigma=(0.4, 1.2)),
+              RandomContrastBrightnessNoise(a.contrast, a.brightness, a.noise)]
+    return SequentialProcessor(steps, name="input jitter")
 
 
 class ViewSampler:
@@ -142,22 +118,9 @@ class ViewSampler:
         self.pairs, self.pair_fraction = pairs, (pair_fraction if pairs is not None else 0.0)
         self.rgb, self.alpha, self.K = rgb, alpha, np.asarray(K, dtype=np.float64)
         self.crop_size, self.padding, self.augmentation, self.seed = int(crop_size), float(padding), augmentation, seed
-        bank_rng = np.random.default_rng([seed, 7919])
-        self._backgrounds = [procedural_background(2 * self.crop_size, bank_rng) for _ in range(background_bank)] \
-            if augmentation.backgrounds else []
-
-    def _background(self, rng: np.random.Generator) -> np.ndarray:
-        size = self.crop_size
-        if not self._backgrounds:
-            return np.zeros((size, size, 3), np.uint8)
-        bank = self._backgrounds[int(rng.integers(len(self._backgrounds)))]
-        x, y = rng.integers(0, bank.shape[0] - size + 1, 2)
-        patch = bank[y:y + size, x:x + size]
-        if rng.random() < 0.5:
-            patch = patch[:, ::-1]
-        if rng.random() < 0.5:
-            patch = patch.transpose(1, 0, 2)
-        return patch
+        self.backgrounds = BackgroundBank(self.crop_size, background_bank if augmentation.backgrounds else 0,
+                                          np.random.default_rng([seed, 7919]), style="clutter")
+        self.jitter = input_jitter(augmentation)
 
     def _relight(self, rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """float32 copy of the object crop with random channel gains and a linear brightness ramp."""
@@ -174,41 +137,13 @@ class ViewSampler:
         return values
 
     def _occlude(self, crop: np.ndarray, rng: np.random.Generator) -> None:
-        """Draws 1..``max_occluders`` flat-coloured random polygons over the object's outskirts (in place).
-
-        Measured on the demo (3,000 steps): larger, more central, textured occluders (up to 0.8 of the
-        object, 3 of them) raised the ADD AUC (0.83 -> 0.84) but also the median rotation error
-        (4.9 -> 6.5 deg); ADD(-S) recall at 0.1 d fell from 71 % to 64 % (validation set: 59 % -> 57 %).
-        """
         a = self.augmentation
-        if rng.random() >= a.occlusion_probability:
-            return
-        size = crop.shape[0]
-        object_side = size / self.padding
-        for _ in range(int(rng.integers(1, a.max_occluders + 1))):
-            radius = 0.5 * rng.uniform(*a.occluder_size) * object_side
-            angle = rng.uniform(0, 2 * np.pi)
-            centre = size / 2 + rng.uniform(0.25, 0.6) * object_side * np.array([np.cos(angle), np.sin(angle)])
-            count = int(rng.integers(3, 7))
-            angles = np.sort(rng.uniform(0, 2 * np.pi, count))
-            radii = radius * rng.uniform(0.5, 1.2, count)
-            polygon = centre + np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=1)
-            cv2.fillPoly(crop, [np.round(polygon).astype(np.int32)], rng.uniform(0, 255, 3).tolist())
+        draw_polygon_occluders(crop, rng, a.occlusion_probability, a.max_occluders, a.occluder_size,
+                               crop.shape[0] / self.padding)
 
     def _jitter(self, crop: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        a = self.augmentation
-        crop = image_backend.adjust_saturation(crop, rng.uniform(*a.saturation))
-        if a.hue > 0:
-            crop = image_backend.adjust_hue(crop, rng.uniform(-a.hue, a.hue))
-        if rng.random() < a.blur_probability:
-            crop = cv2.GaussianBlur(crop, (0, 0), float(rng.uniform(0.4, 1.2)))
-        values = crop.astype(np.float32)
-        mean = values.mean(axis=(0, 1), keepdims=True)
-        values = (values - mean) * np.float32(rng.uniform(*a.contrast)) + mean
-        values += np.float32(rng.uniform(-a.brightness, a.brightness))
-        if a.noise > 0:
-            values += rng.standard_normal(values.shape, dtype=np.float32) * np.float32(rng.uniform(0, a.noise))
-        return np.clip(values, 0, 255).astype(np.uint8)
+        share_generator(self.jitter, rng)
+        return self.jitter(crop)
 
     def sample(self, rng: np.random.Generator, view: int | None = None,
                angle: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -232,7 +167,7 @@ class ViewSampler:
         rgba = crop_object(np.dstack([rgb, alpha]), shifted, self.crop_size, self.padding)
         weight = rgba[..., 3:].astype(np.float32) / 255.0
         lit = self._relight(rgba[..., :3], rng)
-        augmented = np.clip(weight * lit + (1 - weight) * self._background(rng), 0, 255).astype(np.uint8)
+        augmented = np.clip(weight * lit + (1 - weight) * self.backgrounds.patch(rng), 0, 255).astype(np.uint8)
         self._occlude(augmented, rng)
         return self._jitter(augmented, rng), target
 

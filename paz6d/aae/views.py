@@ -3,14 +3,13 @@
 Every view renders the object at ``T = (R, [0, 0, distance])`` in a square ``render_size`` image whose
 focal length makes the object's bounding sphere (about the model origin) project to a circle of radius
 ``render_size / 3``, so an image rotation about the principal point (an in-plane rotation of the
-camera, :func:`rotate_view`) never cuts the object. Rendering runs in ``spawn`` worker processes that
-never import TensorFlow (Mesa llvmpipe and TensorFlow's LLVM cannot share a process unguarded).
+camera, :func:`rotate_view`) never cuts the object. Rendering runs in the ``spawn`` worker processes of
+:mod:`paz6d.synthesis.workers`, which never import TensorFlow (Mesa llvmpipe and TensorFlow's LLVM cannot
+share a process unguarded).
 """
 
 from __future__ import annotations
 
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +17,7 @@ import cv2
 import numpy as np
 
 from paz6d.backend.checks import as_array
+from paz6d.synthesis.workers import progress_bar, run_in_workers
 
 #: The bounding sphere projects to a circle of radius render_size / SPHERE_FRACTION.
 SPHERE_FRACTION = 3.0
@@ -93,25 +93,28 @@ def rotate_view(rgb: np.ndarray, alpha: np.ndarray, angle: float, K) -> tuple[np
 
 
 # ------------------------------------------------------------------------------------ rendering
-_WORKER: dict = {}
+class _ObjectRenderer:
+    """Render-worker state: the mesh and one square renderer (never imports TensorFlow)."""
+
+    def __init__(self, mesh_path: str, mesh_scale: float, size: int, platform: str | None):
+        from paz6d.backend.mesh import load_mesh
+        from renderers import Renderer
+
+        self.mesh = load_mesh(mesh_path, mesh_scale)
+        self.renderer = Renderer(size, size, platform=platform)
+
+    def close(self) -> None:
+        self.renderer.close()
 
 
-def _start_worker(mesh_path: str, mesh_scale: float, render_size: int, platform: str | None) -> None:
-    """Process initializer: loads the mesh and opens one renderer (never imports TensorFlow)."""
-    from paz6d.backend.mesh import load_mesh
-    from renderers import Renderer
-
-    _WORKER["mesh"] = load_mesh(mesh_path, mesh_scale)
-    _WORKER["renderer"] = Renderer(render_size, render_size, platform=platform)
-
-
-def _render_chunk(Ks: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    renderer, mesh = _WORKER["renderer"], _WORKER["mesh"]
-    size = renderer.width
+def _render_chunk(state: _ObjectRenderer, task: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Worker task: renders the object at each ``(K, pose)`` of ``task``."""
+    Ks, poses = task
+    size = state.renderer.width
     rgb = np.empty((len(poses), size, size, 3), np.uint8)
     alpha = np.empty((len(poses), size, size), np.uint8)
     for index, (K, T) in enumerate(zip(Ks, poses)):
-        output = renderer.render(K, [(mesh, T)], masks=False)
+        output = state.renderer.render(K, [(state.mesh, T)], masks=False)
         rgb[index], alpha[index] = output.rgb, output.alpha
     return rgb, alpha
 
@@ -127,43 +130,26 @@ def render_poses(mesh_path: str | Path, mesh_scale: float, Ks, poses, size: int,
         Ks: ``(N, 3, 3)`` intrinsics of ``size × size`` images.
         poses: ``(N, 4, 4)`` ``T_model2cam`` (metres).
         size: image side in pixels.
-        workers: rendering processes (``spawn``); 0 renders in this process, after loading TensorFlow
-            through the RTLD_LOCAL guard so that the two can share it.
+        workers: rendering processes (:func:`paz6d.synthesis.workers.run_in_workers`); 0 renders in
+            this process, after loading TensorFlow through the RTLD_LOCAL guard so that the two can share it.
         platform: ``"egl"``, ``"osmesa"`` or None (auto).
         chunk: renderings per task.
 
     Returns:
         ``rgb (N, size, size, 3)`` uint8 on black and ``alpha (N, size, size)`` uint8 coverage (255 = object).
     """
-    from tqdm.auto import tqdm
-
     poses = as_array(poses, "poses", (4, 4)).reshape(-1, 4, 4)
     Ks = np.broadcast_to(as_array(Ks, "Ks", (3, 3)), (len(poses), 3, 3))
     if int(workers) < 0:
         raise ValueError(f"workers: expected 0 (this process) or more rendering processes, got {workers}")
-    mesh_path = str(Path(mesh_path).resolve())
     if int(workers) == 0:
         from paz6d.backend.tensorflow_guard import import_tensorflow
 
         import_tensorflow()
-        _start_worker(mesh_path, float(mesh_scale), size, platform)
-        try:
-            return _render_chunk(Ks, poses)
-        finally:
-            _WORKER.pop("renderer").close()
-            _WORKER.clear()
-    starts = range(0, len(poses), chunk)
-    results: list = [None] * len(starts)
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(int(workers), len(starts)), mp_context=context,
-                             initializer=_start_worker, initargs=(mesh_path, float(mesh_scale), size, platform)) as pool:
-        futures = {pool.submit(_render_chunk, Ks[start:start + chunk], poses[start:start + chunk]): index
-                   for index, start in enumerate(starts)}
-        with tqdm(total=len(poses), desc=description, unit="view", disable=not progress, dynamic_ncols=True) as bar:
-            for future in as_completed(futures):
-                index = futures[future]
-                results[index] = future.result()
-                bar.update(len(results[index][0]))
+    tasks = [(Ks[start:start + chunk], poses[start:start + chunk]) for start in range(0, len(poses), chunk)]
+    with progress_bar(len(poses), description, "view", progress) as bar:
+        results = run_in_workers(_ObjectRenderer, (str(Path(mesh_path).resolve()), float(mesh_scale), size, platform),
+                                 _render_chunk, tasks, int(workers), bar, task_size=lambda task: len(task[1]))
     return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
 
 

@@ -417,8 +417,8 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
     from paz6d.keypointnet.keypoints import DECODERS, decode_keypoints, keypoint_spread
-    from paz6d.keypointnet.views import (ViewSampling, hull_points, render_test_images, render_views,
-                                               training_batch)
+    from paz6d.keypointnet.views import ViewSampling, render_test_images, render_views, training_batch
+    from paz6d.synthesis.sampling import hull_points
 
     settings = job.settings()
     settings["precision"] = resolve_precision(settings.get("precision", "float32"))

@@ -8,7 +8,7 @@ crops around the object's silhouette box (``margin`` × its longer side) with th
 resolution in the camera image, then resampled like a crop of a whole image; test views are whole
 camera images over random backgrounds with their ground-truth boxes.
 
-Rendering runs in ``multiprocessing`` *spawn* worker processes that never import TensorFlow
+Rendering runs in the *spawn* worker processes of :mod:`paz6d.synthesis.workers`, which never import TensorFlow
 (Mesa llvmpipe and TensorFlow's LLVM must not share a process unguarded); ``workers=0`` renders in
 the calling process (only safe if TensorFlow, if present, was imported through
 ``paz6d.backend.tensorflow_guard``). The same seed gives the same views for any number of workers.
@@ -22,19 +22,24 @@ This module imports neither TensorFlow nor pyrender at import time.
 
 from __future__ import annotations
 
-import multiprocessing
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from paz6d.abstract.processor import SequentialProcessor
 from paz6d.backend import image as image_backend
-from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera
 from paz6d.backend.files import save_npz_atomically
 from paz6d.backend.mesh import diameter, load_mesh
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_box, square_window
+from paz6d.synthesis.augment import (RandomBrightness, RandomContrast, RandomGaussianBlur, RandomHue, RandomImageNoise,
+                                     RandomSaturation, share_generator)
+from paz6d.synthesis.backgrounds import procedural_background
+from paz6d.synthesis.lighting import random_lighting
+from paz6d.synthesis.sampling import hull_points, random_pose_in_view
+from paz6d.synthesis.workers import chunks, progress_bar, run_in_workers
 
 #: LINEMOD-like 640×480 camera used when no camera is given.
 DEFAULT_CAMERA = Camera(np.array([[572.4114, 0.0, 325.2611], [0.0, 573.5704, 242.0490], [0.0, 0.0, 1.0]]), 640, 480)
@@ -145,111 +150,58 @@ class TestImages:
     masks: np.ndarray
 
 
-# ------------------------------------------------------------------------------- pose sampling
-
-def hull_points(vertices: np.ndarray) -> np.ndarray:
-    """Convex hull vertices (the projected bounding box of a point set is that of its hull)."""
-    from scipy.spatial import ConvexHull, QhullError
-
-    try:
-        return vertices[ConvexHull(vertices).vertices]
-    except QhullError:
-        return vertices
-
-
-def sample_pose(rng: np.random.Generator, vertices: np.ndarray, object_diameter: float,
-                sampling: ViewSampling) -> np.ndarray:
-    """``T_model2cam (4, 4)``: random rotation; the bounding-box centre at a random pixel and depth."""
-    rotation = quaternion.to_rotation_matrix(quaternion.random(seed=rng))
-    depth = rng.uniform(*sampling.distance) * object_diameter
-    camera = sampling.camera
-    u = rng.uniform(sampling.border, 1 - sampling.border) * camera.width - 0.5
-    v = rng.uniform(sampling.border, 1 - sampling.border) * camera.height - 0.5
-    centre_cam = camera.unproject(np.array([[u, v]]), np.array([depth]))[0]
-    centre_model = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
-    T = np.eye(4)
-    T[:3, :3] = rotation
-    T[:3, 3] = centre_cam - rotation @ centre_model
-    return T
-
-
-def random_lighting(rng: np.random.Generator):
-    """Ambient + a directional key light from a random direction towards the scene + a camera fill."""
-    from renderers import Light, Lighting
-
-    direction = rng.normal(size=3)
-    direction[2] = abs(direction[2]) + 0.5  # travelling away from the camera, into the scene
-    ambient = float(rng.uniform(0.25, 0.5))
-    return Lighting(ambient=(ambient, ambient, ambient),
-                    lights=(Light("directional", intensity=float(rng.uniform(1.5, 3.5)), direction=tuple(direction)),
-                            Light("point", intensity=float(rng.uniform(0.3, 1.5)), position=(0.0, 0.0, 0.0))))
-
-
-def random_background(height: int, width: int, rng: np.random.Generator) -> np.ndarray:
-    """``(height, width, 3)`` uint8 clutter: smooth colour noise plus random rectangles and ellipses."""
-    cells = int(rng.integers(2, 9))
-    coarse = rng.integers(0, 256, (cells, cells, 3)).astype(np.uint8)
-    background = cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC)
-    scale = max(height, width)
-    for _ in range(int(rng.integers(3, 12))):
-        colour = tuple(int(value) for value in rng.integers(0, 256, 3))
-        centre = (int(rng.integers(0, width)), int(rng.integers(0, height)))
-        extent = (int(rng.integers(2, scale // 4 + 3)), int(rng.integers(2, scale // 4 + 3)))
-        if rng.random() < 0.5:
-            cv2.ellipse(background, centre, extent, float(rng.uniform(0, 180)), 0, 360, colour, -1)
-        else:
-            cv2.rectangle(background, (centre[0] - extent[0], centre[1] - extent[1]),
-                          (centre[0] + extent[0], centre[1] + extent[1]), colour, -1)
-    noise = rng.normal(0.0, rng.uniform(0, 12), background.shape)
-    return np.clip(background + noise, 0, 255).astype(np.uint8)
-
-
 # ------------------------------------------------------------------------------- rendering
-
-_WORKER: dict = {}
-
 
 #: Resolutions at which crop windows are rendered before being resampled to the input size
 #: (the nearest to the window's side in the camera image).
 RENDER_SIZES = (64, 96, 128, 192, 256, 384)
 
 
-def _init_worker(mesh_path: str, mesh_scale: float) -> None:
-    """Worker initializer: loads the mesh (renderers are opened on first use; no TensorFlow here)."""
-    mesh = load_mesh(mesh_path, mesh_scale)
-    _WORKER.update(mesh=mesh, renderers={}, hull=hull_points(np.asarray(mesh.vertices)),
-                   diameter=diameter(np.asarray(mesh.vertices)))
+class _ViewRenderer:
+    """Render-worker state: the mesh, its hull and diameter, and one renderer per image size
+    (opened on first use; no TensorFlow here)."""
+
+    def __init__(self, mesh_path: str, mesh_scale: float):
+        self.mesh = load_mesh(mesh_path, mesh_scale)
+        vertices = np.asarray(self.mesh.vertices)
+        self.hull, self.diameter = hull_points(vertices), diameter(vertices)
+        self.renderers: dict = {}
+
+    def renderer(self, width: int, height: int):
+        from renderers import Renderer
+
+        if (width, height) not in self.renderers:
+            self.renderers[(width, height)] = Renderer(width, height)
+        return self.renderers[(width, height)]
+
+    def close(self) -> None:
+        for renderer in self.renderers.values():
+            renderer.close()
+        self.renderers = {}
 
 
-def _renderer(width: int, height: int):
-    from renderers import Renderer
-
-    renderers = _WORKER["renderers"]
-    if (width, height) not in renderers:
-        renderers[(width, height)] = Renderer(width, height)
-    return renderers[(width, height)]
+def sample_pose(rng: np.random.Generator, vertices: np.ndarray, object_diameter: float,
+                sampling: ViewSampling) -> np.ndarray:
+    """``T_model2cam (4, 4)`` of a view: a random rotation; the bounding-box centre at a random pixel
+    and depth (:func:`paz6d.synthesis.sampling.random_pose_in_view`)."""
+    return random_pose_in_view(rng, vertices, sampling.camera, sampling.border, sampling.distance, object_diameter)
 
 
-def _close_renderers() -> None:
-    for renderer in _WORKER.pop("renderers", {}).values():
-        renderer.close()
-
-
-def _render_crops(indices: list[int], seed: int, sampling: ViewSampling) -> dict[str, np.ndarray]:
+def _render_crops(state: _ViewRenderer, indices: list[int], seed: int, sampling: ViewSampling) -> dict[str, np.ndarray]:
     """Renders each view's crop window at about its resolution in the camera image, then resamples it
     to ``input_size`` with :func:`crop_square`, exactly as test crops are cut from whole images."""
-    mesh, hull, object_diameter = (_WORKER[key] for key in ("mesh", "hull", "diameter"))
     size = sampling.input_size
     out = {"rgb": np.zeros((len(indices), size, size, 3), np.uint8), "alpha": np.zeros((len(indices), size, size), np.uint8),
            "masks": np.zeros((len(indices), size, size), bool), "K": np.zeros((len(indices), 3, 3)),
            "T_model2cam": np.zeros((len(indices), 4, 4))}
     for row, index in enumerate(indices):
         rng = np.random.default_rng([seed, index])
-        T = sample_pose(rng, hull, object_diameter, sampling)
-        window = square_window(projected_box(hull, T, sampling.camera.K), sampling.margin)
+        T = sample_pose(rng, state.hull, state.diameter, sampling)
+        window = square_window(projected_box(state.hull, T, sampling.camera.K), sampling.margin)
         resolution = min(RENDER_SIZES, key=lambda candidate: abs(np.log(candidate / window[2])))
-        rendered = _renderer(resolution, resolution).render(crop_intrinsics(sampling.camera.K, window, resolution),
-                                                            [(mesh, T)], lighting=random_lighting(rng))
+        rendered = state.renderer(resolution, resolution).render(
+            crop_intrinsics(sampling.camera.K, window, resolution), [(state.mesh, T)],
+            lighting=random_lighting(rng, "key-fill"))
         whole = (0, 0, resolution)
         out["rgb"][row] = crop_square(rendered.rgb, whole, size)
         out["alpha"][row] = crop_square(rendered.alpha, whole, size)
@@ -258,20 +210,19 @@ def _render_crops(indices: list[int], seed: int, sampling: ViewSampling) -> dict
     return out
 
 
-def _render_full(indices: list[int], seed: int, sampling: ViewSampling) -> dict[str, np.ndarray]:
-    mesh, hull, object_diameter = (_WORKER[key] for key in ("mesh", "hull", "diameter"))
+def _render_full(state: _ViewRenderer, indices: list[int], seed: int, sampling: ViewSampling) -> dict[str, np.ndarray]:
     camera = sampling.camera
-    renderer = _renderer(camera.width, camera.height)
+    renderer = state.renderer(camera.width, camera.height)
     images, boxes, poses, masks = [], [], [], []
     for index in indices:
         rng = np.random.default_rng([seed, index])
-        T = sample_pose(rng, hull, object_diameter, sampling)
-        rendered = renderer.render(camera.K, [(mesh, T)], lighting=random_lighting(rng))
+        T = sample_pose(rng, state.hull, state.diameter, sampling)
+        rendered = renderer.render(camera.K, [(state.mesh, T)], lighting=random_lighting(rng, "key-fill"))
         mask = rendered.masks[0]
         if not mask.any():
             raise ValueError(f"view {index}: the object is not visible (empty mask)")
         rows, columns = np.nonzero(mask)
-        background = random_background(camera.height, camera.width, rng)
+        background = procedural_background(rng, camera.width, camera.height, "shapes")
         images.append(image_backend.alpha_blend(rendered.rgb, rendered.alpha, background))
         boxes.append([columns.min(), rows.min(), columns.max() + 1, rows.max() + 1])
         poses.append(T)
@@ -280,39 +231,22 @@ def _render_full(indices: list[int], seed: int, sampling: ViewSampling) -> dict[
             "masks": np.stack(masks)}
 
 
-def _run_job(job: tuple) -> dict[str, np.ndarray]:
+def _run_job(state: _ViewRenderer, job: tuple) -> dict[str, np.ndarray]:
     kind, indices, seed, sampling = job
-    return (_render_crops if kind == "crops" else _render_full)(indices, seed, sampling)
+    return (_render_crops if kind == "crops" else _render_full)(state, indices, seed, sampling)
 
 
 def _render(kind: str, mesh_path: Path, mesh_scale: float, count: int, seed: int, sampling: ViewSampling,
             workers: int, chunk: int, progress: bool, description: str) -> dict[str, np.ndarray]:
-    from tqdm.auto import tqdm
-
     if count <= 0:
         raise ValueError(f"count: expected a positive number of views, got {count}")
     mesh_path = Path(mesh_path)
     if not mesh_path.is_file():
         raise ValueError(f"{mesh_path}: mesh file not found")
-    jobs = [(kind, list(range(start, min(start + chunk, count))), seed, sampling) for start in range(0, count, chunk)]
-    parts: list[dict[str, np.ndarray]] = []
-    bar = tqdm(total=count, desc=description, disable=not progress, dynamic_ncols=True)
-    if workers <= 0:
-        _init_worker(str(mesh_path), mesh_scale)
-        try:
-            for job in jobs:
-                parts.append(_run_job(job))
-                bar.update(len(job[1]))
-        finally:
-            _close_renderers()
-    else:
-        context = multiprocessing.get_context("spawn")
-        with context.Pool(min(workers, len(jobs)), initializer=_init_worker,
-                          initargs=(str(mesh_path), mesh_scale)) as pool:
-            for job, part in zip(jobs, pool.imap(_run_job, jobs)):
-                parts.append(part)
-                bar.update(len(job[1]))
-    bar.close()
+    jobs = [(kind, indices, seed, sampling) for indices in chunks(list(range(count)), chunk)]
+    with progress_bar(count, description, "view", progress) as bar:
+        parts = run_in_workers(_ViewRenderer, (str(mesh_path), mesh_scale), _run_job, jobs, max(0, int(workers)),
+                               bar, task_size=lambda job: len(job[1]))
     return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
 
 
@@ -367,14 +301,11 @@ def _jitter_crop(views: ViewSet, index: int, rng: np.random.Generator, augmentat
     return rgb, alpha, mask, A @ views.K[index]
 
 
-def _colour_jitter(picture: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    picture = image_backend.random_brightness(picture, rng, max_delta=30.0)
-    picture = image_backend.random_contrast(picture, rng, 0.7, 1.3)
-    picture = image_backend.random_saturation(picture, rng, 0.7, 1.3)
-    picture = image_backend.random_hue(picture, rng, 8.0)
-    if rng.random() < 0.3:
-        picture = image_backend.random_gaussian_blur(picture, rng, (3,))
-    return image_backend.random_image_noise(picture, rng, 6.0)
+#: Batch-time colour jitter (brightness, contrast, saturation, hue, blur with probability 0.3, noise);
+#: :func:`augmented_view` makes it draw from the sample's generator.
+COLOUR_JITTER = SequentialProcessor([
+    RandomBrightness(max_delta=30.0), RandomContrast(0.7, 1.3), RandomSaturation(0.7, 1.3), RandomHue(8.0),
+    RandomGaussianBlur((3,), probability=0.3), RandomImageNoise(6.0)], name="colour jitter")
 
 
 def augmented_view(views: ViewSet, index: int, rng: np.random.Generator,
@@ -382,10 +313,11 @@ def augmented_view(views: ViewSet, index: int, rng: np.random.Generator,
     """One augmented crop: ``image (S, S, 3) uint8``, ``mask (S, S) bool`` and its ``K (3, 3)``."""
     rgb, alpha, mask, K = _jitter_crop(views, index, rng, augmentation)
     size = rgb.shape[0]
-    background = random_background(size, size, rng) if augmentation.background else np.zeros_like(rgb)
+    background = procedural_background(rng, size, size, "shapes") if augmentation.background else np.zeros_like(rgb)
     picture = image_backend.alpha_blend(rgb, alpha, background)
     if augmentation.colour:
-        picture = _colour_jitter(picture, rng)
+        share_generator(COLOUR_JITTER, rng)
+        picture = COLOUR_JITTER(picture)
     return picture, mask, K
 
 
