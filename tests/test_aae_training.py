@@ -261,3 +261,37 @@ def test_estimate_command_writes_bop_results_that_evaluate_scores(toy_run, tmp_p
                  "--out", str(tmp_path / "none.csv")]) == 2
     assert "no instance of object 7" in capsys.readouterr().err
     assert not (tmp_path / "none.csv").exists()
+
+
+def test_pipeline_steps_can_be_replaced_and_the_camera_given_per_call(toy_run):
+    from paz6d.abstract import KeyedStep
+    from paz6d.aae.pipeline import ImplicitPose6D, PosesFromCodebook
+
+    root, _, _ = toy_run
+    views = np.load(root / "run" / "views.npz")
+    camera = Camera(views["K"], TOY.render_size, TOY.render_size)
+    image, box = views["rgb"][3], (8.0, 9.0, 30.0, 31.0)
+    estimator = ImplicitPose6D(root / "run", camera)
+    assert estimator.names == ["crop", "encode", "lookup", "pose_from_codebook", "refine_with_depth"]
+    reference = estimator(image, box)
+    # the camera given per call wins over the constructor's; a K takes the image's size
+    assert ImplicitPose6D(root / "run")(image, box, camera=views["K"]) == reference
+    wider = Camera(views["K"] * [[0.8], [0.8], [1]], TOY.render_size, TOY.render_size)
+    moved = estimator(image, box, camera=wider)
+    assert moved.translation[2] < reference.translation[2]  # a shorter focal length: the same box is nearer
+    assert estimator.estimate_batch([image, image], [box, box], [None, wider]) == [reference, moved]
+    # without the depth-free refinement (a replaced pose step) the translation comes from the box alone
+    old = estimator.replace("pose_from_codebook", KeyedStep(
+        PosesFromCodebook(estimator.codebook, estimator.hull_points, refine=False),
+        ("indices", "similarities", "rotations", "boxes", "cameras"), "candidates", "pose_from_codebook",
+        per_sample=True))
+    assert old.processor.refine
+    unrefined = estimator(image, box)
+    assert not np.allclose(unrefined.translation, reference.translation, atol=1e-6)
+    # a step removed, then inserted back by name
+    lookup = estimator.remove("lookup")
+    with pytest.raises(ValueError, match=r"step 'pose_from_codebook': needs \['indices', 'similarities', "
+                                         r"'rotations'\]"):
+        estimator(image, box)
+    estimator.insert("pose_from_codebook", lookup)
+    assert estimator(image, box) == unrefined

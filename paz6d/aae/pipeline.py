@@ -14,22 +14,27 @@ Steps (Sundermeyer et al., 2018):
    of the object's convex hull under ``(R, t)`` matches the given box (alternating with step 4);
 6. optional ICP refinement (open3d) against a depth image.
 
+:class:`ImplicitPose6D` runs them as named steps (``crop``, ``encode``, ``lookup``,
+``pose_from_codebook``, ``refine_with_depth``) that can be read, replaced, inserted or removed.
 Boxes follow ``docs/conventions.md`` (pixel ``i`` covers ``[i, i+1)``; ``K`` puts pixel centres on integers).
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from paz6d.abstract import Box2D, Pose6D, Processor
+from paz6d.aae import run_dir as run_files
+from paz6d.aae.codebook import Codebook
+from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
 from paz6d.backend import quaternion
-from paz6d.backend.camera import Camera
+from paz6d.backend.camera import Camera, as_camera, depth_to_points, project_points, unproject
 from paz6d.backend.checks import as_array, as_camera_matrix
 from paz6d.backend.image import as_image
+from paz6d.backend.transform import invert
+from paz6d.processors.crops import SquareCrop
 
 
 # ------------------------------------------------------------------------------------------ geometry
@@ -53,9 +58,7 @@ def ray_rotation(direction) -> np.ndarray:
 def _box_in_normalized_coordinates(box: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Centre ``(2,)`` and size ``(2,)`` of a box (box convention) in normalized image coordinates."""
     corners = np.array([[box[0], box[1]], [box[2], box[3]]]) - 0.5  # to pixel-centre coordinates
-    y = (corners[:, 1] - K[1, 2]) / K[1, 1]
-    x = (corners[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
-    normalized = np.stack([x, y], axis=1)
+    normalized = unproject(corners, np.ones(2), K)[:, :2]
     return normalized.mean(axis=0), normalized[1] - normalized[0]
 
 
@@ -79,10 +82,8 @@ def translation_from_box(box, K, render_box, render_K, render_distance: float) -
 
 def silhouette_box(points, R, t, K) -> np.ndarray:
     """Box ``(4,)`` (box convention) of convex-hull ``points`` ``(M, 3)`` posed by ``(R, t)`` and projected by ``K``."""
-    camera = points @ R.T + t
-    u = K[0, 0] * camera[:, 0] / camera[:, 2] + K[0, 1] * camera[:, 1] / camera[:, 2] + K[0, 2]
-    v = K[1, 1] * camera[:, 1] / camera[:, 2] + K[1, 2]
-    return np.array([u.min(), v.min(), u.max(), v.max()]) + 0.5
+    pixels = project_points(np.asarray(points, dtype=np.float64) @ np.asarray(R).T + t, K)
+    return np.concatenate([pixels.min(axis=0), pixels.max(axis=0)]) + 0.5
 
 
 def fit_translation_to_box(points, R, box, K, t_initial, iterations: int = 20, tolerance: float = 1e-10) -> np.ndarray:
@@ -99,8 +100,7 @@ def fit_translation_to_box(points, R, box, K, t_initial, iterations: int = 20, t
         if np.any(camera[:, 2] <= 1e-9):
             break  # the object would straddle the camera plane; keep the last valid estimate
         inverse_z = 1.0 / camera[:, 2]
-        u = (K[0, 0] * camera[:, 0] + K[0, 1] * camera[:, 1]) * inverse_z + K[0, 2]
-        v = K[1, 1] * camera[:, 1] * inverse_z + K[1, 2]
+        u, v = project_points(camera, K).T
         extremes = [np.argmin(u), np.argmin(v), np.argmax(u), np.argmax(v)]
         residual = np.array([u[extremes[0]], v[extremes[1]], u[extremes[2]], v[extremes[3]]]) + 0.5 - box
         jacobian = np.empty((4, 3))
@@ -147,7 +147,7 @@ def pose_from_codebook_view(R_codebook, box, K, render_box, render_K, render_dis
     return R, t
 
 
-# ------------------------------------------------------------------------------------------ pipeline
+# ------------------------------------------------------------------------------------------ steps
 def _as_box(box, image_shape: tuple[int, ...], name: str = "box") -> np.ndarray:
     if isinstance(box, Box2D):
         coordinates = box.to_array()
@@ -164,174 +164,109 @@ def _as_box(box, image_shape: tuple[int, ...], name: str = "box") -> np.ndarray:
     return coordinates
 
 
-class ImplicitPose6D(Processor):
-    """Estimates an object's 6D pose from an RGB image and its 2D box with a trained AAE run directory.
+class EncodeCrops(Processor):
+    """uint8 crops ``(B, S, S, 3)`` (or a list of ``(S, S, 3)``) -> latent codes ``(B, L)`` by the AAE encoder.
 
     Args:
-        run_dir: folder written by ``paz6d train aae`` (config.json, model.keras, codebook.npz, object.npz).
-        camera: :class:`~paz6d.backend.camera.Camera` or a ``(3, 3)`` intrinsics matrix ``K``.
-        refine: depth-free translation refinement (box fitting), see module docstring.
-        neighbours: codebook matches averaged into the rotation (within ``neighbour_radius_deg`` of the best,
-            weighted by similarity, :meth:`~paz6d.aae.codebook.Codebook.neighbour_average`), which refines
-            it below the codebook's spacing; 1 uses the best match alone.
-        neighbour_radius_deg: only matches this close to the best one are averaged.
-        top_k: codebook candidates kept; with a depth image the candidate ICP fits best wins.
-        class_name: written into the returned poses.
-
-    Example:
-        >>> estimator = ImplicitPose6D("demo_output/model", K)        # doctest: +SKIP
-        >>> pose = estimator(image, (310, 200, 420, 290))             # doctest: +SKIP
-        >>> pose.translation                                          # metres  # doctest: +SKIP
+        encode: compiled encoder (:func:`paz6d.aae.model.encode_function`), float32 ``[0, 1]`` input.
+        crop_size: the encoder's input side ``S``.
     """
 
-    def __init__(self, run_dir: str | Path, camera, refine: bool = True, neighbours: int = 10,
-                 neighbour_radius_deg: float = 15.0, top_k: int = 1, class_name: str | None = None):
-        super().__init__()
-        from paz6d.aae.model import encode_function, encoder_of, load_model
-        from paz6d.aae.codebook import Codebook
+    def __init__(self, encode, crop_size: int, name: str | None = None):
+        super().__init__(name)
+        self.encode, self.crop_size = encode, int(crop_size)
 
-        run_dir = Path(run_dir)
-        if not run_dir.is_dir():
-            raise ValueError(f"run_dir: {run_dir} is not a directory")
-        config_path = run_dir / "config.json"
-        try:
-            config = json.loads(config_path.read_text())["config"]
-            self.crop_size, self.padding = int(config["crop_size"]), float(config["padding"])
-        except FileNotFoundError as error:
-            raise ValueError(f"{config_path}: missing; is {run_dir} an AAE run directory?") from error
-        except (json.JSONDecodeError, KeyError, TypeError) as error:
-            raise ValueError(f"{config_path}: unreadable AAE configuration ({error})") from error
-        if isinstance(camera, Camera):
-            self.camera: Camera | None = camera
-            self.K = camera.K
-        else:
-            self.camera, self.K = None, as_camera_matrix(camera)
-        if int(top_k) < 1 or int(neighbours) < 1:
-            raise ValueError(f"top_k/neighbours: expected at least 1, got {top_k}, {neighbours}")
-        self.refine, self.top_k, self.class_name = refine, int(top_k), class_name
-        self.neighbours, self.neighbour_radius_deg = int(neighbours), float(neighbour_radius_deg)
-        self.autoencoder = load_model(run_dir / "model.keras")
-        self.encoder = encoder_of(self.autoencoder)
-        self._encode = encode_function(self.encoder)
-        self.codebook = Codebook.load(run_dir / "codebook.npz")
-        if self.codebook.latent_size != self.encoder.output.shape[-1]:
-            raise ValueError(f"{run_dir / 'codebook.npz'}: latent size {self.codebook.latent_size} does not match "
-                             f"the model's {self.encoder.output.shape[-1]}")
-        object_path = run_dir / "object.npz"
-        if not object_path.is_file():
-            raise ValueError(f"{object_path}: missing object geometry")
-        with np.load(object_path) as data:
-            self.hull_points = data["hull_points"]
-            self.surface_points = data["surface_points"]
-            self.diameter = float(data["diameter"])
-
-    # -- pieces ---------------------------------------------------------------------------------
-    def _check_image(self, image, name: str = "image") -> np.ndarray:
-        image = as_image(image, name, channels=3)
-        if self.camera is not None and image.shape[:2] != (self.camera.height, self.camera.width):
-            raise ValueError(f"{name}: shape {image.shape[:2]} does not match the camera's "
-                             f"{self.camera.height}x{self.camera.width}")
-        return image
-
-    def crop(self, image, box) -> np.ndarray:
-        """The model input crop ``(S, S, 3)`` uint8 of ``box`` in ``image``."""
-        from paz6d.aae.model import crop_object
-
-        image = self._check_image(image)
-        return crop_object(image, _as_box(box, image.shape), self.crop_size, self.padding)
-
-    def encode(self, crops) -> np.ndarray:
-        """Latent codes ``(B, L)`` of uint8 crops ``(B, S, S, 3)``."""
+    def call(self, crops) -> np.ndarray:
         from paz6d.aae.model import to_model_input
 
-        inputs = to_model_input(crops)
+        inputs = to_model_input(np.stack(crops) if isinstance(crops, list) else crops)
         if inputs.shape[1:3] != (self.crop_size, self.crop_size):
             raise ValueError(f"crops: expected {self.crop_size}x{self.crop_size} crops, got {inputs.shape[1:3]}")
-        return self._encode(inputs)
+        return self.encode(inputs)
 
-    def reconstruct(self, crops) -> np.ndarray:
-        """The autoencoder's reconstructions ``(B, S, S, 3)`` uint8 of crops."""
-        from paz6d.aae.model import to_model_input
 
-        output = np.asarray(self.autoencoder(to_model_input(crops), training=False))
-        return np.clip(np.rint(output * 255), 0, 255).astype(np.uint8)
+class CodebookLookup(Processor):
+    """``(codes (B, L), top_k) -> (indices (B, k), similarities (B, k), rotations (B, 3, 3))``: the ``top_k``
+    nearest codebook entries (cosine similarity) and the refined best rotation per code.
 
-    def _pose(self, index: int, box: np.ndarray, similarity: float, R_codebook: np.ndarray | None = None) -> Pose6D:
-        """Pose from codebook entry ``index`` (its rotation replaced by ``R_codebook`` when given)."""
-        codebook = self.codebook
-        R_codebook = codebook.rotations[index] if R_codebook is None else R_codebook
-        R, t = pose_from_codebook_view(R_codebook, box, self.K, codebook.render_boxes[index], codebook.render_K,
-                                       codebook.render_distance, self.hull_points, self.refine)
-        return Pose6D.from_rotation_matrix(R, t, class_name=self.class_name, score=float(similarity))
+    Args:
+        codebook: the run's :class:`~paz6d.aae.codebook.Codebook`.
+        neighbours: matches averaged into the best rotation (within ``radius_deg`` of the best, weighted by
+            similarity, :meth:`~paz6d.aae.codebook.Codebook.neighbour_average`); 1 uses the best match alone.
+        radius_deg: only matches this close to the best one are averaged.
+    """
 
-    def _lookup(self, codes: np.ndarray, top_k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``indices (B, k)``, ``similarities (B, k)`` and the refined best rotations ``(B, 3, 3)``."""
+    def __init__(self, codebook: Codebook, neighbours: int = 10, radius_deg: float = 15.0, name: str | None = None):
+        super().__init__(name)
+        if int(neighbours) < 1:
+            raise ValueError(f"neighbours: expected at least 1, got {neighbours}")
+        self.codebook, self.neighbours, self.radius_deg = codebook, int(neighbours), float(radius_deg)
+
+    def call(self, codes: np.ndarray, top_k: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         k = min(max(top_k, self.neighbours), len(self.codebook))
         indices, similarities = self.codebook.nearest(codes, k)
         if self.neighbours > 1:
             best = self.codebook.neighbour_average(indices[:, :self.neighbours], similarities[:, :self.neighbours],
-                                                   self.neighbour_radius_deg)
+                                                   self.radius_deg)
         else:
             best = self.codebook.rotations[indices[:, 0]]
         return indices[:, :top_k], similarities[:, :top_k], best
 
-    # -- public API -----------------------------------------------------------------------------
-    def candidates(self, image, box, top_k: int | None = None) -> list[Pose6D]:
-        """The ``top_k`` codebook matches as poses, best first (``score`` = cosine similarity); the first
-        one carries the neighbour-averaged rotation."""
-        image = self._check_image(image)
-        box = _as_box(box, image.shape)
-        code = self.encode(self.crop(image, box)[None])
-        indices, similarities, best = self._lookup(code, top_k or self.top_k)
-        return [self._pose(int(i), box, float(s), best[0] if rank == 0 else None)
-                for rank, (i, s) in enumerate(zip(indices[0], similarities[0]))]
 
-    def call(self, image, box, depth=None) -> Pose6D:
-        """Pose of the object in ``box``: ``Box2D`` or ``(x_min, y_min, x_max, y_max)`` pixels.
+class PosesFromCodebook(Processor):
+    """``(indices (k,), similarities (k,), best_rotation (3, 3), box (4,), camera) -> [Pose6D]``: one pose per
+    matched codebook view (:func:`pose_from_codebook_view`), best first, ``score`` = cosine similarity; the
+    first carries ``best_rotation`` (the neighbour-averaged one).
 
-        Args:
-            image: ``(H, W, 3)`` uint8 RGB.
-            box: the object's 2D box.
-            depth: optional ``(H, W)`` float32 depth in metres (0 = none): refines with ICP (open3d).
-        """
-        candidates = self.candidates(image, box)
+    Args:
+        codebook: the run's codebook; hull_points: ``(M, 3)`` metres, for ``refine``.
+        refine: depth-free translation refinement (box fitting).
+        class_name: written into the poses.
+    """
+
+    def __init__(self, codebook: Codebook, hull_points, refine: bool = True, class_name: str | None = None,
+                 name: str | None = None):
+        super().__init__(name)
+        self.codebook, self.hull_points = codebook, hull_points
+        self.refine, self.class_name = refine, class_name
+
+    def pose(self, index: int, similarity: float, R_codebook: np.ndarray, box: np.ndarray, camera: Camera) -> Pose6D:
+        """Pose from codebook entry ``index`` with rotation ``R_codebook``."""
+        codebook = self.codebook
+        R, t = pose_from_codebook_view(R_codebook, box, camera.K, codebook.render_boxes[index], codebook.render_K,
+                                       codebook.render_distance, self.hull_points, self.refine)
+        return Pose6D.from_rotation_matrix(R, t, class_name=self.class_name, score=float(similarity))
+
+    def call(self, indices, similarities, best_rotation, box, camera: Camera) -> list[Pose6D]:
+        return [self.pose(int(index), float(similarity), best_rotation if rank == 0 else self.codebook.rotations[index],
+                          box, camera)
+                for rank, (index, similarity) in enumerate(zip(indices, similarities))]
+
+
+class RefineWithDepth(Processor):
+    """``(candidates [Pose6D], depth (H, W) or None, box (4,), camera) -> Pose6D``: without depth the first
+    candidate; with depth, ICP (open3d, point-to-point) of the depth points inside ``box`` onto the object's
+    surface points started from each candidate, the refined pose with the smallest inlier RMSE.
+
+    The scene points (a partial, visible surface) are registered to the full model surface, so every
+    scene point has a true counterpart; points farther than one diameter in depth from a candidate
+    (background, clutter in front) are ignored.
+
+    Args:
+        surface_points: ``(P, 3)`` metres; diameter: metres; class_name: written into refined poses.
+        max_iterations: ICP iterations per threshold.
+    """
+
+    def __init__(self, surface_points, diameter: float, class_name: str | None = None, max_iterations: int = 30,
+                 name: str | None = None):
+        super().__init__(name)
+        self.surface_points, self.diameter = np.asarray(surface_points, dtype=np.float64), float(diameter)
+        self.class_name, self.max_iterations = class_name, int(max_iterations)
+
+    def call(self, candidates: Sequence[Pose6D], depth, box, camera: Camera) -> Pose6D:
         if depth is None:
             return candidates[0]
-        return self.refine_with_depth(candidates, depth, _as_box(box, np.shape(image)))
-
-    def estimate_batch(self, images, boxes: Sequence) -> list[Pose6D]:
-        """Poses for many boxes in one encoder call and one codebook product.
-
-        Args:
-            images: one ``(H, W, 3)`` image (all boxes in it) or a sequence of images, one per box.
-            boxes: sequence of ``Box2D`` / 4-tuples.
-        """
-        if isinstance(images, np.ndarray) and images.ndim == 3:
-            images = [images] * len(boxes)
-        if len(images) != len(boxes):
-            raise ValueError(f"images/boxes: expected one image per box, got {len(images)} images, {len(boxes)} boxes")
-        if len(boxes) == 0:
-            return []
-        checked = [self._check_image(image, f"images[{i}]") for i, image in enumerate(images)]
-        boxes = [_as_box(box, image.shape, f"boxes[{i}]") for i, (box, image) in enumerate(zip(boxes, checked))]
-        from paz6d.aae.model import crop_object
-
-        crops = np.stack([crop_object(image, box, self.crop_size, self.padding) for image, box in zip(checked, boxes)])
-        indices, similarities, best = self._lookup(self.encode(crops), 1)
-        return [self._pose(int(i[0]), box, float(s[0]), R) for i, s, box, R in zip(indices, similarities, boxes, best)]
-
-    def refine_with_depth(self, candidates: Sequence[Pose6D], depth, box, max_iterations: int = 30) -> Pose6D:
-        """ICP (open3d, point-to-point) of the depth points inside ``box`` onto the object's surface points,
-        started from each candidate; returns the refined pose with the smallest inlier RMSE.
-
-        The scene points (a partial, visible surface) are registered to the full model surface, so every
-        scene point has a true counterpart; points farther than one diameter in depth from a candidate
-        (background, clutter in front) are ignored.
-        """
         import open3d as o3d
-
-        from paz6d.backend.camera import depth_to_points
-        from paz6d.backend.transform import invert
 
         depth = np.asarray(depth, dtype=np.float32)
         if depth.ndim != 2:
@@ -341,10 +276,10 @@ class ImplicitPose6D(Processor):
         x0, y0 = max(int(np.floor(box[0])), 0), max(int(np.floor(box[1])), 0)
         x1, y1 = min(int(np.ceil(box[2])), depth.shape[1]), min(int(np.ceil(box[3])), depth.shape[0])
         masked[y0:y1, x0:x1] = depth[y0:y1, x0:x1]
-        scene = depth_to_points(masked, self.K)
+        scene = depth_to_points(masked, camera.K)
         model = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.surface_points))
         estimation = o3d.pipelines.registration.TransformationEstimationPointToPoint()
-        criteria = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=max_iterations)
+        criteria = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=self.max_iterations)
         best, best_error = candidates[0], np.inf
         for candidate in candidates:
             T_model2cam = candidate.to_matrix()
@@ -361,3 +296,166 @@ class ImplicitPose6D(Processor):
                 best_error = result.inlier_rmse
                 best = Pose6D.from_matrix(invert(T_cam2model), class_name=self.class_name, score=candidate.score)
         return best
+
+
+# ------------------------------------------------------------------------------------------ pipeline
+class ImplicitPose6D(SequentialProcessor):
+    """Estimates an object's 6D pose from an RGB image and its 2D box with a trained AAE run directory.
+
+    The steps pass a dict of per-sample lists (a batch) along; each is a
+    :class:`~paz6d.abstract.KeyedStep` that reads and writes named values:
+
+    ======================  ==========================================  ===========================  =====================
+    step                    reads                                       writes                       processor
+    ======================  ==========================================  ===========================  =====================
+    ``crop``                ``images``, ``boxes``                       ``crops``, ``windows``       :class:`SquareCrop`
+    ``encode``              ``crops``                                   ``codes``                    :class:`EncodeCrops`
+    ``lookup``              ``codes``, ``top_k``                        ``indices``,                 :class:`CodebookLookup`
+                                                                        ``similarities``,
+                                                                        ``rotations``
+    ``pose_from_codebook``  ``indices``, ``similarities``,              ``candidates``               :class:`PosesFromCodebook`
+                            ``rotations``, ``boxes``, ``cameras``
+    ``refine_with_depth``   ``candidates``, ``depths``, ``boxes``,      ``poses``                    :class:`RefineWithDepth`
+                            ``cameras``
+    ======================  ==========================================  ===========================  =====================
+
+    Args:
+        run_dir: folder written by ``paz6d train aae`` (:mod:`paz6d.aae.run_dir`).
+        camera: default camera of the images: a :class:`~paz6d.backend.camera.Camera` or a ``(3, 3)``
+            intrinsics matrix ``K`` (then each image's size completes it); a call may pass another one.
+        refine: depth-free translation refinement (box fitting), see module docstring.
+        neighbours: codebook matches averaged into the rotation (within ``neighbour_radius_deg`` of the best,
+            weighted by similarity, :meth:`~paz6d.aae.codebook.Codebook.neighbour_average`), which refines
+            it below the codebook's spacing; 1 uses the best match alone.
+        neighbour_radius_deg: only matches this close to the best one are averaged.
+        top_k: codebook candidates kept; with a depth image the candidate ICP fits best wins.
+        class_name: written into the returned poses.
+
+    Example:
+        >>> estimator = ImplicitPose6D("demo_output/model", K)        # doctest: +SKIP
+        >>> pose = estimator(image, (310, 200, 420, 290))             # doctest: +SKIP
+        >>> pose.translation                                          # metres  # doctest: +SKIP
+    """
+
+    def __init__(self, run_dir: str | Path, camera=None, refine: bool = True, neighbours: int = 10,
+                 neighbour_radius_deg: float = 15.0, top_k: int = 1, class_name: str | None = None):
+        super().__init__(name="ImplicitPose6D")
+        from paz6d.aae.model import encode_function, encoder_of
+
+        config = run_files.read_config(run_dir)["config"]
+        self.crop_size, self.padding = int(config["crop_size"]), float(config["padding"])
+        if int(top_k) < 1 or int(neighbours) < 1:
+            raise ValueError(f"top_k/neighbours: expected at least 1, got {top_k}, {neighbours}")
+        self.camera, self.top_k, self.class_name = camera, int(top_k), class_name
+        self.autoencoder = run_files.read_model(run_dir)
+        encoder = encoder_of(self.autoencoder)
+        self.codebook = run_files.read_codebook(run_dir)
+        if self.codebook.latent_size != encoder.output.shape[-1]:
+            raise ValueError(f"{run_files.codebook_path(run_dir)}: latent size {self.codebook.latent_size} does not "
+                             f"match the model's {encoder.output.shape[-1]}")
+        geometry = run_files.read_object(run_dir)
+        self.hull_points, self.surface_points = geometry["hull_points"], geometry["surface_points"]
+        self.diameter = geometry["diameter"]
+        self.add(KeyedStep(SquareCrop(self.padding, self.crop_size), ("images", "boxes"), ("crops", "windows"),
+                           "crop", per_sample=True))
+        self.add(KeyedStep(EncodeCrops(encode_function(encoder), self.crop_size), "crops", "codes", "encode"))
+        self.add(KeyedStep(CodebookLookup(self.codebook, neighbours, neighbour_radius_deg), ("codes", "top_k"),
+                           ("indices", "similarities", "rotations"), "lookup"))
+        self.add(KeyedStep(PosesFromCodebook(self.codebook, self.hull_points, refine, class_name),
+                           ("indices", "similarities", "rotations", "boxes", "cameras"), "candidates",
+                           "pose_from_codebook", per_sample=True))
+        self.add(KeyedStep(RefineWithDepth(self.surface_points, self.diameter, class_name),
+                           ("candidates", "depths", "boxes", "cameras"), "poses", "refine_with_depth",
+                           per_sample=True))
+
+    # -- inputs ---------------------------------------------------------------------------------
+    def _camera(self, camera, width: int, height: int) -> Camera:
+        camera = self.camera if camera is None else camera
+        if camera is None:
+            raise ValueError("camera: none given to the call and none to the constructor")
+        return as_camera(camera, width, height)
+
+    def _sample(self, image, box, camera, name: str = "image", box_name: str = "box"):
+        image = as_image(image, name, channels=3)
+        camera = self._camera(camera, image.shape[1], image.shape[0])
+        return image, _as_box(box, image.shape, box_name), camera
+
+    def _values(self, images, boxes, cameras, depths, top_k: int) -> dict:
+        samples = [self._sample(image, box, camera, f"images[{i}]" if len(images) > 1 else "image",
+                                f"boxes[{i}]" if len(images) > 1 else "box")
+                   for i, (image, box, camera) in enumerate(zip(images, boxes, cameras))]
+        return {"images": [sample[0] for sample in samples], "boxes": [sample[1] for sample in samples],
+                "cameras": [sample[2] for sample in samples], "depths": list(depths), "top_k": int(top_k)}
+
+    def run_steps(self, values: dict, start: str | None = None, stop: str | None = None) -> dict:
+        """Runs the steps from the one named ``start`` (default: the first) up to, not including, the
+        one named ``stop`` (default: to the end) on a dict of named values."""
+        steps = self.steps
+        first = 0 if start is None else self.index(start)
+        last = len(steps) if stop is None else self.index(stop)
+        for step in steps[first:last]:
+            values = step(values)
+        return values
+
+    # -- pieces ---------------------------------------------------------------------------------
+    def crop(self, image, box, camera=None) -> np.ndarray:
+        """The model input crop ``(S, S, 3)`` uint8 of ``box`` in ``image`` (the ``crop`` step)."""
+        image, box, _ = self._sample(image, box, camera)
+        return self["crop"].processor(image, box)[0]
+
+    def encode(self, crops) -> np.ndarray:
+        """Latent codes ``(B, L)`` of uint8 crops ``(B, S, S, 3)`` (the ``encode`` step)."""
+        return self["encode"].processor(crops)
+
+    def reconstruct(self, crops) -> np.ndarray:
+        """The autoencoder's reconstructions ``(B, S, S, 3)`` uint8 of crops."""
+        from paz6d.aae.model import to_model_input
+
+        output = np.asarray(self.autoencoder(to_model_input(crops), training=False))
+        return np.clip(np.rint(output * 255), 0, 255).astype(np.uint8)
+
+    # -- public API -----------------------------------------------------------------------------
+    def candidates(self, image, box, top_k: int | None = None, camera=None) -> list[Pose6D]:
+        """The ``top_k`` codebook matches as poses, best first (``score`` = cosine similarity); the first
+        one carries the neighbour-averaged rotation (the steps before ``refine_with_depth``)."""
+        values = self._values([image], [box], [camera], [None], top_k or self.top_k)
+        return self.run_steps(values, stop="refine_with_depth")["candidates"][0]
+
+    def call(self, image, box, depth=None, camera=None) -> Pose6D:
+        """Pose of the object in ``box``: ``Box2D`` or ``(x_min, y_min, x_max, y_max)`` pixels.
+
+        Args:
+            image: ``(H, W, 3)`` uint8 RGB.
+            box: the object's 2D box.
+            depth: optional ``(H, W)`` float32 depth in metres (0 = none): refines with ICP (open3d).
+            camera: this image's Camera or ``K`` (default: the constructor's).
+        """
+        return self.run_steps(self._values([image], [box], [camera], [depth], self.top_k))["poses"][0]
+
+    def estimate_batch(self, images, boxes: Sequence, cameras: Sequence | None = None) -> list[Pose6D]:
+        """Poses for many boxes in one encoder call and one codebook product (no depth).
+
+        Args:
+            images: one ``(H, W, 3)`` image (all boxes in it) or a sequence of images, one per box.
+            boxes: sequence of ``Box2D`` / 4-tuples.
+            cameras: one Camera or ``K`` per box (default: the constructor's).
+        """
+        if isinstance(images, np.ndarray) and images.ndim == 3:
+            images = [images] * len(boxes)
+        if len(images) != len(boxes):
+            raise ValueError(f"images/boxes: expected one image per box, got {len(images)} images, {len(boxes)} boxes")
+        cameras = [None] * len(boxes) if cameras is None else list(cameras)
+        if len(cameras) != len(boxes):
+            raise ValueError(f"cameras: expected one per box ({len(boxes)}), got {len(cameras)}")
+        if len(boxes) == 0:
+            return []
+        return self.run_steps(self._values(images, boxes, cameras, [None] * len(boxes), 1))["poses"]
+
+    def refine_with_depth(self, candidates: Sequence[Pose6D], depth, box, camera=None) -> Pose6D:
+        """The ``refine_with_depth`` step: ICP of the depth points inside ``box`` from each candidate
+        (see :class:`RefineWithDepth`); the camera's size is the depth image's."""
+        depth = np.asarray(depth, dtype=np.float32)
+        if depth.ndim != 2:
+            raise ValueError(f"depth: expected shape (H, W) in metres, got {depth.shape}")
+        camera = self._camera(camera, depth.shape[1], depth.shape[0])
+        return self["refine_with_depth"].processor(candidates, depth, np.asarray(box, dtype=np.float64), camera)

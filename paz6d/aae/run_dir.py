@@ -58,6 +58,16 @@ def _required(path: Path) -> Path:
     return path
 
 
+def object_path(run_dir: str | Path) -> Path:
+    """Where the object geometry is (or will be) saved."""
+    return Path(run_dir) / OBJECT_FILE
+
+
+def config_path(run_dir: str | Path) -> Path:
+    """Where the run configuration is (or will be) saved."""
+    return Path(run_dir) / CONFIG_FILE
+
+
 def model_path(run_dir: str | Path) -> Path:
     """Where the autoencoder is (or will be) saved."""
     return Path(run_dir) / MODEL_FILE

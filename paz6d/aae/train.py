@@ -1,15 +1,10 @@
 """``paz6d train aae``: train an Augmented Autoencoder for one object and build its orientation codebook.
 
-Stages, each resumable from what is already in the run directory::
-
-    RUN_DIR/config.json       settings (a re-run reuses them; --steps may extend training)
-    RUN_DIR/object.npz        hull vertices, surface points and diameter of the object (metres)
-    RUN_DIR/views.npz         clean on-axis renderings on the view sphere (rendered in worker processes)
-    RUN_DIR/pairs.npz         with --dataset: input crops of the data set + clean targets rendered for them
-    RUN_DIR/checkpoints/ ...  Trainer checkpoints, log.csv, tensorboard/, samples/*.png
-    RUN_DIR/model.keras       the trained autoencoder (native Keras format, safe to load)
-    RUN_DIR/codebook.npz      latent codes of every view x in-plane rotation
-    RUN_DIR/summary.json      loss, throughput (loader vs model samples/s), timings
+Stages, each resumable from what is already in the run directory (its files and formats:
+:mod:`paz6d.aae.run_dir`): the settings (a re-run reuses them; --steps may extend training), the
+object geometry, clean on-axis renderings on the view sphere (rendered in worker processes), with
+--dataset the data set's crops and their clean targets, the Trainer's checkpoints, logs and samples,
+the trained autoencoder, its codebook and a summary.
 
 ``paz6d.aae.pipeline.ImplicitPose6D(RUN_DIR, camera)`` loads the result.
 """
@@ -24,18 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.aae import run_dir as run_files
 from paz6d.aae.augment import Augmentation
-from paz6d.backend.files import save_npz_atomically, write_json_atomically
+from paz6d.backend.files import save_npz_atomically
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from renderers.platform import PLATFORMS
 
-CONFIG_FILE = "config.json"
-OBJECT_FILE = "object.npz"
-VIEWS_FILE = "views.npz"
-MODEL_FILE = "model.keras"
-CODEBOOK_FILE = "codebook.npz"
-SUMMARY_FILE = "summary.json"
-PAIRS_FILE = "pairs.npz"
 
 
 @dataclass(frozen=True)
@@ -159,12 +148,12 @@ class AAETraining:
 def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, seed: int,
                  dataset: Path | None) -> tuple[AAEConfig, int]:
     """Writes ``config.json`` for a new run, or reads the stored one (only ``steps`` may change)."""
-    path = run_dir / CONFIG_FILE
+    path = run_files.config_path(run_dir)
     if path.exists():
+        stored = run_files.read_config(run_dir)
         try:
-            stored = json.loads(path.read_text())
             stored_config = AAEConfig.from_dict(stored["config"])
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
+        except (KeyError, TypeError, ValueError) as error:
             raise ValueError(f"{path}: unreadable AAE run configuration ({error})") from error
         if Path(stored["mesh"]).resolve() != mesh_path.resolve() or stored["mesh_scale"] != mesh_scale:
             raise ValueError(f"{path}: this run directory was trained on {stored['mesh']} (scale "
@@ -174,24 +163,19 @@ def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEC
             raise ValueError(f"{path}: this run directory was trained with --dataset {stored.get('dataset')}; "
                              f"use another --out for --dataset {wanted}")
         config, seed = replace(stored_config, steps=config.steps), int(stored["seed"])
-    run_dir.mkdir(parents=True, exist_ok=True)
-    write_json_atomically(path, {"config": config.to_dict(), "mesh": str(mesh_path.resolve()),
-                                 "mesh_scale": mesh_scale, "seed": seed,
-                                 "dataset": None if dataset is None else str(dataset.resolve())}, indent=2)
+    run_files.write_config(run_dir, config.to_dict(), mesh_path, mesh_scale, seed, dataset)
     return config, seed
 
 
 def _object_geometry(run_dir: Path, mesh_path: Path, mesh_scale: float, seed: int) -> dict:
-    path = run_dir / OBJECT_FILE
-    if not path.exists():
+    if not run_files.object_path(run_dir).exists():
         from paz6d.backend.mesh import diameter, load_mesh, sample_points
 
         mesh = load_mesh(mesh_path, mesh_scale)
         hull = np.asarray(mesh.convex_hull.vertices)
-        save_npz_atomically(path, hull_points=hull, surface_points=sample_points(mesh, 2000, seed),
-                            diameter=diameter(hull), vertices=np.asarray(mesh.vertices))
-    with np.load(path) as data:
-        return {key: data[key] for key in data.files}
+        run_files.write_object(run_dir, hull, sample_points(mesh, 2000, seed), diameter(hull),
+                               np.asarray(mesh.vertices))
+    return run_files.read_object(run_dir)
 
 
 def _views(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, geometry, workers: int,
@@ -199,7 +183,7 @@ def _views(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig,
     from paz6d.aae.codebook import fibonacci_sphere, look_at_rotations
     from paz6d.aae.views import render_views
 
-    path = run_dir / VIEWS_FILE
+    path = run_files.views_path(run_dir)
     rotations = look_at_rotations(fibonacci_sphere(config.views))
     if path.exists():
         with np.load(path) as data:
@@ -243,7 +227,7 @@ def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Pat
            config: AAEConfig, workers: int, platform: str | None, progress: bool):
     from paz6d.aae.dataset import CropPairs, dataset_pairs
 
-    path = run_dir / PAIRS_FILE
+    path = run_files.pairs_path(run_dir)
     if path.exists():
         with np.load(path) as data:
             if data["inputs"].shape[1] == config.crop_size:
@@ -318,7 +302,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     tick = time.perf_counter()
     training = trainer.fit()
     timings["training_seconds"] = time.perf_counter() - tick
-    model_path = run_dir / MODEL_FILE
+    model_path = run_files.model_path(run_dir)
     save_model(model, model_path)
 
     tick = time.perf_counter()
@@ -326,14 +310,14 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     codebook = build_codebook(encoder, views["rgb"], views["alpha"], views["rotations"], geometry,
                               geometry_data["hull_points"], config.in_plane, config.crop_size, config.padding,
                               progress=progress)
-    codebook.save(run_dir / CODEBOOK_FILE)
+    codebook.save(run_files.codebook_path(run_dir))
     timings["codebook_seconds"] = time.perf_counter() - tick
     timings["total_seconds"] = time.perf_counter() - started
     summary = {"steps": training.final_step, "resumed_from_step": training.start_step,
                "final_metrics": training.metrics, "loader_samples_per_second_one_thread": loader_speed,
                "model_samples_per_second": training.model_samples_per_second,
                "codebook_size": len(codebook), "dataset_pairs": 0 if pairs is None else len(pairs), **timings}
-    write_json_atomically(run_dir / SUMMARY_FILE, summary, indent=2)
+    run_files.write_summary(run_dir, summary)
     return summary
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.aae import run_dir as aae_run_dir
 from paz6d.demo.report import AUC_MAX_THRESHOLD, number, pose_rows, print_rows, score_poses, write_report
 
 TRAIN_SEED = 0
@@ -200,8 +201,7 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     _stage("5/5 scoring and plots")
     from paz6d.datasets.bop import load_models_info
 
-    with np.load(out / "model" / "object.npz") as data:
-        points = data["vertices"]
+    points = aae_run_dir.read_object(out / "model")["vertices"]
     diameter = load_models_info(out / "mesh" / "models_info.json")[OBJECT_ID].diameter
     scores = score_poses([pose.to_matrix() for pose in poses], np.stack([target["T_gt"] for target in targets]),
                          points, diameter)

@@ -22,6 +22,7 @@ import numpy as np
 
 from paz6d.backend.files import finite_or_none, new_figure, save_figure_atomically
 from paz6d.demo.report import number, pose_rows, print_rows, score_poses, write_report
+from paz6d.keypointnet import run_dir as keypointnet_run_dir
 
 TEST_SEED_OFFSET = 1_000_003  # test images never share a seed with training/validation views
 
@@ -163,7 +164,7 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
             evaluations[variant] = metrics
             if not from_box and metrics["error"] is None:
                 _examples_png(out_dir / f"keypoint_{mode}_examples.png", run_dir, test, poses, sampling.camera, points)
-        write_report(run_dir / "evaluation.json", evaluations)
+        write_report(keypointnet_run_dir.evaluation_path(run_dir), evaluations)
     _recall_png(out_dir / "keypoint_recall.png", curves, object_diameter, "ADD-S" if symmetric else "ADD")
     report["total_seconds"] = round(time.perf_counter() - started, 1)
     write_report(out_dir / "keypoint_report.json", report)

@@ -146,9 +146,9 @@ def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
     return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
 
 
-def write_evaluation(run_dir: str | Path, evaluation: dict[str, Any]) -> Path:
-    """Writes the demo's ``evaluation.json``."""
-    return write_json_atomically(Path(run_dir) / EVALUATION_FILE, evaluation, indent=2)
+def evaluation_path(run_dir: str | Path) -> Path:
+    """Where the demo writes its evaluation of the run."""
+    return Path(run_dir) / EVALUATION_FILE
 
 
 def validate(run_dir: str | Path) -> Path:

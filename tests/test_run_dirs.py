@@ -1,0 +1,108 @@
+"""Run directories: each method's run_dir module writes, reads and validates its files; method_of tells them apart."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from paz6d.aae import run_dir as aae_run
+from paz6d.aae.codebook import Codebook
+from paz6d.keypointnet import run_dir as keypointnet_run
+from paz6d.run_dirs import method_of
+
+HULL = np.array([[x, y, z] for x in (-0.04, 0.04) for y in (-0.03, 0.03) for z in (-0.02, 0.02)])
+
+
+def write_aae_run(folder):
+    aae_run.write_config(folder, {"crop_size": 16, "padding": 1.2, "latent_size": 8}, folder / "mesh.ply", 0.001, 3,
+                         None)
+    aae_run.write_object(folder, HULL, HULL * 0.9, 0.1, HULL)
+    codebook = Codebook(np.eye(2, 8), np.stack([np.eye(3)] * 2), np.array([[0.0, 0, 10, 10]] * 2), np.diag([100.0, 100.0, 1.0]),
+                        0.5)
+    codebook.save(aae_run.codebook_path(folder))
+    aae_run.model_path(folder).write_bytes(b"model")
+    return folder
+
+
+def write_keypointnet_run(folder):
+    keypointnet_run.write_config(folder, {"input_size": 32, "margin": 1.25, "downsample": 2, "mode": "supervised"})
+    keypointnet_run.write_keypoints(folder, HULL, np.ones(8, bool), "farthest-point")
+    keypointnet_run.write_object(folder, 0.1, HULL)
+    keypointnet_run.model_path(folder).write_bytes(b"model")
+    return folder
+
+
+def test_aae_run_directory_round_trip(tmp_path):
+    folder = write_aae_run(tmp_path / "aae")
+    config = aae_run.read_config(folder)
+    assert config["config"] == {"crop_size": 16, "padding": 1.2, "latent_size": 8}
+    assert (config["mesh_scale"], config["seed"], config["dataset"]) == (0.001, 3, None)
+    assert config["mesh"] == str((folder / "mesh.ply").resolve())
+    geometry = aae_run.read_object(folder)
+    np.testing.assert_array_equal(geometry["hull_points"], HULL)
+    np.testing.assert_array_equal(geometry["surface_points"], HULL * 0.9)
+    assert geometry["diameter"] == 0.1
+    assert len(aae_run.read_codebook(folder)) == 2
+    assert aae_run.validate(folder) == folder
+    assert aae_run.is_run_dir(folder) and not keypointnet_run.is_run_dir(folder)
+
+
+def test_aae_run_directory_errors_name_the_file(tmp_path):
+    folder = write_aae_run(tmp_path / "aae")
+    with pytest.raises(ValueError, match="not a directory"):
+        aae_run.read_config(tmp_path / "absent")
+    config = aae_run.config_path(folder)
+    config.write_text(json.dumps({"config": {"crop_size": 16}, "mesh": "m", "mesh_scale": 1, "seed": 0}))
+    with pytest.raises(ValueError, match=r"config.json: missing key\(s\) \['config.padding'\]"):
+        aae_run.read_config(folder)
+    config.write_text("{not json")
+    with pytest.raises(ValueError, match="config.json: invalid JSON"):
+        aae_run.validate(folder)
+    np.savez(aae_run.object_path(folder), hull_points=HULL, diameter=0.1)
+    with pytest.raises(ValueError, match=r"object.npz: missing key\(s\) \['surface_points', 'vertices'\]"):
+        aae_run.read_object(folder)
+    aae_run.object_path(folder).write_bytes(b"corrupt")
+    with pytest.raises(ValueError, match="object.npz: not a readable .npz"):
+        aae_run.read_object(folder)
+    aae_run.codebook_path(folder).unlink()
+    with pytest.raises(ValueError, match="codebook.npz: missing; is .* an AAE run directory"):
+        aae_run.read_codebook(folder)
+    with pytest.raises(ValueError, match=r"config: missing key\(s\) \['padding'\]"):
+        aae_run.write_config(folder, {"crop_size": 16}, "mesh.ply", 1.0, 0, None)
+
+
+def test_keypointnet_run_directory_round_trip_and_errors(tmp_path):
+    folder = write_keypointnet_run(tmp_path / "keypointnet")
+    assert keypointnet_run.read_config(folder)["mode"] == "supervised"
+    points, usable = keypointnet_run.read_keypoints(folder)
+    np.testing.assert_array_equal(points, HULL)
+    assert usable.all()
+    np.testing.assert_array_equal(keypointnet_run.read_object(folder)["hull_points"], HULL)
+    assert keypointnet_run.validate(folder) == folder
+    keypointnet_run.config_path(folder).write_text(json.dumps({"input_size": 32}))
+    with pytest.raises(ValueError, match=r"config.json: missing field\(s\) \['margin', 'downsample'\]"):
+        keypointnet_run.validate(folder)
+    keypointnet_run.config_path(folder).write_text("[1, 2]")
+    with pytest.raises(ValueError, match="config.json: expected a JSON object"):
+        keypointnet_run.read_config(folder)
+    keypointnet_run.model_path(folder).unlink()
+    with pytest.raises(ValueError, match="model.keras: file not found"):
+        keypointnet_run.validate(folder)
+    with pytest.raises(ValueError, match=r"config: missing key\(s\) \['downsample'\]"):
+        keypointnet_run.write_config(folder, {"input_size": 32, "margin": 1.25})
+
+
+def test_method_of_tells_the_run_directories_apart(tmp_path):
+    assert method_of(write_aae_run(tmp_path / "aae")) == "aae"
+    assert method_of(write_keypointnet_run(tmp_path / "keypointnet")) == "keypointnet"
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ValueError, match=r"is not a run directory of any method \(expected the files of exactly one: "
+                                         r"aae: config.json \+ codebook.npz; keypointnet: config.json \+ keypoints.json"):
+        method_of(tmp_path / "empty")
+    with pytest.raises(ValueError, match="not a directory"):
+        method_of(tmp_path / "absent")
+    both = write_keypointnet_run(tmp_path / "aae")
+    with pytest.raises(ValueError, match="matches several methods"):
+        method_of(both)
