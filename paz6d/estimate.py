@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.datasets.bop import BOPDataset, Target, write_pose_results, write_targets
+from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION
 
 METHODS = ("aae", "keypoints")
 BOXES = {"obj": "bbox_obj", "visib": "bbox_visib"}
@@ -38,8 +39,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--targets-out", type=Path, default=None,
                         help="also write the BOP'19 targets of the images estimated (for `evaluate bop --targets` "
                              "when only some images of the split have RGB files)")
-    parser.add_argument("--min-visible", type=float, default=0.1,
-                        help="skip instances whose visible fraction is below this (BOP'19 uses 0.1)")
+    parser.add_argument("--min-visible", type=float, default=TARGET_MIN_VISIBLE_FRACTION,
+                        help=f"skip instances whose visible fraction is below this (default "
+                             f"{TARGET_MIN_VISIBLE_FRACTION}, as BOP'19 targets)")
 
 
 def _estimator(method: str, run_dir: Path):
@@ -54,7 +56,7 @@ def _estimator(method: str, run_dir: Path):
 
 
 def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_id: int, box: str = "obj",
-                     min_visible: float = 0.1, progress: bool = True) -> dict:
+                     min_visible: float = TARGET_MIN_VISIBLE_FRACTION, progress: bool = True) -> dict:
     """Estimates the pose of every visible-enough instance of ``obj_id`` from its ground-truth box.
 
     Returns:
