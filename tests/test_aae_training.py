@@ -232,9 +232,8 @@ def test_estimate_command_writes_bop_results_that_evaluate_scores(toy_run, tmp_p
     """`paz6d estimate` on a small generated BOP set -> results CSV -> `paz6d evaluate bop`."""
     from data_gen.config import GenerationConfig
     from data_gen.generator import generate
-    from evaluation.bop_results import read_pose_results
     from paz6d.cli import main
-    from paz6d.datasets.bop import BOPDataset
+    from paz6d.datasets.bop import BOPDataset, read_pose_results
 
     root, mesh, _ = toy_run
     dataset = tmp_path / "set"
