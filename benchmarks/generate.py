@@ -36,6 +36,7 @@ sys.path.insert(0, str(REPO))
 from data_gen.config import GenerationConfig  # noqa: E402
 from data_gen.generator import generate, render_indices  # noqa: E402
 from data_gen.producer import ImageProducer, image_generator  # noqa: E402
+from paz6d.datasets.bop.units import MM_PER_M  # noqa: E402
 from paz6d.synthesis.scene import sample_scene  # noqa: E402
 from renderers import select_platform  # noqa: E402
 from renderers.conventions import FLIP_YZ  # noqa: E402
@@ -111,7 +112,7 @@ def pinned_running_rate(config: GenerationConfig, workers: int, cores: int) -> f
 def measure(meshes: list[Path], width: int, height: int, count: int, antialias: str, rgb_format: str,
             workdir: Path) -> dict:
     config = GenerationConfig(meshes=tuple(meshes), out=workdir / "steady", num_images=count, width=width,
-                              height=height, mesh_scale=0.001, objects_per_image=(1, 1), distractors=0,
+                              height=height, mesh_scale=1.0 / MM_PER_M, objects_per_image=(1, 1), distractors=0,
                               occluder_probability=0.0, antialias=antialias, rgb_format=rgb_format)
     producer = ImageProducer(config)
     steady = generator_steady(config, producer, count)

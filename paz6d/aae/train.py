@@ -23,6 +23,7 @@ from paz6d.aae import run_dir as run_files
 from paz6d.aae.augment import Augmentation
 from paz6d.backend.files import save_npz_atomically
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
+from paz6d.datasets.bop.units import MM_PER_M
 from renderers.platform import PLATFORMS
 
 
@@ -134,7 +135,7 @@ class AAETraining:
         if self.steps is not None and self.steps <= 0:
             raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
         if self.mesh_scale is None:
-            object.__setattr__(self, "mesh_scale", 1.0 if self.dataset is None else 0.001)
+            object.__setattr__(self, "mesh_scale", 1.0 if self.dataset is None else 1.0 / MM_PER_M)
         if not np.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
             raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
 

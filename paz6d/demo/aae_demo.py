@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.aae import run_dir as aae_run_dir
+from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.demo.report import AUC_MAX_THRESHOLD, number, pose_rows, print_rows, score_poses, write_report
 
 TRAIN_SEED = 0
@@ -121,7 +122,7 @@ def _plot_grid(path: Path, estimator, targets, poses, mesh_path: Path, rows: int
     from paz6d.aae.model import crop_object
     from renderers import Renderer
 
-    mesh = load_mesh(mesh_path, 0.001)
+    mesh = load_mesh(mesh_path, 1.0 / MM_PER_M)
     size = 128
     chosen = np.linspace(0, len(targets) - 1, min(rows, len(targets))).astype(int)
     camera = targets[0]["camera"]
@@ -179,14 +180,14 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     _stage(f"2/5 held-out test images ({test_images}, seed {TEST_SEED})")
     tick = time.perf_counter()
     generation = GenerationConfig(meshes=(mesh_path,), out=out / "test_data", num_images=test_images,
-                                  seed=TEST_SEED, split="test", mesh_scale=0.001, objects_per_image=(1, 1),
+                                  seed=TEST_SEED, split="test", mesh_scale=1.0 / MM_PER_M, objects_per_image=(1, 1),
                                   platform=platform)
     generate(generation, workers=max(1, workers))
     timings["test_data_seconds"] = time.perf_counter() - tick
 
     _stage(f"3/5 training the Augmented Autoencoder ({config.steps} steps, seed {TRAIN_SEED})")
     tick = time.perf_counter()
-    training = train_aae(mesh_path, out / "model", config, mesh_scale=0.001, seed=TRAIN_SEED, workers=workers,
+    training = train_aae(mesh_path, out / "model", config, mesh_scale=1.0 / MM_PER_M, seed=TRAIN_SEED, workers=workers,
                          platform=platform)
     timings["training_seconds"] = time.perf_counter() - tick
 

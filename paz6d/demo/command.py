@@ -11,6 +11,7 @@ from pathlib import Path
 
 from paz6d.aae.train import QUICK
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
+from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.demo import aae_demo, keypoint_demo
 from renderers.platform import PLATFORMS
 
@@ -45,6 +46,6 @@ def run(args: argparse.Namespace) -> int:
         report = aae_demo.run_demo(options.out, config, options.test_images, options.workers, options.platform)
         if options.keypoints:
             keypoint_demo.run_keypoint_demo(Path(options.out) / "keypoints", Path(report["files"]["mesh"]),
-                                            mesh_scale=0.001, test_images=options.test_images,
+                                            mesh_scale=1.0 / MM_PER_M, test_images=options.test_images,
                                             workers=options.workers)
     return 0

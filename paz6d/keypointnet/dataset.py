@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, square_window
+from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.keypointnet.views import ViewSet
 
 
@@ -25,7 +26,7 @@ def _default_split(root: Path) -> str:
 
 
 def bop_object_views(root: str | Path, object_id: int | None = None, split: str | None = None,
-                     input_size: int = 128, mesh_scale: float = 1e-3, margin: float = 1.25,
+                     input_size: int = 128, mesh_scale: float = 1.0 / MM_PER_M, margin: float = 1.25,
                      min_visible_fraction: float = 0.6, max_views: int | None = None) -> tuple[ViewSet, Path, float]:
     """Crops of one object from a BOP data set.
 

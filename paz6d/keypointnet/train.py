@@ -31,6 +31,7 @@ import numpy as np
 
 from paz6d.backend.files import finite_or_none, save_npz_atomically
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
+from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.keypointnet import run_dir as run_files
 
 CONFIGS: dict[str, dict] = {
@@ -94,7 +95,7 @@ class KeypointTraining:
         if (self.mesh is None) == (self.dataset is None):
             raise ValueError("mesh: expected exactly one of mesh and dataset")
         if self.mesh_scale is None:
-            self.mesh_scale = 1.0 if self.dataset is None else 1e-3
+            self.mesh_scale = 1.0 if self.dataset is None else 1.0 / MM_PER_M
         if not np.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
             raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
         self.settings()  # checks config, mode and steps
