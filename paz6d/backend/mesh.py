@@ -1,6 +1,7 @@
 """Mesh loading and geometry (PLY/OBJ/GLB/GLTF through trimesh), lengths in metres.
 
-BOP meshes are in millimetres: load them with ``scale=0.001``.
+BOP meshes are in millimetres: ``paz6d.datasets.bop.load_model`` loads them in metres (or pass
+``scale=0.001``).
 """
 
 from __future__ import annotations
