@@ -107,3 +107,21 @@ def test_bad_parameters_and_images_are_rejected(astronaut):
         detector(np.zeros((0, 0, 3), np.uint8))
     with pytest.raises(ValueError, match=r"\(H, W, 3\) or grey"):
         to_grey(np.zeros((2, 4, 4, 3), np.uint8))
+
+
+def test_steps_can_be_replaced_inserted_and_removed_by_name(astronaut):
+    from paz6d.abstract import KeyedStep
+    from paz6d.faces.haar import RunCascade
+
+    detector = HaarCascadeDetector("frontalface_default")
+    assert detector.names == ["to_grey", "detect", "to_xyxy", "to_boxes2d", "sort"]
+    [face] = detector(astronaut)
+    # the eye cascade in place of the face cascade: the eyes, still named after the detector's class
+    detector.replace("detect", KeyedStep(RunCascade(cascade_path("eye")), "grey", ("rectangles", "counts"), "detect"))
+    eyes = detector(astronaut)
+    assert len(eyes) == 2 and all(eye.class_name == "frontalface_default" for eye in eyes)
+    detector.insert("sort", KeyedStep(lambda boxes: [box for box in boxes if box.x_min > 220], "boxes", "boxes",
+                                      "right_half"))
+    assert detector(astronaut) == [eye for eye in eyes if eye.x_min > 220]
+    detector.remove("right_half")
+    assert detector(astronaut) == eyes and face not in eyes
