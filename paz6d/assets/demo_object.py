@@ -13,9 +13,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from paz6d.backend.files import write_bytes_atomically, write_json_atomically
 from paz6d.backend.mesh import diameter
-from paz6d.datasets.bop.units import MM_PER_M
+from paz6d.datasets.bop.writer import write_models
 
 OBJECT_ID = 1
 #: RGB per side (-x, +x, -y, +y, -z, +z) of each part: every side of the body differs.
@@ -65,17 +64,7 @@ def make_demo_mesh() -> trimesh.Trimesh:
 
 def write_demo_object(directory: str | Path) -> Path:
     """Writes ``obj_000001.ply`` (millimetres, BOP convention) and ``models_info.json`` into
-    ``directory``; returns the PLY path. Files are written to temp names, then renamed."""
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
+    ``directory`` with the BOP writer; returns the PLY path. Files are written atomically."""
     mesh = make_demo_mesh()
-    millimetres = mesh.copy()
-    millimetres.apply_scale(MM_PER_M)
-    path = directory / f"obj_{OBJECT_ID:06d}.ply"
-    write_bytes_atomically(path, millimetres.export(file_type="ply", encoding="binary"))
-    low, high = millimetres.bounds
-    info = {str(OBJECT_ID): {"diameter": diameter(millimetres.vertices),
-                             "min_x": low[0], "min_y": low[1], "min_z": low[2],
-                             "size_x": high[0] - low[0], "size_y": high[1] - low[1], "size_z": high[2] - low[2]}}
-    write_json_atomically(directory / "models_info.json", info, indent=2)
-    return path
+    ply, _ = write_models(directory, [mesh], [OBJECT_ID], [diameter(mesh.vertices)], units="m")
+    return ply
