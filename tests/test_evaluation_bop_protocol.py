@@ -160,6 +160,12 @@ def test_results_order_does_not_change_the_scores(tiny, tmp_path):
     assert first == second
 
 
+def test_results_read_in_metres_are_rejected(tiny):
+    data = load_evaluation_data(tiny[0])
+    with pytest.raises(ValueError, match="results: expected translations in millimetres"):
+        bop.evaluate(data, read_pose_results(tiny[1]), bop.BopSettings(metrics=("mssd",)))
+
+
 def reference_match(errors: dict[int, dict[int, float]], scores: dict[int, float], top: int, threshold: float):
     """Literal BOP greedy matching for one target: {estimate: gt} (estimates by decreasing score,
     stable; each takes the unmatched GT with the smallest error below the threshold)."""
