@@ -30,11 +30,11 @@ from paz6d.datasets.bop.camera import SceneCamera, load_camera, load_scene_camer
 from paz6d.datasets.bop.models import ModelInfo, load_model, load_models_info, model_path
 from paz6d.datasets.bop.reader import BOPDataset, BOPObject, BOPSample, BOPScene
 from paz6d.datasets.bop.results import PoseResults, read_pose_results, write_pose_results
-from paz6d.datasets.bop.scene import GroundTruthPose, load_scene_gt, load_scene_gt_info, nearest_rotation, pose_from_bop
+from paz6d.datasets.bop.scene import GroundTruthPose, load_scene_gt, load_scene_gt_info
 from paz6d.datasets.bop.targets import Target, read_targets, write_targets
 from paz6d.datasets.bop.units import MM_PER_M
 
 __all__ = ["BOPDataset", "BOPObject", "BOPSample", "BOPScene", "GroundTruthPose", "MM_PER_M", "ModelInfo",
            "PoseResults", "SceneCamera", "Target", "load_camera", "load_model", "load_models_info",
-           "load_scene_camera", "load_scene_gt", "load_scene_gt_info", "model_path", "nearest_rotation",
-           "pose_from_bop", "read_pose_results", "read_targets", "write_pose_results", "write_targets"]
+           "load_scene_camera", "load_scene_gt", "load_scene_gt_info", "model_path", "read_pose_results",
+           "read_targets", "write_pose_results", "write_targets"]
