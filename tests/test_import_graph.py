@@ -78,3 +78,29 @@ def test_no_import_cycle_between_packages():
 
 def test_backend_imports_nothing_above_it():
     assert package_graph()["paz6d.backend"] == set()
+
+
+def module_graph() -> dict[str, set[str]]:
+    """Module -> the project modules it imports (``from package import module`` resolved)."""
+    paths = {".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): path
+             for top in TOP_LEVEL for path in (ROOT / top).rglob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for module, path in paths.items():
+        targets = graph.setdefault(module, set())
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                candidates = [f"{node.module}.{alias.name}" for alias in node.names] + [node.module]
+            elif isinstance(node, ast.Import):
+                candidates = [alias.name for alias in node.names]
+            else:
+                continue
+            for name in candidates:
+                if name in paths and name != module:
+                    targets.add(name)
+                    break
+    return graph
+
+
+def test_no_import_cycle_between_modules():
+    cycle = find_cycle(module_graph())
+    assert cycle is None, f"import cycle between modules: {' -> '.join(cycle)}"
