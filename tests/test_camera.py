@@ -170,3 +170,19 @@ def test_bad_camera_input_names_the_argument():
 def test_rotation_vector_conventions_agree_with_scipy_and_opencv_for_a_pose():
     vector = np.array([0.2, -0.5, 1.3])
     np.testing.assert_allclose(cv2.Rodrigues(vector)[0], Rotation.from_rotvec(vector).as_matrix(), atol=1e-12)
+
+
+def test_as_camera_takes_a_camera_or_a_matrix_with_the_image_size():
+    lens = Camera(K, 640, 480)
+    assert camera.as_camera(lens) is lens and camera.as_camera(lens, 640, 480) is lens
+    made = camera.as_camera(K, 640, 480)
+    assert isinstance(made, Camera) and (made.width, made.height) == (640, 480) and made.distortion is None
+    np.testing.assert_array_equal(made.K, K)
+    with pytest.raises(ValueError, match=r"image: 320x240 pixels does not match the camera's 640x480"):
+        camera.as_camera(lens, 320, 240)
+    with pytest.raises(ValueError, match=r"camera: a 3x3 K needs the image size \(width, height\)"):
+        camera.as_camera(K)
+    with pytest.raises(ValueError, match="camera: none given"):
+        camera.as_camera(None, 640, 480)
+    with pytest.raises(ValueError, match=r"camera: expected shape \(\.\.\., 3, 3\), got \(2, 2\)"):
+        camera.as_camera(np.eye(2), 640, 480)

@@ -109,6 +109,8 @@ def test_sequential_processor_steps_by_name():
     assert old.name == "three" and pipeline.names[3] == "half"
     assert pipeline(1) == -(1 + 1) * 10 * 0.5 * 2 * 5
     assert pipeline.remove("five").name == "five" and pipeline.names[-1] == "double"
+    assert pipeline.run_steps(1, start="ten") == 1 * 10 * 0.5 * 2
+    assert pipeline.run_steps(1, stop="ten") == -(1 + 1) and pipeline.run_steps(1, "ten", "double") == 5
     assert "steps=['AddOne', 'negate', 'ten', 'half', 'double']" in repr(pipeline)
     for operation in (lambda: pipeline.replace("absent", double), lambda: pipeline.insert("absent", double),
                       lambda: pipeline["absent"]):

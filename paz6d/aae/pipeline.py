@@ -369,15 +369,9 @@ class ImplicitPose6D(SequentialProcessor):
                            per_sample=True))
 
     # -- inputs ---------------------------------------------------------------------------------
-    def _camera(self, camera, width: int, height: int) -> Camera:
-        camera = self.camera if camera is None else camera
-        if camera is None:
-            raise ValueError("camera: none given to the call and none to the constructor")
-        return as_camera(camera, width, height)
-
     def _sample(self, image, box, camera, name: str = "image", box_name: str = "box"):
         image = as_image(image, name, channels=3)
-        camera = self._camera(camera, image.shape[1], image.shape[0])
+        camera = as_camera(self.camera if camera is None else camera, image.shape[1], image.shape[0])
         return image, _as_box(box, image.shape, box_name), camera
 
     def _values(self, images, boxes, cameras, depths, top_k: int) -> dict:
@@ -386,16 +380,6 @@ class ImplicitPose6D(SequentialProcessor):
                    for i, (image, box, camera) in enumerate(zip(images, boxes, cameras))]
         return {"images": [sample[0] for sample in samples], "boxes": [sample[1] for sample in samples],
                 "cameras": [sample[2] for sample in samples], "depths": list(depths), "top_k": int(top_k)}
-
-    def run_steps(self, values: dict, start: str | None = None, stop: str | None = None) -> dict:
-        """Runs the steps from the one named ``start`` (default: the first) up to, not including, the
-        one named ``stop`` (default: to the end) on a dict of named values."""
-        steps = self.steps
-        first = 0 if start is None else self.index(start)
-        last = len(steps) if stop is None else self.index(stop)
-        for step in steps[first:last]:
-            values = step(values)
-        return values
 
     # -- pieces ---------------------------------------------------------------------------------
     def crop(self, image, box, camera=None) -> np.ndarray:
@@ -457,5 +441,5 @@ class ImplicitPose6D(SequentialProcessor):
         depth = np.asarray(depth, dtype=np.float32)
         if depth.ndim != 2:
             raise ValueError(f"depth: expected shape (H, W) in metres, got {depth.shape}")
-        camera = self._camera(camera, depth.shape[1], depth.shape[0])
+        camera = as_camera(self.camera if camera is None else camera, depth.shape[1], depth.shape[0])
         return self["refine_with_depth"].processor(candidates, depth, np.asarray(box, dtype=np.float64), camera)

@@ -187,6 +187,16 @@ class SequentialProcessor(Processor):
         """A copy of the list of steps."""
         return list(self._steps)
 
+    def run_steps(self, value: Any, start: str | None = None, stop: str | None = None) -> Any:
+        """Runs the steps from the one named ``start`` (default: the first) up to, not including, the
+        one named ``stop`` (default: to the end) on one value (for :class:`KeyedStep` pipelines, the
+        dict of named values)."""
+        first = 0 if start is None else self.index(start)
+        last = len(self._steps) if stop is None else self.index(stop)
+        for step in self._steps[first:last]:
+            value = step(value)
+        return value
+
     def call(self, *args, **kwargs) -> Any:
         if not self._steps:
             if kwargs or len(args) != 1:

@@ -159,7 +159,8 @@ def as_camera(camera, width: int | None = None, height: int | None = None, name:
                              f"{camera.width}x{camera.height} (width x height)")
         return camera
     if camera is None:
-        raise ValueError(f"{name}: expected a paz6d.backend.camera.Camera or a 3x3 K, got None")
+        raise ValueError(f"{name}: none given; expected a paz6d.backend.camera.Camera or a 3x3 K (a pipeline "
+                         "takes it in its constructor or per call)")
     if width is None or height is None:
         raise ValueError(f"{name}: a 3x3 K needs the image size (width, height); pass a Camera or the size")
     return Camera(as_camera_matrix(camera, name), width, height)

@@ -193,7 +193,7 @@ class DetectEmotion(SequentialProcessor):
         self.add(KeyedStep(LabelFaces(self.class_names), ("faces", "probabilities"), "detections", "label"))
 
     def call(self, image) -> list[tuple[Box2D, str, np.ndarray]]:
-        return super().call({"image": image})["detections"]
+        return self.run_steps({"image": image})["detections"]
 
 
 def draw_emotions(image, detections, color: tuple[int, int, int] = (255, 64, 64)) -> np.ndarray:

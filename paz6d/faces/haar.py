@@ -157,4 +157,4 @@ class HaarCascadeDetector(SequentialProcessor):
 
     def call(self, image) -> list[Box2D]:
         """Runs the cascade on a ``uint8`` RGB ``(H, W, 3)`` or grey ``(H, W)`` image."""
-        return super().call({"image": image})["boxes"]
+        return self.run_steps({"image": image})["boxes"]

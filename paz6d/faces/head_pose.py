@@ -382,14 +382,12 @@ class HeadPose6D(SequentialProcessor):
             raise ValueError(f"image: expected uint8 RGB (H, W, 3), got a grey image of shape {array.shape}; "
                              "the landmark network needs colour (use np.dstack([grey] * 3) for grey input)")
         array = as_image(array, "image", channels=3)
-        camera = self.camera if camera is None else camera
-        if camera is None:
-            raise ValueError("camera: none given to the call and none to the constructor")
-        return {"image": array, "camera": as_camera(camera, array.shape[1], array.shape[0])}
+        return {"image": array, "camera": as_camera(self.camera if camera is None else camera, array.shape[1],
+                                                    array.shape[0])}
 
     def detect(self, image, camera=None) -> list[HeadDetection]:
         """Like calling the pipeline, with boxes, landmarks and reprojection errors."""
-        return super().call(self._values(image, camera))["detections"]
+        return self.run_steps(self._values(image, camera))["detections"]
 
     def call(self, image, camera=None) -> list[Pose6D]:
         """Head poses in ``image`` (uint8 RGB); ``camera``: this image's Camera or ``K`` (default: the constructor's)."""

@@ -191,10 +191,8 @@ class KeypointPose6D(SequentialProcessor):
 
     # -- inputs ---------------------------------------------------------------------------------
     def _camera(self, camera, width: int | None = None, height: int | None = None) -> Camera:
-        camera = self.camera if camera is None else camera
-        if camera is None:
-            raise ValueError("camera: none given to the call and none to the constructor")
-        return as_camera(camera, width, height)
+        """The call's camera, else the constructor's, completed by the image size."""
+        return as_camera(self.camera if camera is None else camera, width, height)
 
     def _sample(self, image, box, camera) -> tuple[np.ndarray, Box2D, Camera]:
         image = as_image(image)
@@ -216,16 +214,6 @@ class KeypointPose6D(SequentialProcessor):
         samples = [self._sample(*sample) for sample in zip(images, boxes, cameras)]
         return {"images": [sample[0] for sample in samples], "boxes": [sample[1] for sample in samples],
                 "cameras": [sample[2] for sample in samples]}
-
-    def run_steps(self, values: dict, start: str | None = None, stop: str | None = None) -> dict:
-        """Runs the steps from the one named ``start`` (default: the first) up to, not including, the
-        one named ``stop`` (default: to the end) on a dict of named values."""
-        steps = self.steps
-        first = 0 if start is None else self.index(start)
-        last = len(steps) if stop is None else self.index(stop)
-        for step in steps[first:last]:
-            values = step(values)
-        return values
 
     # -- public API -----------------------------------------------------------------------------
     def detect_batch(self, images, boxes, cameras: Sequence | None = None) -> list[Keypoints2D]:
