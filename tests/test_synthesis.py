@@ -177,6 +177,23 @@ def test_background_files_are_cropped_to_size(tmp_path):
                                   backgrounds.procedural_background(np.random.default_rng(0), 40, 30, "shapes"))
 
 
+def test_blend_background_over_procedural_clutter_or_image_crops():
+    foreground = np.full((30, 40, 3), 7, np.uint8)
+    alpha = np.zeros((30, 40), np.uint8)
+    alpha[10:20, 10:20] = 255
+    blended = augment.BlendBackground(style="noise", seed=3)(foreground, alpha)
+    np.testing.assert_array_equal(blended[10:20, 10:20], 7)
+    expected = backgrounds.procedural_background(np.random.default_rng(3), 40, 30, "noise")
+    np.testing.assert_array_equal(blended[alpha == 0], expected[alpha == 0])
+    ramp = np.repeat(np.arange(200, dtype=np.uint8)[None, :, None], 3, axis=2).repeat(100, axis=0)
+    cropped = augment.BlendBackground([ramp], seed=4)(foreground, alpha)
+    generator = np.random.default_rng(4)
+    generator.integers(1)  # the choice among one image
+    np.testing.assert_array_equal(cropped[alpha == 0], backgrounds.crop_background(generator, ramp, 40, 30)[alpha == 0])
+    with pytest.raises(ValueError, match="style: expected one of"):
+        augment.BlendBackground(style="plasma")
+
+
 def test_background_bank_patches_come_from_the_bank():
     bank = backgrounds.BackgroundBank(16, 3, np.random.default_rng(0))
     assert len(bank.backgrounds) == 3 and bank.backgrounds[0].shape == (32, 32, 3)

@@ -34,9 +34,8 @@ from paz6d.backend.camera import Camera
 from paz6d.backend.files import save_npz_atomically
 from paz6d.backend.mesh import diameter, load_mesh
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_box, square_window
-from paz6d.synthesis.augment import (RandomBrightness, RandomContrast, RandomGaussianBlur, RandomHue, RandomImageNoise,
-                                     RandomSaturation, share_generator)
-from paz6d.synthesis.backgrounds import procedural_background
+from paz6d.synthesis.augment import (BlendBackground, RandomBrightness, RandomContrast, RandomGaussianBlur, RandomHue,
+                                     RandomImageNoise, RandomSaturation, share_generator)
 from paz6d.synthesis.lighting import random_lighting
 from paz6d.synthesis.sampling import hull_points, random_pose_in_view
 from paz6d.synthesis.workers import chunks, progress_bar, run_in_workers
@@ -222,8 +221,8 @@ def _render_full(state: _ViewRenderer, indices: list[int], seed: int, sampling: 
         if not mask.any():
             raise ValueError(f"view {index}: the object is not visible (empty mask)")
         rows, columns = np.nonzero(mask)
-        background = procedural_background(rng, camera.width, camera.height, "shapes")
-        images.append(image_backend.alpha_blend(rendered.rgb, rendered.alpha, background))
+        share_generator(BACKGROUND, rng)
+        images.append(BACKGROUND(rendered.rgb, rendered.alpha))
         boxes.append([columns.min(), rows.min(), columns.max() + 1, rows.max() + 1])
         poses.append(T)
         masks.append(mask)
@@ -301,6 +300,9 @@ def _jitter_crop(views: ViewSet, index: int, rng: np.random.Generator, augmentat
     return rgb, alpha, mask, A @ views.K[index]
 
 
+#: Composites a view over random clutter (``"shapes"`` style); :func:`augmented_view` and the test images
+#: make it draw from the view's generator.
+BACKGROUND = BlendBackground(style="shapes", name="background")
 #: Batch-time colour jitter (brightness, contrast, saturation, hue, blur with probability 0.3, noise);
 #: :func:`augmented_view` makes it draw from the sample's generator.
 COLOUR_JITTER = SequentialProcessor([
@@ -313,8 +315,11 @@ def augmented_view(views: ViewSet, index: int, rng: np.random.Generator,
     """One augmented crop: ``image (S, S, 3) uint8``, ``mask (S, S) bool`` and its ``K (3, 3)``."""
     rgb, alpha, mask, K = _jitter_crop(views, index, rng, augmentation)
     size = rgb.shape[0]
-    background = procedural_background(rng, size, size, "shapes") if augmentation.background else np.zeros_like(rgb)
-    picture = image_backend.alpha_blend(rgb, alpha, background)
+    if augmentation.background:
+        share_generator(BACKGROUND, rng)
+        picture = BACKGROUND(rgb, alpha)
+    else:
+        picture = image_backend.alpha_blend(rgb, alpha, np.zeros_like(rgb))
     if augmentation.colour:
         share_generator(COLOUR_JITTER, rng)
         picture = COLOUR_JITTER(picture)

@@ -28,6 +28,7 @@ import numpy as np
 from paz6d.abstract.processor import RandomProcessor, random_processors
 from paz6d.backend import boxes as boxes_backend
 from paz6d.backend import image as image_backend
+from paz6d.synthesis.backgrounds import BACKGROUND_STYLES, crop_background, procedural_background
 
 
 def share_generator(processor: Callable, generator: np.random.Generator) -> None:
@@ -201,28 +202,34 @@ class RandomCrop(RandomProcessor):
 
 
 class BlendBackground(RandomProcessor):
-    """Composites a foreground over a random crop of one of ``backgrounds`` (resized to fit).
+    """Composites a foreground over a random background: a random crop
+    (:func:`~paz6d.synthesis.backgrounds.crop_background`) of one of ``backgrounds`` or, without
+    images, a procedural background of ``style``
+    (:data:`~paz6d.synthesis.backgrounds.BACKGROUND_STYLES`).
 
     Called as ``(foreground, alpha)`` with ``alpha`` ``(H, W)`` opacity (float in [0, 1],
     ``bool`` or ``uint8`` mask).
     """
 
-    def __init__(self, backgrounds: list[np.ndarray], scale: tuple[float, float] = (0.3, 1.0), seed=None,
+    def __init__(self, backgrounds: list[np.ndarray] | None = None, style: str = "shapes", seed=None,
                  name: str | None = None):
         super().__init__(seed, name)
-        if len(backgrounds) == 0:
-            raise ValueError("backgrounds: expected at least one uint8 RGB background image")
-        self.backgrounds = [image_backend.as_image(background, "backgrounds[i]") for background in backgrounds]
-        self.scale = tuple(scale)
+        if backgrounds is not None and len(backgrounds) == 0:
+            raise ValueError("backgrounds: expected at least one uint8 RGB background image (or None: procedural)")
+        if style not in BACKGROUND_STYLES:
+            raise ValueError(f"style: expected one of {BACKGROUND_STYLES}, got {style!r}")
+        self.backgrounds = None if backgrounds is None else [
+            image_backend.as_image(background, "backgrounds[i]") for background in backgrounds]
+        self.style = style
 
     def call(self, foreground: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-        background = self.backgrounds[int(self.generator.integers(len(self.backgrounds)))]
         height, width = np.asarray(foreground).shape[:2]
-        window = image_backend.random_crop_box((background.shape[1], background.shape[0]), self.generator,
-                                               self.scale, (width / height, width / height))
-        patch = image_backend.resize(image_backend.crop(background, window), (width, height))
-        return image_backend.alpha_blend(foreground, alpha, patch)
-
+        if self.backgrounds is None:
+            background = procedural_background(self.generator, width, height, self.style)
+        else:
+            image = self.backgrounds[int(self.generator.integers(len(self.backgrounds)))]
+            background = crop_background(self.generator, image, width, height)
+        return image_backend.alpha_blend(foreground, alpha, background)
 
 
 class RandomContrastBrightnessNoise(RandomProcessor):

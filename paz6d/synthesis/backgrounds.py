@@ -114,14 +114,9 @@ def _shapes(generator: np.random.Generator, width: int, height: int) -> np.ndarr
     return np.clip(background + noise, 0, 255).astype(np.uint8)
 
 
-def background_image(generator: np.random.Generator, files: list[Path], width: int, height: int,
-                     style: str = "noise") -> np.ndarray:
-    """``(height, width, 3)`` uint8: a random crop (50-100 % of the largest window of the image's
-    aspect ratio, mirrored half of the time) of a random file among ``files``, or a procedural
-    background of ``style`` when there are no files."""
-    if not files:
-        return procedural_background(generator, width, height, style)
-    image = load_image(files[int(generator.integers(len(files)))])
+def crop_background(generator: np.random.Generator, image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """``(height, width, 3)`` uint8: a random crop of ``image`` (uint8 RGB) with the output's aspect
+    ratio, 50-100 % of the largest such window, mirrored half of the time, resized (linear)."""
     source_height, source_width = image.shape[:2]
     scale = generator.uniform(0.5, 1.0) * min(source_width / width, source_height / height)
     crop_width, crop_height = max(1, int(round(width * scale))), max(1, int(round(height * scale)))
@@ -131,6 +126,16 @@ def background_image(generator: np.random.Generator, files: list[Path], width: i
     if generator.random() < 0.5:
         crop = crop[:, ::-1]
     return cv2.resize(np.ascontiguousarray(crop), (width, height), interpolation=cv2.INTER_LINEAR)
+
+
+def background_image(generator: np.random.Generator, files: list[Path], width: int, height: int,
+                     style: str = "noise") -> np.ndarray:
+    """``(height, width, 3)`` uint8: :func:`crop_background` of a random file among ``files`` (read
+    when drawn, so a large folder costs no memory), or a procedural background of ``style`` when there
+    are no files."""
+    if not files:
+        return procedural_background(generator, width, height, style)
+    return crop_background(generator, load_image(files[int(generator.integers(len(files)))]), width, height)
 
 
 class BackgroundBank:
