@@ -22,7 +22,8 @@ def method_of(run_dir: str | Path) -> str:
         raise ValueError(f"run_dir: {run_dir} is not a directory")
     found = [method for method, module in RUN_DIR_MODULES.items() if module.is_run_dir(run_dir)]
     if len(found) != 1:
-        markers = "; ".join(f"{method}: {' + '.join(module.MARKER_FILES)}" for method, module in RUN_DIR_MODULES.items())
+        markers = "; ".join(f"{method}: {' + '.join(module.MARKER_FILES)}"
+                            for method, module in RUN_DIR_MODULES.items())
         state = "matches several methods" if found else "is not a run directory of any method"
         raise ValueError(f"run_dir: {run_dir} {state} (expected the files of exactly one: {markers})")
     return found[0]

@@ -19,8 +19,8 @@ def write_aae_run(folder):
     aae_run.write_config(folder, {"crop_size": 16, "padding": 1.2, "latent_size": 8}, folder / "mesh.ply", 0.001, 3,
                          None)
     aae_run.write_object(folder, HULL, HULL * 0.9, 0.1, HULL)
-    codebook = Codebook(np.eye(2, 8), np.stack([np.eye(3)] * 2), np.array([[0.0, 0, 10, 10]] * 2), np.diag([100.0, 100.0, 1.0]),
-                        0.5)
+    codebook = Codebook(np.eye(2, 8), np.stack([np.eye(3)] * 2), np.array([[0.0, 0, 10, 10]] * 2),
+                        np.diag([100.0, 100.0, 1.0]), 0.5)
     codebook.save(aae_run.codebook_path(folder))
     aae_run.model_path(folder).write_bytes(b"model")
     return folder
@@ -98,8 +98,9 @@ def test_method_of_tells_the_run_directories_apart(tmp_path):
     assert method_of(write_aae_run(tmp_path / "aae")) == "aae"
     assert method_of(write_keypointnet_run(tmp_path / "keypointnet")) == "keypointnet"
     (tmp_path / "empty").mkdir()
-    with pytest.raises(ValueError, match=r"is not a run directory of any method \(expected the files of exactly one: "
-                                         r"aae: config.json \+ codebook.npz; keypointnet: config.json \+ keypoints.json"):
+    with pytest.raises(ValueError, match=r"is not a run directory of any method \(expected the files of exactly "
+                                         r"one: aae: config.json \+ codebook.npz; keypointnet: config.json \+ "
+                                         r"keypoints.json"):
         method_of(tmp_path / "empty")
     with pytest.raises(ValueError, match="not a directory"):
         method_of(tmp_path / "absent")

@@ -305,19 +305,12 @@ class ImplicitPose6D(SequentialProcessor):
     The steps pass a dict of per-sample lists (a batch) along; each is a
     :class:`~paz6d.abstract.KeyedStep` that reads and writes named values:
 
-    ======================  ==========================================  ===========================  =====================
-    step                    reads                                       writes                       processor
-    ======================  ==========================================  ===========================  =====================
-    ``crop``                ``images``, ``boxes``                       ``crops``, ``windows``       :class:`SquareCrop`
-    ``encode``              ``crops``                                   ``codes``                    :class:`EncodeCrops`
-    ``lookup``              ``codes``, ``top_k``                        ``indices``,                 :class:`CodebookLookup`
-                                                                        ``similarities``,
-                                                                        ``rotations``
-    ``pose_from_codebook``  ``indices``, ``similarities``,              ``candidates``               :class:`PosesFromCodebook`
-                            ``rotations``, ``boxes``, ``cameras``
-    ``refine_with_depth``   ``candidates``, ``depths``, ``boxes``,      ``poses``                    :class:`RefineWithDepth`
-                            ``cameras``
-    ======================  ==========================================  ===========================  =====================
+    - ``crop``: ``images``, ``boxes`` -> ``crops``, ``windows`` (:class:`~paz6d.processors.crops.SquareCrop`);
+    - ``encode``: ``crops`` -> ``codes`` (:class:`EncodeCrops`);
+    - ``lookup``: ``codes``, ``top_k`` -> ``indices``, ``similarities``, ``rotations`` (:class:`CodebookLookup`);
+    - ``pose_from_codebook``: ``indices``, ``similarities``, ``rotations``, ``boxes``, ``cameras`` ->
+      ``candidates`` (:class:`PosesFromCodebook`);
+    - ``refine_with_depth``: ``candidates``, ``depths``, ``boxes``, ``cameras`` -> ``poses`` (:class:`RefineWithDepth`).
 
     Args:
         run_dir: folder written by ``paz6d train aae`` (:mod:`paz6d.aae.run_dir`).

@@ -56,7 +56,8 @@ def _check_correspondences(points3d, points2d) -> tuple[np.ndarray, np.ndarray]:
     points3d = as_points(points3d, "points3d", dimension=3)
     points2d = as_points(points2d, "points2d", dimension=2)
     if len(points3d) != len(points2d):
-        raise PnPError(f"points3d/points2d: expected the same number of points, got {len(points3d)} and {len(points2d)}")
+        raise PnPError(f"points3d/points2d: expected the same number of points, got {len(points3d)} and "
+                       f"{len(points2d)}")
     if len(points3d) < 4:
         raise PnPError(f"points3d: expected at least 4 correspondences of shape (N, 3), got {len(points3d)}")
     singular = np.linalg.svd(points3d - points3d.mean(axis=0), compute_uv=False)

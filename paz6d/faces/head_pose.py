@@ -334,15 +334,10 @@ class HeadPose6D(SequentialProcessor):
 
     The steps pass a dict of named values along (each a :class:`~paz6d.abstract.KeyedStep`):
 
-    ==============  ==========================================  ============================  ======================
-    step            reads                                       writes                        processor
-    ==============  ==========================================  ============================  ======================
-    ``find_faces``  ``image``                                   ``candidates``                :class:`FindFaces`
-    ``landmarks``   ``image``, ``candidates``                   ``landmarks``                 :class:`LandmarksInRegions`
-    ``solve_pnp``   ``landmarks``, ``camera``                   ``poses``, ``errors``         :class:`HeadPnP`
-    ``merge``       ``candidates``, ``landmarks``, ``poses``,   ``detections``                :class:`MergeHeads`
-                    ``errors``
-    ==============  ==========================================  ============================  ======================
+    - ``find_faces``: ``image`` -> ``candidates`` (:class:`FindFaces`);
+    - ``landmarks``: ``image``, ``candidates`` -> ``landmarks`` (:class:`LandmarksInRegions`);
+    - ``solve_pnp``: ``landmarks``, ``camera`` -> ``poses``, ``errors`` (:class:`HeadPnP`);
+    - ``merge``: ``candidates``, ``landmarks``, ``poses``, ``errors`` -> ``detections`` (:class:`MergeHeads`).
 
     Args:
         camera: default intrinsics of the images: a Camera (images must be ``camera.width x camera.height``)
@@ -390,7 +385,8 @@ class HeadPose6D(SequentialProcessor):
         return self.run_steps(self._values(image, camera))["detections"]
 
     def call(self, image, camera=None) -> list[Pose6D]:
-        """Head poses in ``image`` (uint8 RGB); ``camera``: this image's Camera or ``K`` (default: the constructor's)."""
+        """Head poses in ``image`` (uint8 RGB); ``camera``: this image's Camera or ``K`` (default: the
+        constructor's)."""
         return [detection.pose for detection in self.detect(image, camera)]
 
 

@@ -113,20 +113,15 @@ class KeypointPose6D(SequentialProcessor):
     The steps pass a dict of per-sample lists (a batch) along; each is a
     :class:`~paz6d.abstract.KeyedStep` that reads and writes named values:
 
-    ==================  =============================  ===========================  =======================
-    step                reads                          writes                       processor
-    ==================  =============================  ===========================  =======================
-    ``crop``            ``images``, ``boxes``          ``crops``, ``windows``       :class:`SquareCrop`
-    ``predict``         ``crops``                      ``outputs``                  :class:`Predict`
-    ``decode``          ``outputs``                    ``uv``, ``spread``           :class:`DecodeKeypoints`
-    ``score``           ``spread``                     ``scores``                   :class:`ScoreKeypoints`
-    ``to_image``        ``uv``, ``windows``            ``points``                   :class:`CropToImage`
-    ``to_keypoints2d``  ``points``, ``scores``         ``keypoints``                :class:`ToKeypoints2D`
-    ``solve_pnp``       ``keypoints``, ``windows``,    ``poses``                    :class:`KeypointPnP`
-                        ``cameras``
-    ``depth_from_box``  ``poses``, ``boxes``,          ``poses``                    :class:`DepthFromBox`
-                        ``cameras``                    (only with ``depth_from_box=True``)
-    ==================  =============================  ===========================  =======================
+    - ``crop``: ``images``, ``boxes`` -> ``crops``, ``windows`` (:class:`~paz6d.processors.crops.SquareCrop`);
+    - ``predict``: ``crops`` -> ``outputs`` (:class:`~paz6d.processors.predict.Predict`);
+    - ``decode``: ``outputs`` -> ``uv``, ``spread`` (:class:`DecodeKeypoints`);
+    - ``score``: ``spread`` -> ``scores`` (:class:`ScoreKeypoints`);
+    - ``to_image``: ``uv``, ``windows`` -> ``points`` (:class:`~paz6d.processors.crops.CropToImage`);
+    - ``to_keypoints2d``: ``points``, ``scores`` -> ``keypoints`` (:class:`~paz6d.processors.keypoints.ToKeypoints2D`);
+    - ``solve_pnp``: ``keypoints``, ``windows``, ``cameras`` -> ``poses`` (:class:`KeypointPnP`);
+    - ``depth_from_box`` (only with ``depth_from_box=True``): ``poses``, ``boxes``, ``cameras`` -> ``poses``
+      (:class:`~paz6d.processors.pose.DepthFromBox`).
 
     ``cameras`` holds a :class:`~paz6d.backend.camera.Camera` per image. A sample whose PnP fails
     carries its :class:`~paz6d.backend.pnp.PnPError` as its pose (raised by a call, ``None`` from
