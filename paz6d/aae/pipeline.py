@@ -28,6 +28,7 @@ import numpy as np
 
 from paz6d.aae import run_dir as run_files
 from paz6d.aae.codebook import Codebook
+from paz6d.aae.model import encode_function, encoder_of, to_model_input
 from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
 from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera, as_camera, depth_to_points, project_points, unproject
@@ -177,8 +178,6 @@ class EncodeCrops(Processor):
         self.encode, self.crop_size = encode, int(crop_size)
 
     def call(self, crops) -> np.ndarray:
-        from paz6d.aae.model import to_model_input
-
         inputs = to_model_input(np.stack(crops) if isinstance(crops, list) else crops)
         if inputs.shape[1:3] != (self.crop_size, self.crop_size):
             raise ValueError(f"crops: expected {self.crop_size}x{self.crop_size} crops, got {inputs.shape[1:3]}")
@@ -333,8 +332,6 @@ class ImplicitPose6D(SequentialProcessor):
     def __init__(self, run_dir: str | Path, camera=None, refine: bool = True, neighbours: int = 10,
                  neighbour_radius_deg: float = 15.0, top_k: int = 1, class_name: str | None = None):
         super().__init__(name="ImplicitPose6D")
-        from paz6d.aae.model import encode_function, encoder_of
-
         config = run_files.read_config(run_dir)["config"]
         self.crop_size, self.padding = int(config["crop_size"]), float(config["padding"])
         if int(top_k) < 1 or int(neighbours) < 1:
@@ -386,8 +383,6 @@ class ImplicitPose6D(SequentialProcessor):
 
     def reconstruct(self, crops) -> np.ndarray:
         """The autoencoder's reconstructions ``(B, S, S, 3)`` uint8 of crops."""
-        from paz6d.aae.model import to_model_input
-
         output = np.asarray(self.autoencoder(to_model_input(crops), training=False))
         return np.clip(np.rint(output * 255), 0, 255).astype(np.uint8)
 

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from paz6d.aae.codebook import Codebook
+from paz6d.aae.model import load_model
 from paz6d.backend.files import load_json, save_npz_atomically, write_json_atomically
 
 CONFIG_FILE = "config.json"
@@ -156,8 +157,6 @@ def read_codebook(run_dir: str | Path) -> Codebook:
 
 def read_model(run_dir: str | Path):
     """The trained autoencoder (imports TensorFlow)."""
-    from paz6d.aae.model import load_model
-
     return load_model(_required(model_path(run_dir)))
 
 

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from paz6d.abstract.processor import random_processors, reseed
+from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow
 
 _ORDER_STREAM = 0
 _SAMPLE_STREAM = 1
@@ -149,8 +150,6 @@ class BatchDispatcher:
 
 
 def _build_processing_sequence() -> type:
-    from paz6d.backend.tensorflow_guard import import_keras
-
     keras = import_keras()
 
     class ProcessingSequence(keras.utils.PyDataset):
@@ -218,8 +217,6 @@ def to_tf_dataset(samples: Sequence, processor: Callable, batch_size: int, seed:
         batch dimension (``None`` unless ``drop_remainder``); dtypes and per-sample shapes come
         from processing the first sample.
     """
-    from paz6d.backend.tensorflow_guard import import_tensorflow
-
     tf = import_tensorflow()
     if epochs is not None and int(epochs) < 1:
         raise ValueError(f"epochs: expected a positive number of epochs or None, got {epochs}")

