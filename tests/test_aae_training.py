@@ -72,7 +72,7 @@ def test_rendering_at_a_codebook_rotation_returns_that_rotation(toy_run):
     from paz6d.aae.codebook import Codebook
     from paz6d.aae.pipeline import ImplicitPose6D
     from paz6d.backend.mesh import load_mesh
-    from paz6d.aae.views import mask_box
+    from paz6d.aae.views import coverage_box
     from renderers import Renderer
 
     root, mesh_path, _ = toy_run
@@ -87,7 +87,7 @@ def test_rendering_at_a_codebook_rotation_returns_that_rotation(toy_run):
             T[:3, :3] = codebook.rotations[index]
             T[2, 3] = codebook.render_distance
             output = renderer.render(codebook.render_K, [(mesh, T)], masks=False)
-            box = tuple(mask_box(output.alpha))
+            box = tuple(coverage_box(output.alpha))
             indices, similarities = codebook.nearest(estimator.encode(estimator.crop(output.rgb, box)[None]))
             assert indices[0, 0] == index and similarities[0, 0] == pytest.approx(1.0, abs=1e-5)
             pose = estimator(output.rgb, box)
@@ -175,7 +175,7 @@ def test_bad_inputs_raise_clear_value_errors(toy_run, tmp_path):
 def test_icp_refinement_with_depth_recovers_the_pose(toy_run):
     from paz6d.backend.mesh import load_mesh
     from paz6d.aae.pipeline import ImplicitPose6D
-    from paz6d.aae.views import mask_box
+    from paz6d.aae.views import coverage_box
     from renderers import Renderer
     from scipy.spatial.transform import Rotation
 
@@ -187,7 +187,7 @@ def test_icp_refinement_with_depth_recovers_the_pose(toy_run):
     T_true[:3, 3] = [0.02, -0.01, 0.45]
     with Renderer(160, 120) as renderer:
         output = renderer.render(K, [(load_mesh(mesh_path, 0.001), T_true)])
-    box = mask_box(output.masks[0].astype(np.uint8) * 255)
+    box = coverage_box(output.masks[0].astype(np.uint8) * 255)
     start = Pose6D.from_rotation_matrix(Rotation.from_rotvec([0.05, 0.03, -0.04]).as_matrix() @ T_true[:3, :3],
                                         T_true[:3, 3] + [0.004, -0.003, 0.01])
     refined = estimator.refine_with_depth([start], output.depth, box)
@@ -203,7 +203,7 @@ def test_training_from_a_generated_data_set(toy_run, tmp_path):
     from data_gen.config import GenerationConfig
     from data_gen.generator import generate
     from paz6d.backend.image import load_image
-    from paz6d.aae.views import mask_box
+    from paz6d.aae.views import coverage_box
 
     root, mesh, _ = toy_run
     data = tmp_path / "data"
@@ -223,7 +223,8 @@ def test_training_from_a_generated_data_set(toy_run, tmp_path):
         np.testing.assert_array_equal(pairs["inputs"][index], load_image(scene / "crop_rgb" / name))  # data_gen's crop
         mask = load_image(scene / "crop_mask" / name, grayscale=True)
         target_mask = (pairs["targets"][index].max(axis=-1) > 0).astype(np.uint8) * 255
-        np.testing.assert_allclose(mask_box(target_mask), mask_box(mask), atol=1.0)  # the target sits on the object
+        # the target sits on the object
+        np.testing.assert_allclose(coverage_box(target_mask), coverage_box(mask), atol=1.0)
     with pytest.raises(ValueError, match="--dataset"):
         train_aae(mesh, tmp_path / "run", TOY, mesh_scale=0.001, workers=0, progress=False)
 

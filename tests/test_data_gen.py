@@ -25,7 +25,7 @@ from data_gen.config import GenerationConfig
 from data_gen.generator import generate
 from data_gen.producer import image_generator
 from paz6d.backend.camera import transform_and_project
-from paz6d.backend.mesh import diameter, load_mesh
+from paz6d.backend.mesh import load_mesh
 from paz6d.datasets.bop import BOPDataset, load_models_info
 from paz6d.synthesis.scene import sample_scene
 

@@ -291,3 +291,11 @@ def test_nonzero_window_is_the_tight_box_grown_and_clipped():
     assert nonzero_window(mask, margin=1) == (slice(1, 6), slice(2, 8))
     assert nonzero_window(mask, margin=3) == (slice(0, 6), slice(0, 8))
     assert nonzero_window(np.zeros((3, 3), bool)) is None
+
+
+def test_mask_box_covers_the_nonzero_pixels():
+    mask = np.zeros((6, 8), dtype=bool)
+    mask[2, 3] = mask[4, 6] = True
+    np.testing.assert_array_equal(image.mask_box(mask), [3.0, 2.0, 7.0, 5.0])
+    assert image.mask_box(mask).dtype == np.float64
+    assert image.mask_box(np.zeros((3, 3), np.uint8)) is None

@@ -55,7 +55,8 @@ def test_pool_returns_results_in_task_order_for_any_number_of_workers():
 
 def test_pool_closes_an_in_process_state_and_checks_its_arguments():
     _ClosableState.closed = False
-    assert workers.run_in_workers(_ClosableState, (), lambda state, task: task * 2, [1, 2], 0, task_size=lambda _: 1) == [2, 4]
+    doubled = workers.run_in_workers(_ClosableState, (), lambda state, task: task * 2, [1, 2], 0, task_size=lambda _: 1)
+    assert doubled == [2, 4]
     assert _ClosableState.closed
     with pytest.raises(ValueError, match="processes: expected 0 .* got -1"):
         workers.run_in_workers(_ClosableState, (), lambda state, task: task, [1], -1)
@@ -109,7 +110,8 @@ def test_placed_objects_are_inside_the_image_and_apart():
     generator, placed = np.random.default_rng(1), []
     for _ in range(5):
         rotation = sampling.random_rotation(generator)
-        translation = sampling.place_object(generator, rotation, centre, radius, outline, K, 120, 90, (0.3, 0.6), placed)
+        translation = sampling.place_object(generator, rotation, centre, radius, outline, K, 120, 90, (0.3, 0.6),
+                                            placed)
         if translation is None:
             continue
         assert sampling.inside_image(project_points(outline @ rotation.T + translation, K), 120, 90)
@@ -245,8 +247,10 @@ PICTURE = np.random.default_rng(9).integers(0, 256, (24, 32, 3), dtype=np.uint8)
 RANDOM_PROCESSORS = [
     lambda: augment.RandomBrightness(20.0), lambda: augment.RandomContrast(0.6, 1.4),
     lambda: augment.RandomSaturation(0.6, 1.4), lambda: augment.RandomHue(30.0), lambda: augment.RandomImageNoise(8.0),
-    lambda: augment.RandomGaussianBlur((3, 5), probability=0.7), lambda: augment.RandomGaussianBlur((0,), 0.7, (0.4, 1.2)),
-    lambda: augment.RandomImageNoise(6.0, probability=0.8, quantized=True), lambda: augment.RandomContrastBrightnessNoise(),
+    lambda: augment.RandomGaussianBlur((3, 5), probability=0.7),
+    lambda: augment.RandomGaussianBlur((0,), 0.7, (0.4, 1.2)),
+    lambda: augment.RandomImageNoise(6.0, probability=0.8, quantized=True),
+    lambda: augment.RandomContrastBrightnessNoise(),
     lambda: augment.RandomFlipLeftRight(), lambda: augment.RandomCrop(),
 ]
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from paz6d.aae.model import crop_object
-from paz6d.aae.views import mask_box, rotate_view
+from paz6d.aae.views import coverage_box, rotate_view
 from paz6d.abstract.processor import SequentialProcessor
 from paz6d.synthesis.augment import (RandomContrastBrightnessNoise, RandomGaussianBlur, RandomHue, RandomSaturation,
                                      share_generator)
@@ -156,7 +156,7 @@ class ViewSampler:
         view = int(rng.integers(len(self.rgb))) if view is None else view
         angle = float(rng.uniform(0, 2 * np.pi)) if angle is None else angle
         rgb, alpha = rotate_view(self.rgb[view], self.alpha[view], angle, self.K)
-        box = mask_box(alpha)
+        box = coverage_box(alpha)
         if box is None:
             raise ValueError(f"view {view}: the object is not visible in the rendering")
         target = crop_object(rgb, box, self.crop_size, self.padding)

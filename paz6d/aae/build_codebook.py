@@ -6,7 +6,7 @@ import numpy as np
 
 from paz6d.aae.model import crop_object, encode_function, to_model_input
 from paz6d.aae.codebook import Codebook, codebook_angles, codebook_rotations
-from paz6d.aae.views import ViewGeometry, mask_box, rotate_view, silhouette_boxes
+from paz6d.aae.views import ViewGeometry, coverage_box, rotate_view, silhouette_boxes
 
 
 def codebook_crops(rgb: np.ndarray, alpha: np.ndarray, geometry: ViewGeometry, in_plane: int, crop_size: int,
@@ -20,7 +20,7 @@ def codebook_crops(rgb: np.ndarray, alpha: np.ndarray, geometry: ViewGeometry, i
     for view in views:
         for angle in angles:
             rotated_rgb, rotated_alpha = rotate_view(rgb[view], alpha[view], float(angle), geometry.K)
-            box = mask_box(rotated_alpha)
+            box = coverage_box(rotated_alpha)
             if box is None:
                 raise ValueError(f"view {view}: the object is not visible in the rendering")
             crops[index] = crop_object(rotated_rgb, box, crop_size, padding)

@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from paz6d.backend.checks import as_array
+from paz6d.backend.image import mask_box
 from paz6d.synthesis.workers import progress_bar, run_in_workers
 
 #: The bounding sphere projects to a circle of radius render_size / SPHERE_FRACTION.
@@ -61,14 +62,10 @@ def silhouette_boxes(points, rotations, K, translation) -> np.ndarray:
     return np.stack([u.min(1), v.min(1), u.max(1), v.max(1)], axis=1) + 0.5
 
 
-def mask_box(alpha: np.ndarray, threshold: int = 128) -> np.ndarray | None:
-    """Box ``(4,)`` (box convention, pixel ``i`` covers ``[i, i+1)``) of pixels with ``alpha >= threshold``;
-    None when there are none."""
-    rows = np.flatnonzero(np.any(alpha >= threshold, axis=1))
-    if len(rows) == 0:
-        return None
-    cols = np.flatnonzero(np.any(alpha >= threshold, axis=0))
-    return np.array([cols[0], rows[0], cols[-1] + 1, rows[-1] + 1], dtype=np.float64)
+def coverage_box(alpha: np.ndarray, threshold: int = 128) -> np.ndarray | None:
+    """Box ``(4,)`` (box convention, pixel ``i`` covers ``[i, i+1)``) of the pixels an object covers at
+    least half (uint8 ``alpha >= threshold``); None when there are none."""
+    return mask_box(alpha >= threshold)
 
 
 def rotation_about_principal_point(angle: float, K) -> np.ndarray:

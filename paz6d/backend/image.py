@@ -136,6 +136,16 @@ def nonzero_window(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | N
             slice(max(int(columns[0]) - margin, 0), min(int(columns[-1]) + 1 + margin, width)))
 
 
+def mask_box(mask: np.ndarray) -> np.ndarray | None:
+    """``xyxy`` box ``(4,)`` float64 of the nonzero pixels of a 2D ``mask`` (pixel ``i`` covers
+    ``[i, i + 1)``, so the box is ``(x_min, y_min, x_max + 1, y_max + 1)``); ``None`` when empty."""
+    window = nonzero_window(mask)
+    if window is None:
+        return None
+    rows, columns = window
+    return np.array([columns.start, rows.start, columns.stop, rows.stop], dtype=np.float64)
+
+
 def crop(image, box) -> np.ndarray:
     """Copies the pixels covered by ``xyxy`` ``box`` (clipped to the image).
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.image import mask_box
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, square_window
 from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.keypointnet.views import ViewSet
@@ -68,8 +69,7 @@ def bop_object_views(root: str | Path, object_id: int | None = None, split: str 
                 fraction = visible.sum() / instance.mask.sum()
             if fraction is not None and fraction < min_visible_fraction:
                 continue
-            rows, columns = np.nonzero(visible)
-            window = square_window((columns.min(), rows.min(), columns.max() + 1, rows.max() + 1), margin)
+            window = square_window(mask_box(visible), margin)
             rgb.append(crop_square(sample.image, window, input_size))
             masks.append(crop_square(visible.astype(np.uint8) * 255, window, input_size) > 127)
             intrinsics.append(crop_intrinsics(sample.K, window, input_size))

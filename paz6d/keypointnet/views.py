@@ -220,10 +220,9 @@ def _render_full(state: _ViewRenderer, indices: list[int], seed: int, sampling: 
         mask = rendered.masks[0]
         if not mask.any():
             raise ValueError(f"view {index}: the object is not visible (empty mask)")
-        rows, columns = np.nonzero(mask)
         share_generator(BACKGROUND, rng)
         images.append(BACKGROUND(rendered.rgb, rendered.alpha))
-        boxes.append([columns.min(), rows.min(), columns.max() + 1, rows.max() + 1])
+        boxes.append(image_backend.mask_box(mask))
         poses.append(T)
         masks.append(mask)
     return {"images": np.stack(images), "boxes": np.asarray(boxes, float), "T_model2cam": np.stack(poses),

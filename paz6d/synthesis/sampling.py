@@ -28,7 +28,8 @@ def hull_points(vertices: np.ndarray) -> np.ndarray:
 
 
 def random_rotation(generator: np.random.Generator, mode: str = "so3",
-                    elevation_degrees: tuple[float, float] = (-90.0, 90.0), inplane_degrees: float = 180.0) -> np.ndarray:
+                    elevation_degrees: tuple[float, float] = (-90.0, 90.0),
+                    inplane_degrees: float = 180.0) -> np.ndarray:
     """``R_model2cam`` ``(3, 3)``: uniform on SO(3) (``mode="so3"``), or (``"view-sphere"``) a
     viewpoint uniform on the spherical band between the two elevations (degrees) looking at the
     model origin, turned in-plane by up to ``±inplane_degrees``."""
