@@ -3,6 +3,11 @@
 Each method keeps its pipeline in its own package (``paz6d.aae``, ``paz6d.keypointnet``,
 ``paz6d.faces``); this module is the one place to import them from. Importing it is cheap: models
 (and TensorFlow) load when a pipeline is created.
+
+Every pipeline is a :class:`~paz6d.abstract.SequentialProcessor` of named steps
+(``pipeline.names``; ``pipeline["crop"]``; ``replace``, ``insert`` and ``remove`` by name), and the
+pose pipelines take the camera per call (``pipeline(image, box, camera=...)``, default: the
+constructor's).
 """
 
 from paz6d.aae.pipeline import ImplicitPose6D
