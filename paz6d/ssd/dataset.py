@@ -1,0 +1,139 @@
+"""Detection training data: the COCO annotations ``paz6d generate`` writes, turned into SSD batches.
+
+``paz6d generate`` writes ``<dataset>/<split>/<scene>/scene_gt_coco.json`` (visible boxes, categories
+named ``obj_XXXXXX``) next to ``rgb/``. :func:`load_detection_set` reads every scene of a split;
+:func:`training_batch` makes one augmented batch as a pure function of ``(seed, step)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from paz6d.abstract.processor import reseed
+from paz6d.backend import boxes as boxes_backend
+from paz6d.backend.files import load_json
+from paz6d.backend.image import load_image, resize
+from paz6d.ssd.encoding import encode_targets
+from paz6d.synthesis.box_augment import AnnotatedImage
+
+COCO_FILE = "scene_gt_coco.json"
+
+
+@dataclass(frozen=True)
+class DetectionSample:
+    """One annotated image: ``path``, ``boxes (N, 4)`` ``xyxy`` pixels and ``class_ids (N,)`` (1-based,
+    indices into the set's ``class_names`` + 1)."""
+
+    path: Path
+    boxes: np.ndarray
+    class_ids: np.ndarray
+
+
+@dataclass(frozen=True)
+class DetectionSet:
+    """A split's samples and its class names (sorted; class id ``i`` is ``class_names[i - 1]``)."""
+
+    class_names: tuple[str, ...]
+    samples: tuple[DetectionSample, ...]
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+
+def default_split(dataset: Path) -> str:
+    """``train`` when ``dataset/train`` exists, else the only split folder holding COCO annotations."""
+    if (dataset / "train").is_dir():
+        return "train"
+    splits = sorted(path.parent.parent.name for path in dataset.glob(f"*/*/{COCO_FILE}"))
+    if len(set(splits)) != 1:
+        raise ValueError(f"dataset: {dataset} has no 'train' split and {len(set(splits))} splits with "
+                         f"{COCO_FILE} files ({sorted(set(splits))}); name one with --split")
+    return splits[0]
+
+
+def load_detection_set(dataset: str | Path, split: str | None = None,
+                       class_names: tuple[str, ...] | None = None) -> DetectionSet:
+    """Reads every ``<dataset>/<split>/*/scene_gt_coco.json``.
+
+    Args:
+        dataset: data set folder (BOP layout, as ``paz6d generate`` writes).
+        split: split folder (default: :func:`default_split`).
+        class_names: the classes to use (e.g. a trained model's); default: every category, sorted.
+    Raises:
+        ValueError: no annotation file or no annotated image (empty data set), a category outside
+            ``class_names``, malformed annotations; messages name the file.
+    """
+    dataset = Path(dataset)
+    if not dataset.is_dir():
+        raise ValueError(f"dataset: {dataset} is not a directory")
+    split = default_split(dataset) if split is None else split
+    files = sorted((dataset / split).glob(f"*/{COCO_FILE}"))
+    if not files:
+        raise ValueError(f"dataset: no {COCO_FILE} in {dataset / split}/<scene>/ (is it a `paz6d generate` output?)")
+    contents = [(path, load_json(path)) for path in files]
+    names = sorted({category["name"] for _, coco in contents for category in coco.get("categories", [])})
+    if class_names is None:
+        class_names = tuple(names)
+    index = {name: position + 1 for position, name in enumerate(class_names)}
+    samples = []
+    for path, coco in contents:
+        try:
+            category_names = {category["id"]: category["name"] for category in coco["categories"]}
+            annotations: dict[int, list] = {}
+            for annotation in coco["annotations"]:
+                annotations.setdefault(annotation["image_id"], []).append(annotation)
+            for image in coco["images"]:
+                rows = [a for a in annotations.get(image["id"], []) if not a.get("iscrowd", 0) and not a.get("ignore")]
+                unknown = sorted({category_names[a["category_id"]] for a in rows} - set(index))
+                if unknown:
+                    raise ValueError(f"{path}: unknown class(es) {unknown}; the classes are {list(class_names)}")
+                boxes = np.asarray([a["bbox"] for a in rows], dtype=np.float64).reshape(-1, 4)
+                boxes = boxes_backend.convert(boxes, "xywh", "xyxy")
+                ids = np.asarray([index[category_names[a["category_id"]]] for a in rows], dtype=np.int64)
+                keep = np.all(boxes[:, 2:] > boxes[:, :2], axis=1)
+                if np.any(keep):
+                    samples.append(DetectionSample(path.parent / image["file_name"], boxes[keep], ids[keep]))
+        except (KeyError, TypeError) as error:
+            raise ValueError(f"{path}: malformed COCO annotations ({type(error).__name__}: {error})") from error
+    if not samples:
+        raise ValueError(f"dataset: {dataset / split} holds no annotated image (empty data set)")
+    if not class_names:
+        raise ValueError(f"dataset: {dataset / split} has no categories")
+    return DetectionSet(tuple(class_names), tuple(samples))
+
+
+def prepare_sample(sample: AnnotatedImage, input_size: int, priors: np.ndarray, num_classes: int,
+                   iou_threshold: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Resizes an (augmented) sample to ``input_size`` and encodes its boxes: ``(image (S, S, 3) uint8,
+    target (P, 4 + C) float32)``."""
+    height, width = sample.image.shape[:2]
+    image = resize(sample.image, (input_size, input_size))
+    boxes = boxes_backend.normalize(sample.boxes, (width, height)) if len(sample.boxes) else sample.boxes
+    return image, encode_targets(boxes, sample.class_ids, priors, num_classes, iou_threshold)
+
+
+def training_batch(data: DetectionSet, augmentation: Callable[[], Callable] | None, seed: int, step: int, batch_size: int, input_size: int,
+                   priors: np.ndarray, iou_threshold: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Batch ``step``: ``images (B, S, S, 3)`` uint8 and ``targets (B, P, 4 + C)`` float32.
+
+    Sample ``b`` is image ``rng.integers(len(data))`` of ``rng = default_rng([seed, step, b])``, augmented
+    by a processor over :class:`AnnotatedImage` that ``augmentation()`` makes (one per batch, so batches
+    can be made in several threads), reseeded per sample: a batch depends only on ``(seed, step)``.
+    """
+    chain = augmentation() if augmentation is not None else None
+    images, targets = [], []
+    for slot in range(batch_size):
+        generator = np.random.default_rng([seed, step, slot])
+        sample = data.samples[int(generator.integers(len(data)))]
+        annotated = AnnotatedImage(load_image(sample.path), sample.boxes, sample.class_ids)
+        if chain is not None:
+            reseed(chain, [seed, step, slot, 1])
+            annotated = chain(annotated)
+        image, target = prepare_sample(annotated, input_size, priors, len(data.class_names) + 1, iou_threshold)
+        images.append(image)
+        targets.append(target)
+    return np.stack(images), np.stack(targets)

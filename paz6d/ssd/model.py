@@ -1,0 +1,307 @@
+"""SSD (Liu et al., "SSD: Single Shot MultiBox Detector", ECCV 2016) networks, randomly initialised.
+
+Three architectures share one head and one output layout:
+
+- ``"ssd300"``: VGG16 body (conv1_1 ... conv5_3, pool5 3x3/1, dilated fc6, fc7 as convolutions) with an
+  L2-normalised conv4_3 (learned per-channel scale, initialised to 20), four extra blocks; feature maps
+  38, 19, 10, 5, 3, 1 and the paper's prior boxes.
+- ``"ssd512"``: the same body on 512 x 512 inputs, five extra blocks; feature maps 64, 32, 16, 8, 4, 2, 1.
+- ``"light"``: a CPU configuration (input 320 by default): MobileNet-style depthwise-separable body with
+  batch normalisation, ``width`` channels scaling, feature maps of stride 8, 16, 32, 64 and two more, and
+  depthwise-separable heads; priors sized for small objects.
+
+The model maps ``images (B, S, S, 3)`` float32 (normalised with :data:`IMAGE_MEAN`/:data:`IMAGE_STD`,
+see :func:`normalize_images`) to ``(B, P, 4 + C)``: per prior, the 4 box offsets (encoded as in
+:func:`paz6d.backend.boxes.encode`) then ``C`` class logits, class 0 being the background. Priors
+(:func:`priors_for`) are in the same order: feature map, then cell (row-major), then prior shape.
+
+Models save as ``.keras`` with only registered layers (no ``Lambda``): loading runs in safe mode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from paz6d.backend.boxes import prior_boxes
+from paz6d.backend.files import save_keras_model_atomically
+from paz6d.backend.image import normalize
+from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow
+
+tf = import_tensorflow()
+keras = import_keras()
+
+PACKAGE = "paz6d"
+ARCHITECTURES = ("ssd300", "ssd512", "light")
+#: Input normalisation: ``(image / 255 - IMAGE_MEAN) / IMAGE_STD`` per channel (RGB).
+IMAGE_MEAN = (0.485, 0.456, 0.406)
+IMAGE_STD = (0.229, 0.224, 0.225)
+
+
+class SSDModelError(ValueError):
+    """An SSD model file or architecture setting is unusable."""
+
+
+@dataclass(frozen=True)
+class PriorSpec:
+    """Prior boxes of every feature map (pixels of the square network input).
+
+    Attributes:
+        input_size: side of the network input.
+        feature_map_sizes: side of each feature map.
+        steps: pixels between neighbouring cell centres, per map.
+        min_sizes, max_sizes: prior sides per map (a ``min`` square, a ``sqrt(min * max)`` square).
+        aspect_ratios: per map, the extra ratios ``r`` (each gives an ``r`` and a ``1/r`` box).
+    """
+
+    input_size: int
+    feature_map_sizes: tuple[int, ...]
+    steps: tuple[float, ...]
+    min_sizes: tuple[float, ...]
+    max_sizes: tuple[float, ...]
+    aspect_ratios: tuple[tuple[float, ...], ...]
+
+    @property
+    def priors_per_cell(self) -> tuple[int, ...]:
+        return tuple(2 + 2 * len(ratios) for ratios in self.aspect_ratios)
+
+    def to_dict(self) -> dict:
+        return {key: [list(item) for item in value] if key == "aspect_ratios" else
+                (list(value) if isinstance(value, tuple) else value) for key, value in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "PriorSpec":
+        try:
+            return cls(int(data["input_size"]), tuple(int(v) for v in data["feature_map_sizes"]),
+                       tuple(float(v) for v in data["steps"]), tuple(float(v) for v in data["min_sizes"]),
+                       tuple(float(v) for v in data["max_sizes"]),
+                       tuple(tuple(float(r) for r in ratios) for ratios in data["aspect_ratios"]))
+        except (KeyError, TypeError, ValueError) as error:
+            raise SSDModelError(f"priors: expected input_size, feature_map_sizes, steps, min_sizes, max_sizes and "
+                                f"aspect_ratios ({type(error).__name__}: {error})") from error
+
+
+def paper_priors(architecture: str, input_size: int | None = None) -> PriorSpec:
+    """The prior layout of ``architecture``: the SSD paper's (Caffe release) for ``ssd300``/``ssd512``,
+    small-object priors for ``light`` (any ``input_size`` divisible by 64; default 320)."""
+    if architecture == "ssd300":
+        return PriorSpec(300, (38, 19, 10, 5, 3, 1), (8, 16, 32, 64, 100, 300), (30, 60, 111, 162, 213, 264),
+                         (60, 111, 162, 213, 264, 315), ((2,), (2, 3), (2, 3), (2, 3), (2,), (2,)))
+    if architecture == "ssd512":
+        return PriorSpec(512, (64, 32, 16, 8, 4, 2, 1), (8, 16, 32, 64, 128, 256, 512),
+                         (35.84, 76.8, 153.6, 230.4, 307.2, 384.0, 460.8),
+                         (76.8, 153.6, 230.4, 307.2, 384.0, 460.8, 537.6),
+                         ((2,), (2, 3), (2, 3), (2, 3), (2, 3), (2,), (2,)))
+    if architecture == "light":
+        size = 320 if input_size is None else int(input_size)
+        if size < 128 or size % 64:
+            raise SSDModelError(f"input_size: expected a multiple of 64 of at least 128 for 'light', got {size}")
+        maps = (size // 8, size // 16, size // 32, size // 64, (size // 64 + 1) // 2, 1)
+        fractions = np.array([0.044, 0.094, 0.19, 0.34, 0.53, 0.75, 1.0])
+        sides = tuple(float(v) for v in np.round(fractions * size, 1))
+        return PriorSpec(size, maps, tuple(float(size) / m for m in maps), sides[:-1], sides[1:],
+                         ((2,), (2, 3), (2, 3), (2, 3), (2,), (2,)))
+    raise SSDModelError(f"architecture: expected one of {ARCHITECTURES}, got {architecture!r}")
+
+
+def priors_for(spec: PriorSpec) -> np.ndarray:
+    """Normalised ``cxcywh`` priors ``(P, 4)`` of ``spec`` (:func:`paz6d.backend.boxes.prior_boxes`)."""
+    return prior_boxes(spec.input_size, spec.feature_map_sizes, spec.steps, spec.min_sizes, spec.max_sizes,
+                       spec.aspect_ratios)
+
+
+def normalize_images(images) -> np.ndarray:
+    """``uint8`` RGB ``(..., H, W, 3)`` to the network's float32 input (:func:`paz6d.backend.image.normalize`)."""
+    return normalize(images, IMAGE_MEAN, IMAGE_STD)
+
+
+@keras.saving.register_keras_serializable(package=PACKAGE)
+class L2Normalization(keras.layers.Layer):
+    """Channel-wise L2 normalisation with a learned per-channel scale (SSD's conv4_3 norm).
+
+    ``y = scale * x / ||x||`` over the last axis; ``scale`` starts at ``initial_scale``.
+    """
+
+    def __init__(self, initial_scale: float = 20.0, **kwargs):
+        super().__init__(**kwargs)
+        self.initial_scale = float(initial_scale)
+
+    def build(self, input_shape):
+        self.scale = self.add_weight(name="scale", shape=(input_shape[-1],),
+                                     initializer=keras.initializers.Constant(self.initial_scale))
+
+    def call(self, inputs):
+        return keras.ops.normalize(inputs, axis=-1, order=2) * self.scale
+
+    def get_config(self):
+        return {**super().get_config(), "initial_scale": self.initial_scale}
+
+
+def _conv(x, filters: int, kernel: int, name: str, strides: int = 1, padding: str = "same", dilation: int = 1):
+    return keras.layers.Conv2D(filters, kernel, strides=strides, padding=padding, dilation_rate=dilation,
+                               activation="relu", kernel_initializer="he_normal", name=name)(x)
+
+
+def _vgg16_body(inputs, input_size: int) -> tuple[list, object]:
+    """VGG16 up to fc7: returns ``([L2-normalised conv4_3, fc7], fc7)``."""
+    x = inputs
+    for block, (filters, count) in enumerate(((64, 2), (128, 2), (256, 3), (512, 3)), start=1):
+        for index in range(1, count + 1):
+            x = _conv(x, filters, 3, f"conv{block}_{index}")
+        if block == 4:
+            conv4_3 = x
+        x = keras.layers.MaxPooling2D(2, 2, padding="same", name=f"pool{block}")(x)
+    for index in range(1, 4):
+        x = _conv(x, 512, 3, f"conv5_{index}")
+    x = keras.layers.MaxPooling2D(3, 1, padding="same", name="pool5")(x)
+    x = _conv(x, 1024, 3, "fc6", dilation=6)
+    fc7 = _conv(x, 1024, 1, "fc7")
+    return [L2Normalization(20.0, name="conv4_3_norm")(conv4_3), fc7], fc7
+
+
+def _vgg_extras(x, strided_blocks: int, valid_blocks: int) -> list:
+    """SSD's extra blocks (1x1 bottleneck + 3x3): ``strided_blocks`` of stride 2 ('same'), then
+    ``valid_blocks`` 3x3 'valid' ones."""
+    features = []
+    widths = [(256, 512)] + [(128, 256)] * (strided_blocks + valid_blocks - 1)
+    for index, (bottleneck, filters) in enumerate(widths, start=6):
+        x = _conv(x, bottleneck, 1, f"conv{index}_1")
+        if index - 6 < strided_blocks:
+            x = _conv(x, filters, 3, f"conv{index}_2", strides=2)
+        else:
+            x = _conv(x, filters, 3, f"conv{index}_2", padding="valid")
+        features.append(x)
+    return features
+
+
+def _separable(x, filters: int, name: str, strides: int = 1):
+    """Depthwise 3x3 + BN + ReLU, pointwise 1x1 + BN + ReLU."""
+    x = keras.layers.DepthwiseConv2D(3, strides=strides, padding="same", use_bias=False, name=f"{name}_dw")(x)
+    x = keras.layers.BatchNormalization(name=f"{name}_dw_bn")(x)
+    x = keras.layers.ReLU(name=f"{name}_dw_relu")(x)
+    x = keras.layers.Conv2D(filters, 1, use_bias=False, kernel_initializer="he_normal", name=f"{name}_pw")(x)
+    x = keras.layers.BatchNormalization(name=f"{name}_pw_bn")(x)
+    return keras.layers.ReLU(name=f"{name}_pw_relu")(x)
+
+
+def _light_body(inputs, width: float) -> list:
+    """Depthwise-separable body: six feature maps of stride 8, 16, 32, 64, 128 and a 1x1 map."""
+    def channels(count: int) -> int:
+        return max(8, int(round(count * width / 8)) * 8)
+
+    x = keras.layers.Conv2D(channels(32), 3, strides=2, padding="same", use_bias=False,
+                            kernel_initializer="he_normal", name="stem")(inputs)
+    x = keras.layers.ReLU(name="stem_relu")(keras.layers.BatchNormalization(name="stem_bn")(x))
+    x = _separable(x, channels(64), "block1", strides=2)
+    x = _separable(x, channels(64), "block2")
+    x = _separable(x, channels(128), "block3", strides=2)
+    stride8 = _separable(x, channels(128), "block4")
+    x = _separable(stride8, channels(256), "block5", strides=2)
+    stride16 = _separable(x, channels(256), "block6")
+    stride32 = _separable(stride16, channels(256), "block7", strides=2)
+    x = _conv(stride32, channels(128), 1, "extra1_1")
+    stride64 = _separable(x, channels(256), "extra1_2", strides=2)
+    x = _conv(stride64, channels(64), 1, "extra2_1")
+    stride128 = _separable(x, channels(128), "extra2_2", strides=2)
+    x = _conv(stride128, channels(64), 1, "extra3_1")
+    last = keras.layers.GlobalAveragePooling2D(keepdims=True, name="extra3_pool")(x)
+    last = _conv(last, channels(128), 1, "extra3_2")
+    return [stride8, stride16, stride32, stride64, stride128, last]
+
+
+def _heads(features: list, spec: PriorSpec, num_classes: int, separable: bool):
+    """Per map: a 3x3 regression and a 3x3 classification conv, reshaped and concatenated to
+    ``(B, P, 4 + num_classes)``."""
+    offsets, logits = [], []
+    for index, (feature, count) in enumerate(zip(features, spec.priors_per_cell)):
+        for kind, depth, outputs in (("loc", 4, offsets), ("conf", num_classes, logits)):
+            name = f"{kind}_{index}"
+            if separable:
+                y = keras.layers.SeparableConv2D(count * depth, 3, padding="same", name=name)(feature)
+            else:
+                y = keras.layers.Conv2D(count * depth, 3, padding="same", name=name)(feature)
+            outputs.append(keras.layers.Reshape((-1, depth), name=f"{name}_flat")(y))
+    offsets = keras.layers.Concatenate(axis=1, name="offsets")(offsets)
+    logits = keras.layers.Concatenate(axis=1, name="logits")(logits)
+    return keras.layers.Concatenate(axis=-1, name="boxes")([offsets, logits])
+
+
+def build_ssd(num_classes: int, architecture: str = "light", input_size: int | None = None,
+              width: float = 1.0) -> tuple[object, PriorSpec]:
+    """An SSD network and its prior layout.
+
+    Args:
+        num_classes: classes including the background (class 0), at least 2.
+        architecture: ``"ssd300"``, ``"ssd512"`` or ``"light"``.
+        input_size: ``light`` only (multiple of 64, default 320); the VGG models use 300 / 512.
+        width: ``light`` only: channel multiplier of the body.
+    Returns:
+        ``(model, spec)``: ``model(images (B, S, S, 3)) -> (B, P, 4 + num_classes)``; ``spec`` gives the priors.
+    Raises:
+        SSDModelError: bad ``num_classes``, ``architecture``, ``input_size`` or ``width``.
+    """
+    if int(num_classes) < 2:
+        raise SSDModelError(f"num_classes: expected at least 2 (background + one object class), got {num_classes}")
+    if architecture != "light" and input_size not in (None, paper_priors(architecture).input_size):
+        raise SSDModelError(f"input_size: {architecture} takes {paper_priors(architecture).input_size} x "
+                            f"{paper_priors(architecture).input_size} images, got {input_size}")
+    if not 0.1 <= float(width) <= 4.0:
+        raise SSDModelError(f"width: expected a channel multiplier in [0.1, 4], got {width}")
+    spec = paper_priors(architecture, input_size)
+    inputs = keras.Input((spec.input_size, spec.input_size, 3), name="image")
+    if architecture == "light":
+        features = _light_body(inputs, float(width))
+    else:
+        features, fc7 = _vgg16_body(inputs, spec.input_size)
+        features += _vgg_extras(fc7, 2 if architecture == "ssd300" else 4, 2 if architecture == "ssd300" else 0)
+        if architecture == "ssd512":
+            features.append(_vgg_extras_last(features[-1]))
+    sizes = tuple(int(feature.shape[1]) for feature in features)
+    if sizes != spec.feature_map_sizes:
+        raise SSDModelError(f"{architecture}: feature maps {sizes} differ from the prior layout {spec.feature_map_sizes}")
+    outputs = _heads(features, spec, int(num_classes), separable=architecture == "light")
+    return keras.Model(inputs, outputs, name=f"ssd_{architecture}"), spec
+
+
+def _vgg_extras_last(x):
+    """SSD512's last block: 1x1 bottleneck and a 3x3 stride-2 conv from 2 x 2 to 1 x 1."""
+    x = _conv(x, 128, 1, "conv10_1")
+    return _conv(x, 256, 3, "conv10_2", strides=2)
+
+
+def save_ssd(model, path: str | Path) -> Path:
+    """Saves ``model`` to a ``.keras`` file (temporary file, then rename)."""
+    return save_keras_model_atomically(model, path)
+
+
+def load_ssd(path: str | Path, spec: PriorSpec, num_classes: int):
+    """Loads a model saved by :func:`save_ssd` in Keras safe mode and checks it against ``spec``.
+
+    Raises:
+        SSDModelError: missing, unreadable or mismatching file (message names the file).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise SSDModelError(f"{path}: model file not found")
+    try:
+        model = keras.saving.load_model(path, safe_mode=True, compile=False)
+    except Exception as error:  # Keras raises several types for damaged archives
+        raise SSDModelError(f"{path}: not a readable .keras model ({type(error).__name__}: {error})") from error
+    expected = (None, len(priors_for(spec)), 4 + int(num_classes))
+    if tuple(model.output_shape) != expected or tuple(model.input_shape[1:]) != (spec.input_size, spec.input_size, 3):
+        raise SSDModelError(f"{path}: expected an SSD with input {(spec.input_size,) * 2 + (3,)} and output "
+                            f"{expected}, got {model.input_shape} -> {model.output_shape}")
+    return model
+
+
+def inference_function(model):
+    """Compiled ``images (B, S, S, 3) float32 -> (B, P, 4 + C)`` (one trace for any batch size)."""
+    size = model.input_shape[1]
+
+    @tf.function(input_signature=[tf.TensorSpec((None, size, size, 3), tf.float32)], reduce_retracing=True)
+    def infer(images):
+        return model(images, training=False)
+
+    return infer

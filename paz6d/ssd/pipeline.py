@@ -1,0 +1,162 @@
+"""Single-shot detection: ``DetectSingleShot(run_dir)(image) -> list[Box2D]``.
+
+:class:`DetectSingleShot` loads an SSD run directory (:mod:`paz6d.ssd.run_dir`) and is a
+:class:`~paz6d.abstract.SequentialProcessor` of named steps that pass a dict of values along (each a
+:class:`~paz6d.abstract.KeyedStep`), so steps can be read, replaced, inserted or removed.
+
+Example:
+    >>> detect = DetectSingleShot("runs/ssd")                        # doctest: +SKIP
+    >>> detect(image)[0]                                              # doctest: +SKIP
+    Box2D(x_min=210.4, y_min=140.0, x_max=330.2, y_max=260.9, score=0.93, class_name='obj_000005')
+    >>> detect.names                                                  # doctest: +SKIP
+    ['check', 'resize', 'normalize', 'predict', 'decode', 'nms', 'to_pixels', 'to_boxes2d']
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from paz6d.abstract import Box2D, KeyedStep, Processor, SequentialProcessor
+from paz6d.backend import boxes as boxes_backend
+from paz6d.backend.draw import draw_box, keypoint_colors
+from paz6d.backend.image import as_image
+from paz6d.processors.boxes import ToBoxes2D
+from paz6d.processors.image import NormalizeImage, ResizeImage
+from paz6d.processors.predict import Predict
+from paz6d.ssd import run_dir as run_files
+from paz6d.ssd.encoding import decode_outputs, select_detections
+
+
+class CheckImage(Processor):
+    """``image -> (image, (width, height))`` for an RGB ``uint8`` ``(H, W, 3)`` image.
+
+    Raises:
+        ValueError: another shape or dtype (the message names ``image`` and the expected shape).
+    """
+
+    def call(self, image) -> tuple[np.ndarray, tuple[int, int]]:
+        array = np.asarray(image)
+        if array.ndim != 3 or array.shape[2] != 3 or 0 in array.shape:
+            raise ValueError(f"image: expected an RGB image of shape (H, W, 3), got shape {array.shape}")
+        image = as_image(array)
+        return image, (image.shape[1], image.shape[0])
+
+
+class PredictImage(Processor):
+    """One network input ``(S, S, 3)`` -> its output ``(P, 4 + C)`` (a batch of one through :class:`Predict`)."""
+
+    def __init__(self, function: Callable, name: str | None = None):
+        super().__init__(name)
+        self.predict = Predict(function, batch_size=1)
+
+    def call(self, values: np.ndarray) -> np.ndarray:
+        return self.predict(np.asarray(values, np.float32)[None])[0]
+
+
+class DecodeBoxes(Processor):
+    """Network output ``(P, 4 + C)`` -> normalised ``xyxy`` boxes ``(P, 4)`` and class probabilities
+    ``(P, C)`` (:func:`paz6d.ssd.encoding.decode_outputs`)."""
+
+    def __init__(self, priors, variances=boxes_backend.SSD_VARIANCES, name: str | None = None):
+        super().__init__(name)
+        self.priors, self.variances = np.asarray(priors, np.float64), tuple(variances)
+
+    def call(self, outputs) -> tuple[np.ndarray, np.ndarray]:
+        return decode_outputs(outputs, self.priors, self.variances)
+
+
+class NonMaximumSuppression(Processor):
+    """``(boxes (P, 4), probabilities (P, C)) -> (boxes (K, 4), scores (K,), class_ids (K,))``: per-class
+    NMS (:func:`paz6d.ssd.encoding.select_detections`)."""
+
+    def __init__(self, score_threshold: float = 0.3, iou_threshold: float = 0.45, max_detections: int = 100,
+                 name: str | None = None):
+        super().__init__(name)
+        if not 0.0 <= score_threshold <= 1.0 or not 0.0 <= iou_threshold <= 1.0:
+            raise ValueError(f"score_threshold/iou_threshold: expected values in [0, 1], got "
+                             f"{score_threshold}, {iou_threshold}")
+        if int(max_detections) < 1:
+            raise ValueError(f"max_detections: expected a positive count, got {max_detections}")
+        self.score_threshold, self.iou_threshold = float(score_threshold), float(iou_threshold)
+        self.max_detections = int(max_detections)
+
+    def call(self, boxes, probabilities) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return select_detections(boxes, probabilities, self.score_threshold, self.iou_threshold, self.max_detections)
+
+
+class DenormalizeBoxes(Processor):
+    """Normalised ``xyxy`` boxes ``(K, 4)`` and the image size ``(width, height)`` -> pixel boxes."""
+
+    def call(self, boxes, image_size) -> np.ndarray:
+        return boxes_backend.denormalize(np.asarray(boxes, np.float64).reshape(-1, 4), image_size)
+
+
+class DetectSingleShot(SequentialProcessor):
+    """``image (H, W, 3) uint8 RGB -> list[Box2D]`` (pixel boxes, score, class name) with a trained SSD.
+
+    ==============  ==============================  ====================================  =========================
+    step            reads                           writes                                processor
+    ==============  ==============================  ====================================  =========================
+    ``check``       ``image``                       ``image``, ``image_size``             :class:`CheckImage`
+    ``resize``      ``image``                       ``resized``                           :class:`ResizeImage`
+    ``normalize``   ``resized``                     ``input``                             :class:`NormalizeImage`
+    ``predict``     ``input``                       ``output``                            :class:`PredictImage`
+    ``decode``      ``output``                      ``boxes``, ``probabilities``          :class:`DecodeBoxes`
+    ``nms``         ``boxes``, ``probabilities``    ``boxes``, ``scores``, ``class_ids``  :class:`NonMaximumSuppression`
+    ``to_pixels``   ``boxes``, ``image_size``       ``boxes``                             :class:`DenormalizeBoxes`
+    ``to_boxes2d``  ``boxes``, ``scores``,          ``detections``                        :class:`ToBoxes2D`
+                    ``class_ids``
+    ==============  ==============================  ====================================  =========================
+
+    Args:
+        run_dir: SSD run directory (:mod:`paz6d.ssd.run_dir`).
+        score_threshold: detections scoring below it are dropped (use ~0.01 for mAP evaluation).
+        iou_threshold: per-class NMS threshold.
+        max_detections: most boxes per image.
+    Raises:
+        ValueError: missing or corrupt run directory (message names the file).
+    """
+
+    def __init__(self, run_dir: str | Path, score_threshold: float = 0.3, iou_threshold: float = 0.45,
+                 max_detections: int = 100):
+        from paz6d.ssd.model import IMAGE_MEAN, IMAGE_STD, PriorSpec, inference_function, priors_for
+
+        model, detector = run_files.read_model(run_dir)
+        spec = PriorSpec.from_dict(detector["priors"])
+        self.run_dir, self.model = Path(run_dir), model
+        self.class_names = tuple(detector["class_names"])
+        self.input_size = spec.input_size
+        super().__init__([
+            KeyedStep(CheckImage(), "image", ("image", "image_size"), name="check"),
+            KeyedStep(ResizeImage((spec.input_size, spec.input_size)), "image", "resized", name="resize"),
+            KeyedStep(NormalizeImage(IMAGE_MEAN, IMAGE_STD), "resized", "input", name="normalize"),
+            KeyedStep(PredictImage(inference_function(model)), "input", "output", name="predict"),
+            KeyedStep(DecodeBoxes(priors_for(spec), detector["variances"]), "output", ("boxes", "probabilities"),
+                      name="decode"),
+            KeyedStep(NonMaximumSuppression(score_threshold, iou_threshold, max_detections),
+                      ("boxes", "probabilities"), ("boxes", "scores", "class_ids"), name="nms"),
+            KeyedStep(DenormalizeBoxes(), ("boxes", "image_size"), "boxes", name="to_pixels"),
+            KeyedStep(ToBoxes2D(self.class_names), ("boxes", "scores", "class_ids"), "detections",
+                      name="to_boxes2d"),
+        ], name="DetectSingleShot")
+
+    def call(self, image) -> list[Box2D]:
+        return self.run_steps({"image": image})["detections"]
+
+
+def draw_detections(image, detections: list[Box2D], class_names: tuple[str, ...] = ()) -> np.ndarray:
+    """A copy of ``image`` with each box drawn (one colour per class of ``class_names``) and labelled."""
+    canvas = as_image(image).copy()
+    colors = keypoint_colors(max(len(class_names), 1))
+    for box in detections:
+        index = class_names.index(box.class_name) if box.class_name in class_names else 0
+        color = tuple(int(c) for c in colors[index])
+        canvas = draw_box(canvas, box.to_array(), color, thickness=2)
+        label = f"{box.class_name or ''} {box.score:.2f}".strip()
+        cv2.putText(canvas, label, (int(box.x_min), max(int(box.y_min) - 3, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                    color, 1, cv2.LINE_AA)
+    return canvas

@@ -1,0 +1,129 @@
+"""The SSD run directory: the only module that knows its file names and formats.
+
+``paz6d train ssd`` writes, and :class:`~paz6d.ssd.pipeline.DetectSingleShot` and ``paz6d detect`` read::
+
+    RUN_DIR/detector.json   architecture, class_names (class id i is class_names[i - 1]; 0 = background),
+                            priors (input_size, feature maps, steps, sizes, aspect ratios), variances
+    RUN_DIR/model.keras     the network (loaded in Keras safe mode)
+    RUN_DIR/config.json     the training settings (dataset, seed, schedule)
+    RUN_DIR/metrics.json    training summary
+
+plus the shared trainer's ``checkpoints/``, ``log.csv``, ``tensorboard/`` and ``samples/``.
+Every reader raises ``ValueError`` naming the file and what is missing or malformed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from paz6d.backend.boxes import SSD_VARIANCES
+from paz6d.backend.files import load_json, write_json_atomically
+
+DETECTOR_FILE = "detector.json"
+MODEL_FILE = "model.keras"
+CONFIG_FILE = "config.json"
+METRICS_FILE = "metrics.json"
+#: Fields of ``detector.json``.
+DETECTOR_KEYS = ("architecture", "class_names", "priors", "variances")
+#: Files that mark a directory as an SSD run (see :func:`paz6d.run_dirs.method_of`).
+MARKER_FILES = (DETECTOR_FILE,)
+#: Files without which a run directory cannot detect.
+REQUIRED_FILES = (DETECTOR_FILE, MODEL_FILE)
+
+
+def is_run_dir(run_dir: str | Path) -> bool:
+    """True when ``run_dir`` holds an SSD run's ``detector.json``."""
+    return all((Path(run_dir) / name).is_file() for name in MARKER_FILES)
+
+
+def model_path(run_dir: str | Path) -> Path:
+    """Where the network is (or will be) saved."""
+    return Path(run_dir) / MODEL_FILE
+
+
+def write_detector(run_dir: str | Path, architecture: str, class_names, priors: dict,
+                   variances=SSD_VARIANCES) -> Path:
+    """Writes ``detector.json``: what the pipeline needs besides the weights.
+
+    Args:
+        architecture: ``"ssd300"``, ``"ssd512"`` or ``"light"``.
+        class_names: object classes in class-id order (without the background).
+        priors: :meth:`paz6d.ssd.model.PriorSpec.to_dict`.
+    """
+    class_names = [str(name) for name in class_names]
+    if not class_names or len(set(class_names)) != len(class_names):
+        raise ValueError(f"class_names: expected distinct names, got {class_names}")
+    Path(run_dir).mkdir(parents=True, exist_ok=True)
+    data = {"architecture": architecture, "class_names": class_names, "priors": priors,
+            "variances": [float(v) for v in variances]}
+    return write_json_atomically(Path(run_dir) / DETECTOR_FILE, data, indent=2)
+
+
+def read_detector(run_dir: str | Path) -> dict[str, Any]:
+    """``detector.json`` checked for its fields (``class_names`` a non-empty list of strings,
+    4 positive ``variances``)."""
+    path = Path(run_dir) / DETECTOR_FILE
+    if not path.is_file():
+        raise ValueError(f"{path}: file not found (is {Path(run_dir)} an SSD run directory?)")
+    try:
+        data = load_json(path)
+    except ValueError as error:
+        raise ValueError(f"{path}: corrupt detector description ({error})") from error
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    missing = [key for key in DETECTOR_KEYS if key not in data]
+    if missing:
+        raise ValueError(f"{path}: missing field(s) {missing}")
+    names = data["class_names"]
+    if not isinstance(names, list) or not names or not all(isinstance(name, str) for name in names):
+        raise ValueError(f"{path}: class_names: expected a non-empty list of names, got {names!r}")
+    variances = data["variances"]
+    if (not isinstance(variances, list) or len(variances) != 4
+            or not all(isinstance(v, (int, float)) and v > 0 for v in variances)):
+        raise ValueError(f"{path}: variances: expected 4 positive numbers, got {variances!r}")
+    if not isinstance(data["priors"], dict):
+        raise ValueError(f"{path}: priors: expected an object, got {type(data['priors']).__name__}")
+    return data
+
+
+def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
+    """Writes the training settings ``config.json``."""
+    return write_json_atomically(Path(run_dir) / CONFIG_FILE, config, indent=2)
+
+
+def read_config(run_dir: str | Path) -> dict[str, Any] | None:
+    """The training settings, ``None`` when the run has none yet."""
+    path = Path(run_dir) / CONFIG_FILE
+    return load_json(path) if path.is_file() else None
+
+
+def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
+    """Writes the training summary ``metrics.json``."""
+    return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
+
+
+def read_model(run_dir: str | Path):
+    """``(model, detector)``: the trained network (Keras safe mode; imports TensorFlow) and
+    ``detector.json``.
+
+    Raises:
+        ValueError: missing or corrupt files, or a model that does not fit ``detector.json``.
+    """
+    from paz6d.ssd.model import PriorSpec, load_ssd
+
+    detector = validate(run_dir)
+    spec = PriorSpec.from_dict(detector["priors"])
+    return load_ssd(model_path(run_dir), spec, len(detector["class_names"]) + 1), detector
+
+
+def validate(run_dir: str | Path) -> dict[str, Any]:
+    """Checks that ``run_dir`` is a directory with ``detector.json`` and ``model.keras``; returns the
+    detector description."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise ValueError(f"run_dir: {run_dir} is not a directory")
+    for name in REQUIRED_FILES:
+        if not (run_dir / name).is_file():
+            raise ValueError(f"{run_dir / name}: file not found (is {run_dir} an SSD run directory?)")
+    return read_detector(run_dir)
