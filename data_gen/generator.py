@@ -17,6 +17,8 @@ from data_gen import bop_writer
 from data_gen.assets import Assets, load_assets
 from data_gen.config import BACKENDS, GenerationConfig, check_output_writable
 from data_gen.files import remove_stale_temporaries
+from data_gen.producer import ImageProducer, write_files
+from data_gen.ray_backend import import_ray, run_with_ray
 from paz6d.synthesis.workers import chunks, progress_bar, run_in_workers
 
 
@@ -38,8 +40,6 @@ class GenerationSummary:
 def render_indices(producer, indices: Iterable[int], output, on_image: Callable[[int], None]) -> int:
     """Renders ``indices`` with ``producer`` while a thread encodes and writes the previous image
     (PNG encoding releases the GIL); at most one image waits. Returns the number of files written."""
-    from data_gen.producer import write_files
-
     written = 0
     with ThreadPoolExecutor(max_workers=1) as writer:
         pending = None
@@ -61,8 +61,6 @@ def _render_chunk(producer, indices: list[int]) -> tuple[int, int]:
 
 
 def _run_local(config: GenerationConfig, assets: Assets, pending: list[int], workers: int, progress) -> int:
-    from data_gen.producer import ImageProducer
-
     if workers == 1:
         producer = ImageProducer(config, assets)
         try:
@@ -93,8 +91,6 @@ def generate(config: GenerationConfig, workers: int = 1, backend: str = "local",
     if backend not in BACKENDS:
         raise ValueError(f"backend: expected one of {BACKENDS}, got {backend!r}")
     if backend == "ray":
-        from data_gen.ray_backend import import_ray
-
         import_ray()
     assets = load_assets(config)
     check_output_writable(config.out)
@@ -109,8 +105,6 @@ def generate(config: GenerationConfig, workers: int = 1, backend: str = "local",
         if pending and backend == "local":
             written += _run_local(config, assets, pending, int(workers), progress)
         elif pending:
-            from data_gen.ray_backend import run_with_ray
-
             written += run_with_ray(config, pending, int(workers), ray_address, progress)
     written += len(bop_writer.merge_scenes(config, assets.object_ids))
     return GenerationSummary(config.num_images, len(pending), config.num_images - len(pending), written,

@@ -9,6 +9,7 @@ from types import ModuleType
 from tqdm import tqdm
 
 from data_gen.config import GenerationConfig
+from data_gen.producer import ImageProducer, write_files
 
 CHUNK = 4
 
@@ -27,8 +28,6 @@ class _Renderer:
     """Ray actor body: one :class:`data_gen.producer.ImageProducer` for its lifetime."""
 
     def __init__(self, config: GenerationConfig):
-        from data_gen.producer import ImageProducer
-
         self.producer = ImageProducer(config)
 
     def produce(self, indices: list[int]) -> list[dict[str, bytes]]:
@@ -38,8 +37,6 @@ class _Renderer:
 def run_with_ray(config: GenerationConfig, pending: list[int], workers: int, address: str | None,
                  progress: tqdm) -> int:
     """Renders ``pending`` on ``workers`` Ray actors; returns the number of files written."""
-    from data_gen.producer import write_files
-
     ray = import_ray()
     started_here = not ray.is_initialized()
     if started_here:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from paz6d.aae.model import crop_object, encode_function, to_model_input
 from paz6d.aae.codebook import Codebook, codebook_angles, codebook_rotations
@@ -43,8 +44,6 @@ def build_codebook(encoder, rgb: np.ndarray, alpha: np.ndarray, view_rotations: 
         crop_size / padding: crop settings of the model.
         batch_size: crops encoded per call.
     """
-    from tqdm.auto import tqdm
-
     encode = encode_function(encoder)
     rotations = codebook_rotations(view_rotations, in_plane)
     views_per_batch = max(1, batch_size // in_plane)

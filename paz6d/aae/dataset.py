@@ -13,8 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
+from paz6d.aae.model import crop_object
+from paz6d.aae.views import render_poses
 from paz6d.backend.square_crop import crop_intrinsics, square_window
+from paz6d.datasets.bop import BOPDataset
 
 
 @dataclass(frozen=True)
@@ -33,11 +37,6 @@ def dataset_crops(root: str | Path, obj_id: int, crop_size: int, padding: float,
                   min_visible_fraction: float = 0.1, progress: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Crops ``(N, S, S, 3)``, crop intrinsics ``(N, 3, 3)`` and poses ``(N, 4, 4)`` of every instance of
     ``obj_id`` with a ground-truth box and visible fraction >= ``min_visible_fraction``."""
-    from tqdm.auto import tqdm
-
-    from paz6d.datasets.bop import BOPDataset
-    from paz6d.aae.model import crop_object
-
     dataset = BOPDataset(root, split=split)
     crops, Ks, poses = [], [], []
     for sample in tqdm(dataset, total=len(dataset), desc="read data set", unit="img", disable=not progress,
@@ -64,8 +63,6 @@ def dataset_pairs(root: str | Path, obj_id: int, mesh_path: str | Path, mesh_sca
                   padding: float, split: str = "train", workers: int = 2, platform: str | None = None,
                   progress: bool = True) -> CropPairs:
     """Input crops from the data set and clean targets rendered through the same crop windows."""
-    from paz6d.aae.views import render_poses
-
     inputs, Ks, poses = dataset_crops(root, obj_id, crop_size, padding, split, progress=progress)
     targets, _ = render_poses(mesh_path, mesh_scale, Ks, poses, crop_size, workers, platform, progress=progress,
                               description="render targets")

@@ -18,6 +18,7 @@ import numpy as np
 
 from paz6d.backend.checks import as_array
 from paz6d.backend.image import mask_box
+from paz6d.backend.mesh import load_mesh
 from paz6d.synthesis.workers import progress_bar, run_in_workers
 
 #: The bounding sphere projects to a circle of radius render_size / SPHERE_FRACTION.
@@ -94,8 +95,7 @@ class _ObjectRenderer:
     """Render-worker state: the mesh and one square renderer (never imports TensorFlow)."""
 
     def __init__(self, mesh_path: str, mesh_scale: float, size: int, platform: str | None):
-        from paz6d.backend.mesh import load_mesh
-        from renderers import Renderer
+        from renderers import Renderer  # GL is loaded only in the processes that render
 
         self.mesh = load_mesh(mesh_path, mesh_scale)
         self.renderer = Renderer(size, size, platform=platform)

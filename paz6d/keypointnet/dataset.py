@@ -15,6 +15,7 @@ import numpy as np
 
 from paz6d.backend.image import mask_box
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, square_window
+from paz6d.datasets.bop import BOPDataset, load_models_info, model_path
 from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.keypointnet.views import ViewSet
 
@@ -43,8 +44,6 @@ def bop_object_views(root: str | Path, object_id: int | None = None, split: str 
     Raises:
         ValueError: missing folders/files, or no usable view of the object (e.g. all masks empty).
     """
-    from paz6d.datasets.bop import BOPDataset, load_models_info, model_path
-
     root = Path(root)
     models_info = load_models_info(root / "models" / "models_info.json")
     if object_id is None:
