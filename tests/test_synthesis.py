@@ -240,6 +240,12 @@ def test_polygon_occluders_follow_their_probability():
     np.testing.assert_array_equal(drawn[0], drawn[1])
     assert 0 < drawn[0].any(axis=2).mean() < 0.6
     assert not drawn[0][24:40, 24:40].any() or drawn[0][24:40, 24:40].any(axis=2).mean() < 1.0  # outskirts first
+    step = occluders.PolygonOccluders(1.0, 2, (0.2, 0.5), padding=64 / 40.0, seed=3)
+    blank = np.zeros((64, 64, 3), np.uint8)
+    np.testing.assert_array_equal(step(blank), drawn[0])
+    assert not blank.any()  # the step draws on a copy
+    with pytest.raises(ValueError, match="probability: expected a probability in"):
+        occluders.PolygonOccluders(probability=1.5)
 
 
 # ------------------------------------------------------------------------------------ augment
@@ -252,6 +258,7 @@ RANDOM_PROCESSORS = [
     lambda: augment.RandomImageNoise(6.0, probability=0.8, quantized=True),
     lambda: augment.RandomContrastBrightnessNoise(),
     lambda: augment.RandomFlipLeftRight(), lambda: augment.RandomCrop(),
+    lambda: occluders.PolygonOccluders(probability=0.9, padding=1.2),
 ]
 
 

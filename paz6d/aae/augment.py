@@ -6,9 +6,9 @@ in-plane angle, rotates the view about the principal point, and makes
 * the target: :func:`paz6d.aae.model.crop_object` of the clean view (object on black) around its box;
 * the input: the object re-lit (per-channel gains, brightness gradient), composited over a random
   procedural background (:class:`paz6d.synthesis.backgrounds.BackgroundBank`, ``"clutter"`` style),
-  partly covered by random occluders (:func:`paz6d.synthesis.occluders.draw_polygon_occluders`), cropped
-  around a shifted and rescaled box, then colour-jittered (brightness, contrast, saturation, hue), blurred
-  and noised (:func:`input_jitter`, processors of :mod:`paz6d.synthesis.augment`).
+  cropped around a shifted and rescaled box, then (:func:`input_augmentation`, a sequence of
+  :mod:`paz6d.synthesis` processors) partly covered by random occluders and colour-jittered (brightness,
+  contrast, saturation, hue), blurred and noised.
 
 Every batch is a pure function of ``(seed, step)``, so training resumes on the same data stream.
 """
@@ -25,7 +25,7 @@ from paz6d.abstract.processor import SequentialProcessor
 from paz6d.synthesis.augment import (RandomContrastBrightnessNoise, RandomGaussianBlur, RandomHue, RandomSaturation,
                                      share_generator)
 from paz6d.synthesis.backgrounds import BackgroundBank
-from paz6d.synthesis.occluders import draw_polygon_occluders
+from paz6d.synthesis.occluders import PolygonOccluders
 
 
 @dataclass(frozen=True)
@@ -76,14 +76,16 @@ class Augmentation:
                 raise ValueError(f"Augmentation.{name}: expected >= 0, got {getattr(self, name)}")
 
 
-def input_jitter(augmentation: Augmentation) -> SequentialProcessor:
-    """The input's photometric jitter: saturation, hue (when ``hue > 0``), blur (sigma 0.4-1.2 px) with
-    ``blur_probability``, then contrast, brightness and noise in float."""
+def input_augmentation(augmentation: Augmentation, padding: float) -> SequentialProcessor:
+    """What is done to an input crop (object side = crop side / ``padding``) once it is composited:
+    random polygon occluders, then the photometric jitter: saturation, hue (when ``hue > 0``), blur
+    (sigma 0.4-1.2 px) with ``blur_probability``, then contrast, brightness and noise in float."""
     a = augmentation
-    steps = [RandomSaturation(*a.saturation)] + ([RandomHue(a.hue)] if a.hue > 0 else [])
+    steps = [PolygonOccluders(a.occlusion_probability, a.max_occluders, a.occluder_size, padding, name="occlude"),
+             RandomSaturation(*a.saturation)] + ([RandomHue(a.hue)] if a.hue > 0 else [])
     steps += [RandomGaussianBlur((0,), a.blur_probability, sigma=(0.4, 1.2)),
               RandomContrastBrightnessNoise(a.contrast, a.brightness, a.noise)]
-    return SequentialProcessor(steps, name="input jitter")
+    return SequentialProcessor(steps, name="input augmentation")
 
 
 class ViewSampler:
@@ -120,7 +122,7 @@ class ViewSampler:
         self.crop_size, self.padding, self.augmentation, self.seed = int(crop_size), float(padding), augmentation, seed
         self.backgrounds = BackgroundBank(self.crop_size, background_bank if augmentation.backgrounds else 0,
                                           np.random.default_rng([seed, 7919]), style="clutter")
-        self.jitter = input_jitter(augmentation)
+        self.input_augmentation = input_augmentation(augmentation, self.padding)
 
     def _relight(self, rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """float32 copy of the object crop with random channel gains and a linear brightness ramp."""
@@ -136,23 +138,16 @@ class ViewSampler:
             values *= gradient[..., None] * gains
         return values
 
-    def _occlude(self, crop: np.ndarray, rng: np.random.Generator) -> None:
-        a = self.augmentation
-        draw_polygon_occluders(crop, rng, a.occlusion_probability, a.max_occluders, a.occluder_size,
-                               crop.shape[0] / self.padding)
-
-    def _jitter(self, crop: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        share_generator(self.jitter, rng)
-        return self.jitter(crop)
+    def _augment(self, crop: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        share_generator(self.input_augmentation, rng)
+        return self.input_augmentation(crop)
 
     def sample(self, rng: np.random.Generator, view: int | None = None,
                angle: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """One ``(input, target)`` pair of uint8 crops ``(crop_size, crop_size, 3)``."""
         if view is None and angle is None and self.pair_fraction and rng.random() < self.pair_fraction:
             index = int(rng.integers(len(self.pairs)))
-            augmented = self.pairs.inputs[index].copy()
-            self._occlude(augmented, rng)
-            return self._jitter(augmented, rng), self.pairs.targets[index]
+            return self._augment(self.pairs.inputs[index], rng), self.pairs.targets[index]
         view = int(rng.integers(len(self.rgb))) if view is None else view
         angle = float(rng.uniform(0, 2 * np.pi)) if angle is None else angle
         rgb, alpha = rotate_view(self.rgb[view], self.alpha[view], angle, self.K)
@@ -167,9 +162,8 @@ class ViewSampler:
         rgba = crop_object(np.dstack([rgb, alpha]), shifted, self.crop_size, self.padding)
         weight = rgba[..., 3:].astype(np.float32) / 255.0
         lit = self._relight(rgba[..., :3], rng)
-        augmented = np.clip(weight * lit + (1 - weight) * self.backgrounds.patch(rng), 0, 255).astype(np.uint8)
-        self._occlude(augmented, rng)
-        return self._jitter(augmented, rng), target
+        composited = np.clip(weight * lit + (1 - weight) * self.backgrounds.patch(rng), 0, 255).astype(np.uint8)
+        return self._augment(composited, rng), target
 
     def batch(self, step: int, batch_size: int) -> tuple[np.ndarray, np.ndarray]:
         """Batch number ``step``: float32 ``(inputs, targets)`` of shape ``(B, S, S, 3)`` in [0, 1]."""

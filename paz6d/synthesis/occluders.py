@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 import trimesh
 
+from paz6d.abstract.processor import RandomProcessor
 from paz6d.backend import quaternion
 from paz6d.backend.transform import from_rotation_translation
 
@@ -70,3 +71,24 @@ def draw_polygon_occluders(crop: np.ndarray, generator: np.random.Generator, pro
         radii = radius * generator.uniform(0.5, 1.2, count)
         polygon = centre + np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=1)
         cv2.fillPoly(crop, [np.round(polygon).astype(np.int32)], generator.uniform(0, 255, 3).tolist())
+
+
+class PolygonOccluders(RandomProcessor):
+    """:func:`draw_polygon_occluders` as a step: returns a copy of a crop ``(S, S, 3)`` uint8 of a
+    centred object of side ``S / padding``, with ``probability`` covered by 1..``max_count`` polygons
+    of diameter ``size`` × the object's side."""
+
+    def __init__(self, probability: float = 0.5, max_count: int = 2, size: tuple[float, float] = (0.2, 0.5),
+                 padding: float = 1.0, seed=None, name: str | None = None):
+        super().__init__(seed, name)
+        if not 0.0 <= probability <= 1.0:
+            raise ValueError(f"probability: expected a probability in [0, 1], got {probability}")
+        if int(max_count) < 1 or padding <= 0:
+            raise ValueError(f"max_count/padding: expected >= 1 and > 0, got {max_count}, {padding}")
+        self.probability, self.max_count, self.size, self.padding = probability, int(max_count), tuple(size), padding
+
+    def call(self, crop: np.ndarray) -> np.ndarray:
+        crop = crop.copy()
+        draw_polygon_occluders(crop, self.generator, self.probability, self.max_count, self.size,
+                               crop.shape[0] / self.padding)
+        return crop
