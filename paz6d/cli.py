@@ -1,7 +1,9 @@
 """The ``paz6d`` command: ``generate``, ``train``, ``detect``, ``estimate``, ``evaluate`` and ``demo``.
 
 Each command lives in its own module exposing ``configure(parser)`` and ``run(args) -> int``;
-those modules import heavy libraries (TensorFlow, pyrender) only inside ``run``.
+those modules import heavy libraries (TensorFlow, pyrender, trimesh, numba, ...) only inside ``run``.
+A command's module is imported only when that command is parsed (:class:`CommandParser`), so
+``paz6d --help`` imports none of them and ``paz6d evaluate --help`` only ``evaluation.cli``.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ COMMANDS = {
     "generate": ("data_gen.cli", "render a synthetic BOP-format data set from meshes"),
     "train": ({"aae": ("paz6d.aae.train", "Augmented Autoencoder (implicit 6D pose)"),
                "keypointnet": ("paz6d.keypointnet.train", "KeypointNet keypoint discovery"),
-               "emotion": ("paz6d.faces.emotion_train", "mini-Xception emotion classifier"),
+               "emotion": ("paz6d.faces.emotion_command", "mini-Xception emotion classifier"),
                "ssd": ("paz6d.ssd.train", "SSD single-shot object detector")},
               "train a model"),
     "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
@@ -26,24 +28,48 @@ COMMANDS = {
 }
 
 
-def _add_module_command(subparsers, name: str, module_name: str, help_text: str) -> None:
-    module = importlib.import_module(module_name)
-    parser = subparsers.add_parser(name, help=help_text, description=help_text)
-    module.configure(parser)
-    parser.set_defaults(_run=module.run)
+class CommandParser(argparse.ArgumentParser):
+    """The parser of one command: imports the command's module and adds its flags (``configure``)
+    on first use, so that parsing one command never imports the others."""
+
+    def __init__(self, *args, module_name: str | None = None, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.module_name = module_name
+
+    def load_command(self) -> None:
+        """Imports the command's module and configures this parser (once; nothing for a group)."""
+        if self.module_name is None:
+            return
+        module, self.module_name = importlib.import_module(self.module_name), None
+        module.configure(self)
+        self.set_defaults(_run=module.run)
+
+    def parse_known_args(self, args=None, namespace=None):
+        self.load_command()
+        return super().parse_known_args(args, namespace)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _subparsers(parser: argparse.ArgumentParser, dest: str) -> argparse._SubParsersAction:
+    return parser.add_subparsers(dest=dest, required=True, parser_class=CommandParser)
+
+
+def build_parser(load_commands: bool = False) -> argparse.ArgumentParser:
+    """The ``paz6d`` parser; each command's flags are added when it is parsed, or now with
+    ``load_commands`` (to inspect every command's flags)."""
     parser = argparse.ArgumentParser(prog="paz6d", description="paz6d: 6D object pose and perception toolkit")
-    subparsers = parser.add_subparsers(dest="command", required=True)
+    subparsers = _subparsers(parser, "command")
+    commands = []
     for name, (target, help_text) in COMMANDS.items():
         if isinstance(target, dict):
             group = subparsers.add_parser(name, help=help_text, description=help_text)
-            inner = group.add_subparsers(dest="model", required=True)
-            for model_name, (module_name, model_help) in target.items():
-                _add_module_command(inner, model_name, module_name, model_help)
+            inner = _subparsers(group, "model")
+            commands += [inner.add_parser(model_name, help=model_help, description=model_help, module_name=module_name)
+                         for model_name, (module_name, model_help) in target.items()]
         else:
-            _add_module_command(subparsers, name, target, help_text)
+            commands.append(subparsers.add_parser(name, help=help_text, description=help_text, module_name=target))
+    if load_commands:
+        for command in commands:
+            command.load_command()
     return parser
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.datasets.bop import BOPDataset, Target, write_pose_results, write_targets
+from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION
 
 METHODS = ("aae", "keypoints")
@@ -66,6 +66,8 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
         (BOP scores a missing estimate as a miss).
     """
     from tqdm.auto import tqdm
+
+    from paz6d.datasets.bop import BOPDataset  # here: the image reader loads OpenCV, which `--help` does not need
 
     if box not in BOXES:
         raise ValueError(f"box: expected one of {sorted(BOXES)}, got {box!r}")

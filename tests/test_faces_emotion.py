@@ -130,7 +130,7 @@ def test_missing_model_is_explained(monkeypatch, tmp_path):
 
 
 def test_train_emotion_command_writes_a_loadable_model_and_resumes(tmp_path, fer_sample):
-    from paz6d.faces import emotion_train as training
+    from paz6d.faces import emotion_command as training
 
     faces, labels, _ = fer_sample
     rows = [f"{label},{' '.join(map(str, face.ravel()))},{'PublicTest' if index % 7 == 0 else 'Training'}"

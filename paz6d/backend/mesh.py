@@ -7,12 +7,14 @@ BOP meshes are in millimetres: ``paz6d.datasets.bop.load_model`` loads them in m
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
-from scipy.spatial import ConvexHull, QhullError
 
 from paz6d.backend.checks import as_points
+
+if TYPE_CHECKING:
+    import trimesh
 
 MESH_SUFFIXES = (".ply", ".obj", ".glb", ".gltf", ".off", ".stl")
 
@@ -34,6 +36,8 @@ def load_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
         raise MeshError(f"{path}: unsupported mesh format {path.suffix!r}; expected one of {MESH_SUFFIXES}")
     if not np.isfinite(scale) or scale <= 0:
         raise MeshError(f"{path}: scale must be a positive finite number, got {scale}")
+    import trimesh  # here, not at the top: importing it (with scipy.spatial, networkx) takes ~0.5 s
+
     try:
         loaded = trimesh.load(str(path), force="mesh", process=False)
     except Exception as error:  # trimesh raises many exception types for broken files
@@ -56,6 +60,8 @@ def diameter(points) -> float:
     points = as_points(points, "points", min_count=1)
     candidates = points
     if len(points) > 4:
+        from scipy.spatial import ConvexHull, QhullError  # here: scipy.spatial costs ~0.2 s to import
+
         try:
             candidates = points[ConvexHull(points).vertices]
         except QhullError:

@@ -1,4 +1,6 @@
-"""``paz6d train emotion``: mini-Xception on FER-2013 data (CSV or image folders), with augmentation.
+"""Training for ``paz6d train emotion``: mini-Xception on FER-2013 data (CSV or image folders), with
+augmentation. The settings are :class:`~paz6d.faces.emotion_config.EmotionTraining`; the command
+(flags, run) is :mod:`paz6d.faces.emotion_command`.
 
 Data (``--data``):
 
@@ -17,10 +19,8 @@ confusion matrix), ``confusion_matrix.png`` and, during training, ``validation.c
 
 from __future__ import annotations
 
-import argparse
 import csv
 import io
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,48 +29,13 @@ from paz6d.abstract import SequentialProcessor
 from paz6d.abstract.processor import random_processors
 from paz6d.backend.files import (save_figure_atomically, save_keras_model_atomically, write_json_atomically,
                                  write_text_atomically)
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.fer2013 import FER2013_CLASSES, load_fer2013_csv, load_image_folder
+from paz6d.faces.emotion_config import EmotionTraining
 from paz6d.processors.affine import RandomAffine
 from paz6d.processors.image import ConvertColorSpace
 from paz6d.synthesis.augment import RandomBrightness, RandomContrast, RandomFlipLeftRight
 
 VALIDATION_LOG = "validation.csv"
-
-
-@dataclass(frozen=True)
-class EmotionTraining:
-    """One ``paz6d train emotion`` run (each field is a flag, see :mod:`paz6d.cli_options`)."""
-
-    data: Path = option(help="FER-2013 CSV file or image folder DIR/<class>/*")
-    out: Path = option(help="run folder (created; an existing run resumes)")
-    epochs: int = option(30, "passes over the training set")
-    batch_size: int = option(32, "faces per step")
-    learning_rate: float = option(1e-3, "Adam learning rate")
-    input_size: int = option(48, "square network input side (pixels)")
-    val_fraction: float = option(0.1, "held-out fraction when the data has no validation split")
-    checkpoint_every: int = option(500, "steps between checkpoints")
-    validate_every: int = option(500, "steps between validation confusion matrices (0: only at the end)")
-    augment: bool = option(True, "augment the training faces (brightness, contrast, flip, rotation/zoom/shift)")
-    seed: int = option(0, "seed of the validation split, the augmentation and the initialisation")
-    eager: bool = option(False, "run steps eagerly (no tf.function compile): for debugging and tiny runs")
-    progress: bool = option(True, "progress bar")
-
-    def __post_init__(self):
-        for name in ("epochs", "batch_size", "input_size", "checkpoint_every"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or int(value) != value or value < 1:
-                raise ValueError(f"{name}: expected a positive integer, got {value!r}")
-        if self.validate_every < 0:
-            raise ValueError(f"validate_every: expected 0 (only at the end) or a number of steps, "
-                             f"got {self.validate_every}")
-        if not np.isfinite(self.learning_rate) or self.learning_rate <= 0:
-            raise ValueError(f"learning_rate: expected a positive number, got {self.learning_rate}")
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    """Adds the ``paz6d train emotion`` flags (the fields of :class:`EmotionTraining`)."""
-    add_config_arguments(parser, EmotionTraining)
 
 
 def _split_per_class(labels: np.ndarray, fraction: float, seed: int) -> np.ndarray:
@@ -241,14 +206,6 @@ def _append_validation_row(run_dir: Path, step: int, accuracy: float) -> None:
     writer.writeheader()
     writer.writerows(rows)
     write_text_atomically(path, text.getvalue())
-
-
-def run(args: argparse.Namespace) -> int:
-    """Runs ``paz6d train emotion``; bad input raises ``ValueError`` naming the flag."""
-    job = config_from_args(EmotionTraining, args)
-    with flags_in_errors(EmotionTraining):
-        train_emotion(job)
-    return 0
 
 
 def train_emotion(job: EmotionTraining) -> dict:

@@ -24,17 +24,37 @@ Modules:
 * :mod:`~paz6d.datasets.bop.results`: BOP'19 results CSV (reader and writer).
 * :mod:`~paz6d.datasets.bop.reader`: :class:`BOPDataset` / :class:`BOPScene` samples in metres.
 * :mod:`~paz6d.datasets.bop.writer`: ``camera.json``, models and the scene JSON entries.
+
+Importing the package loads none of its modules: each name below is imported from its module on
+first use, so that reading ``units`` or ``results`` never loads the mesh reader (trimesh) or OpenCV.
 """
 
-from paz6d.datasets.bop.camera import SceneCamera, load_camera, load_scene_camera
-from paz6d.datasets.bop.models import ModelInfo, load_model, load_models_info, model_path
-from paz6d.datasets.bop.reader import BOPDataset, BOPObject, BOPSample, BOPScene
-from paz6d.datasets.bop.results import PoseResults, read_pose_results, write_pose_results
-from paz6d.datasets.bop.scene import GroundTruthPose, load_scene_gt, load_scene_gt_info
-from paz6d.datasets.bop.targets import Target, read_targets, write_targets
-from paz6d.datasets.bop.units import MM_PER_M
+from __future__ import annotations
 
-__all__ = ["BOPDataset", "BOPObject", "BOPSample", "BOPScene", "GroundTruthPose", "MM_PER_M", "ModelInfo",
-           "PoseResults", "SceneCamera", "Target", "load_camera", "load_model", "load_models_info",
-           "load_scene_camera", "load_scene_gt", "load_scene_gt_info", "model_path", "read_pose_results",
-           "read_targets", "write_pose_results", "write_targets"]
+import importlib
+
+_EXPORTS = {
+    "camera": ("SceneCamera", "load_camera", "load_scene_camera"),
+    "models": ("ModelInfo", "load_model", "load_models_info", "model_path"),
+    "reader": ("BOPDataset", "BOPObject", "BOPSample", "BOPScene"),
+    "results": ("PoseResults", "read_pose_results", "write_pose_results"),
+    "scene": ("GroundTruthPose", "load_scene_gt", "load_scene_gt_info"),
+    "targets": ("Target", "read_targets", "write_targets"),
+    "units": ("MM_PER_M",),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+
+__all__ = sorted(_MODULE_OF)
+
+
+def __getattr__(name: str):
+    """The exported ``name``, imported from its module on first use."""
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_MODULE_OF[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
