@@ -6,13 +6,14 @@ from pathlib import Path
 
 from paz6d.aae import run_dir as aae_run_dir
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
+from paz6d.ssd import run_dir as ssd_run_dir
 
 #: Method name -> the module that owns that method's run directories.
-RUN_DIR_MODULES = {"aae": aae_run_dir, "keypointnet": keypointnet_run_dir}
+RUN_DIR_MODULES = {"aae": aae_run_dir, "keypointnet": keypointnet_run_dir, "ssd": ssd_run_dir}
 
 
 def method_of(run_dir: str | Path) -> str:
-    """``"aae"`` or ``"keypointnet"``: the method whose training wrote ``run_dir``.
+    """``"aae"``, ``"keypointnet"`` or ``"ssd"``: the method whose training wrote ``run_dir``.
 
     Raises:
         ValueError: not a directory, or no method recognises it (the message names the marker files).

@@ -1,7 +1,7 @@
 """Application-ready pipelines: an image in, messages (Box2D, Pose6D, ...) out.
 
 Each method keeps its pipeline in its own package (``paz6d.aae``, ``paz6d.keypointnet``,
-``paz6d.faces``); this module is the one place to import them from. Importing it is cheap: models
+``paz6d.faces``, ``paz6d.ssd``); this module is the one place to import them from. Importing it is cheap: models
 (and TensorFlow) load when a pipeline is created.
 
 Every pipeline is a :class:`~paz6d.abstract.SequentialProcessor` of named steps
@@ -15,6 +15,7 @@ from paz6d.faces.emotion import DetectEmotion, EmotionClassifier
 from paz6d.faces.haar import HaarCascadeDetector, available_cascades
 from paz6d.faces.head_pose import HeadPose6D, draw_axes, yaw_pitch_roll_degrees
 from paz6d.keypointnet.pipeline import KeypointPose6D
+from paz6d.ssd.pipeline import DetectSingleShot
 
-__all__ = ["DetectEmotion", "EmotionClassifier", "HaarCascadeDetector", "HeadPose6D", "ImplicitPose6D",
+__all__ = ["DetectEmotion", "DetectSingleShot", "EmotionClassifier", "HaarCascadeDetector", "HeadPose6D", "ImplicitPose6D",
            "KeypointPose6D", "available_cascades", "draw_axes", "yaw_pitch_roll_degrees"]

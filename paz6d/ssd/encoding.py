@@ -10,6 +10,9 @@ import numpy as np
 
 from paz6d.backend import boxes as boxes_backend
 
+#: Name of class 0 (ToBoxes2D looks names up by class id, so the list of names starts with it).
+BACKGROUND = "background"
+
 
 def encode_targets(boxes, class_ids, priors, num_classes: int, iou_threshold: float = 0.5,
                    variances=boxes_backend.SSD_VARIANCES) -> np.ndarray:

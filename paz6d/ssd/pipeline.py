@@ -28,7 +28,7 @@ from paz6d.processors.boxes import ToBoxes2D
 from paz6d.processors.image import NormalizeImage, ResizeImage
 from paz6d.processors.predict import Predict
 from paz6d.ssd import run_dir as run_files
-from paz6d.ssd.encoding import decode_outputs, select_detections
+from paz6d.ssd.encoding import BACKGROUND, decode_outputs, select_detections
 
 
 class CheckImage(Processor):
@@ -140,7 +140,7 @@ class DetectSingleShot(SequentialProcessor):
             KeyedStep(NonMaximumSuppression(score_threshold, iou_threshold, max_detections),
                       ("boxes", "probabilities"), ("boxes", "scores", "class_ids"), name="nms"),
             KeyedStep(DenormalizeBoxes(), ("boxes", "image_size"), "boxes", name="to_pixels"),
-            KeyedStep(ToBoxes2D(self.class_names), ("boxes", "scores", "class_ids"), "detections",
+            KeyedStep(ToBoxes2D((BACKGROUND,) + self.class_names), ("boxes", "scores", "class_ids"), "detections",
                       name="to_boxes2d"),
         ], name="DetectSingleShot")
 

@@ -35,7 +35,7 @@ from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_e
 from paz6d.processors.boxes import ToBoxes2D
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.dataset import load_detection_set, training_batch
-from paz6d.ssd.encoding import decode_outputs, select_detections
+from paz6d.ssd.encoding import BACKGROUND, decode_outputs, select_detections
 from paz6d.ssd.pipeline import draw_detections
 from paz6d.synthesis.box_augment import ssd_augmentation
 
@@ -134,7 +134,7 @@ def _sample_drawer(images: list[np.ndarray], spec, class_names: tuple[str, ...],
             boxes, scores, ids = select_detections(*decode_outputs(output, priors, variances), score_threshold=0.3)
             height, width = image.shape[:2]
             pixels = boxes * np.array([width, height, width, height])
-            tiles.append(draw_detections(image, ToBoxes2D(class_names)(pixels, scores, ids), class_names))
+            tiles.append(draw_detections(image, ToBoxes2D((BACKGROUND,) + class_names)(pixels, scores, ids), class_names))
         save_image(path, image_grid(tiles, columns=2))
 
     return draw

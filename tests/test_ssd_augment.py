@@ -1,0 +1,98 @@
+"""SSD's box augmentations (paz6d.synthesis.box_augment) and the photographic backgrounds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from paz6d.abstract import SequentialProcessor
+from paz6d.synthesis.box_augment import (AnnotatedImage, Expand, PhotometricDistortion, RandomFlip,
+                                         RandomSampleCrop, ssd_augmentation)
+from paz6d.synthesis.photo_backgrounds import photo_collage, sample_photographs, write_backgrounds
+
+
+def _sample() -> AnnotatedImage:
+    """A textured image with two boxes drawn as solid patches of known colour."""
+    image = np.random.default_rng(0).integers(0, 60, (90, 120, 3), dtype=np.uint8)
+    image[10:40, 20:50] = (250, 10, 10)
+    image[50:80, 70:110] = (10, 250, 10)
+    return AnnotatedImage(image, np.array([[20, 10, 50, 40], [70, 50, 110, 80]], float), np.array([1, 2]))
+
+
+def _patch(sample: AnnotatedImage, index: int) -> np.ndarray:
+    x0, y0, x1, y1 = np.round(sample.boxes[index]).astype(int)
+    return sample.image[y0:y1, x0:x1]
+
+
+def test_flip_mirrors_image_and_boxes():
+    sample = _sample()
+    flipped = RandomFlip(probability=1.0, seed=0)(sample)
+    np.testing.assert_array_equal(flipped.image, sample.image[:, ::-1])
+    np.testing.assert_allclose(flipped.boxes, [[70, 10, 100, 40], [10, 50, 50, 80]])
+    np.testing.assert_array_equal(_patch(flipped, 0), _patch(sample, 0)[:, ::-1])
+    assert RandomFlip(probability=0.0, seed=0)(sample) is sample
+
+
+def test_expand_moves_boxes_with_the_content():
+    sample = _sample()
+    expanded = Expand(max_ratio=3.0, probability=1.0, seed=3)(sample)
+    assert expanded.image.shape[0] >= 90 and expanded.image.shape[1] >= 120
+    assert expanded.image.shape[:2] != sample.image.shape[:2]
+    for index in range(2):
+        np.testing.assert_array_equal(_patch(expanded, index), _patch(sample, index))
+    np.testing.assert_array_equal(expanded.class_ids, sample.class_ids)
+
+
+def test_random_sample_crop_keeps_boxes_whose_centre_is_inside():
+    sample = _sample()
+    crop = RandomSampleCrop(min_ious=(0.0,), seed=0)
+    for seed in range(20):
+        crop.reseed(seed)
+        out = crop(sample)
+        assert len(out.boxes) >= 1
+        assert np.all(out.boxes[:, :2] >= 0) and np.all(out.boxes[:, 2] <= out.image.shape[1])
+        assert np.all(out.boxes[:, 3] <= out.image.shape[0])
+        for index, class_id in enumerate(out.class_ids):
+            colour = (250, 10, 10) if class_id == 1 else (10, 250, 10)
+            assert np.all(_patch(out, index) == colour)  # clipped boxes still cover only their object
+    assert RandomSampleCrop(min_ious=(None,), seed=0)(sample) is sample
+
+
+def test_photometric_distortion_changes_colours_only_and_is_seeded():
+    sample = _sample()
+    first = PhotometricDistortion(seed=5)(sample)
+    second = PhotometricDistortion(seed=5)(sample)
+    np.testing.assert_array_equal(first.image, second.image)
+    np.testing.assert_array_equal(first.boxes, sample.boxes)
+    changed = [not np.array_equal(PhotometricDistortion(seed=s)(sample).image, sample.image) for s in range(5)]
+    assert any(changed)
+
+
+def test_ssd_augmentation_is_a_named_sequence_and_reproducible():
+    chain = ssd_augmentation(seed=1)
+    assert isinstance(chain, SequentialProcessor)
+    assert chain.names == ["photometric", "expand", "crop", "flip"]
+    again = ssd_augmentation(seed=1)
+    for _ in range(3):
+        a, b = chain(_sample()), again(_sample())
+        np.testing.assert_array_equal(a.image, b.image)
+        np.testing.assert_array_equal(a.boxes, b.boxes)
+
+
+def test_annotated_image_checks_its_fields():
+    with pytest.raises(ValueError, match="class_ids: expected 1 ids"):
+        AnnotatedImage(np.zeros((4, 4, 3), np.uint8), [[0, 0, 1, 1]], [1, 2])
+    with pytest.raises(ValueError, match="image"):
+        AnnotatedImage(np.zeros((4, 4), np.uint8), np.zeros((0, 4)), [])
+
+
+def test_photo_collages_are_seeded_and_written(tmp_path):
+    photographs = sample_photographs()
+    assert len(photographs) >= 10 and all(p.dtype == np.uint8 and p.shape[2] == 3 for p in photographs)
+    first = photo_collage(np.random.default_rng(0), photographs, 64, 48)
+    np.testing.assert_array_equal(first, photo_collage(np.random.default_rng(0), photographs, 64, 48))
+    assert first.shape == (48, 64, 3) and first.std() > 5
+    paths = write_backgrounds(tmp_path / "backgrounds", 3, 64, 48, seed=2)
+    assert [path.name for path in paths] == [f"background_0000{i}.jpg" for i in range(3)]
+    with pytest.raises(ValueError, match="photographs"):
+        photo_collage(np.random.default_rng(0), [], 64, 48)

@@ -1,0 +1,154 @@
+"""`paz6d train ssd` on a few generated images, the DetectSingleShot pipeline, `paz6d detect`, the data
+set reader's errors and the BOP -> COCO ground-truth converter."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from data_gen.config import GenerationConfig
+from data_gen.generator import generate
+from paz6d.abstract import Box2D
+from paz6d.cli import main
+from paz6d.datasets.bop.coco_ground_truth import bop_split_to_coco, coco_image_id
+from paz6d.run_dirs import method_of
+from paz6d.ssd import run_dir as run_files
+from paz6d.ssd.dataset import load_detection_set
+from paz6d.ssd.train import SSDTraining, train_ssd
+
+TINY = {"input_size": 128, "width": 0.25, "learning_rate": 5e-3, "warmup_steps": 0, "expand_probability": 0.0,
+        "checkpoint_every": 30, "sample_every": 30}
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory, shared_data) -> Path:
+    """Six 160x120 images of two LM-O meshes, as `paz6d generate` writes them."""
+    out = tmp_path_factory.mktemp("ssd_data")
+    models = shared_data / "bop_lmo" / "models"
+    config = GenerationConfig(meshes=(models / "obj_000005.ply", models / "obj_000008.ply"), out=out, num_images=6,
+                              width=160, height=120, mesh_scale=0.001, objects_per_image=(2, 2), distractors=1,
+                              seed=3)
+    generate(config, workers=1, show_progress=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def trained(generated, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ssd_run") / "run"
+    train_ssd(SSDTraining(dataset=generated, out=out, steps=60, batch_size=4, progress=False, overrides=TINY))
+    return out
+
+
+def test_training_lowers_the_loss_and_writes_the_run_directory(trained):
+    with (trained / "log.csv").open() as handle:
+        losses = [float(row["loss"]) for row in csv.DictReader(handle)]
+    assert len(losses) == 6
+    assert np.mean(losses[-2:]) < 0.7 * losses[0]
+    detector = run_files.read_detector(trained)
+    assert detector["class_names"] == ["obj_000005", "obj_000008"]
+    assert detector["architecture"] == "light"
+    assert sorted(path.name for path in (trained / "samples").iterdir()) == ["step_00000030.png", "step_00000060.png"]
+    assert json.loads((trained / "metrics.json").read_text())["steps"] == 60
+    assert method_of(trained) == "ssd"
+
+
+def test_pipeline_returns_named_boxes_from_named_steps(trained, generated):
+    from paz6d.backend.image import load_image
+    from paz6d.pipelines import DetectSingleShot
+
+    detect = DetectSingleShot(trained, score_threshold=0.0, max_detections=5)
+    assert detect.names == ["check", "resize", "normalize", "predict", "decode", "nms", "to_pixels", "to_boxes2d"]
+    image = load_image(next((generated / "train" / "000000" / "rgb").iterdir()))
+    boxes = detect(image)
+    assert 1 <= len(boxes) <= 5 and all(isinstance(box, Box2D) for box in boxes)
+    assert {box.class_name for box in boxes} <= {"obj_000005", "obj_000008"}
+    assert all(0 <= box.x_min <= box.x_max <= 160 and 0 <= box.y_min <= box.y_max <= 120 for box in boxes)
+    assert [box.score for box in boxes] == sorted((box.score for box in boxes), reverse=True)
+    with pytest.raises(ValueError, match=r"image: expected an RGB image of shape \(H, W, 3\), got shape \(120, 160\)"):
+        detect(image[..., 0])
+
+
+def test_detect_command_writes_detections_that_evaluate_scores(trained, generated, tmp_path, capsys):
+    detections, truth = tmp_path / "detections.json", tmp_path / "truth.json"
+    assert main(["detect", "--run-dir", str(trained), "--dataset", str(generated), "--split", "train",
+                 "--out", str(detections), "--ground-truth", str(truth), "--no-progress"]) == 0
+    results = json.loads(detections.read_text())
+    ground_truth = json.loads(truth.read_text())
+    assert {r["image_id"] for r in results} <= {image["id"] for image in ground_truth["images"]}
+    assert {r["category_id"] for r in results} <= {5, 8}
+    assert main(["evaluate", "coco", "--gt", str(truth), "--results", str(detections),
+                 "--out", str(tmp_path / "coco.json")]) == 0
+    folder = tmp_path / "images"
+    folder.mkdir()
+    for path in sorted((generated / "train" / "000000" / "rgb").iterdir())[:2]:
+        shutil.copy(path, folder / path.name)
+    assert main(["detect", "--run-dir", str(trained), "--images", str(folder), "--out", str(tmp_path / "f.json"),
+                 "--no-progress"]) == 0
+    entries = json.loads((tmp_path / "f.json").read_text())
+    assert {entry["image_id"] for entry in entries} <= {0, 1} and "file_name" in entries[0]
+
+
+def test_corrupt_run_directory_is_refused(trained, tmp_path):
+    from paz6d.ssd.pipeline import DetectSingleShot
+
+    broken = tmp_path / "broken"
+    shutil.copytree(trained, broken)
+    (broken / "detector.json").write_text("{not json")
+    with pytest.raises(ValueError, match="detector.json: corrupt"):
+        DetectSingleShot(broken)
+    (broken / "detector.json").write_text(json.dumps({"architecture": "light", "class_names": [], "priors": {},
+                                                      "variances": [0.1, 0.1, 0.2, 0.2]}))
+    with pytest.raises(ValueError, match="class_names: expected a non-empty list"):
+        DetectSingleShot(broken)
+    (broken / "detector.json").write_text((trained / "detector.json").read_text())
+    (broken / "model.keras").unlink()
+    with pytest.raises(ValueError, match="model.keras: file not found"):
+        DetectSingleShot(broken)
+    with pytest.raises(ValueError, match="is not a directory"):
+        DetectSingleShot(tmp_path / "missing")
+
+
+def test_data_set_errors_name_the_problem(generated, tmp_path):
+    with pytest.raises(ValueError, match="unknown class"):
+        load_detection_set(generated, class_names=("obj_000005",))
+    empty = tmp_path / "empty" / "train" / "000000"
+    empty.mkdir(parents=True)
+    (empty / "scene_gt_coco.json").write_text(json.dumps({"images": [{"id": 0, "file_name": "rgb/000000.png"}],
+                                                          "annotations": [], "categories": []}))
+    with pytest.raises(ValueError, match="empty data set"):
+        load_detection_set(tmp_path / "empty")
+    with pytest.raises(ValueError, match=r"dataset: no scene_gt_coco.json"):
+        load_detection_set(tmp_path / "empty", split="val")
+    assert main(["train", "ssd", "--dataset", str(tmp_path / "empty"), "--out", str(tmp_path / "run")]) == 2
+
+
+def test_resuming_with_other_settings_is_refused(trained, generated):
+    with pytest.raises(ValueError, match="holds a different run"):
+        train_ssd(SSDTraining(dataset=generated, out=trained, steps=60, batch_size=4, seed=9, progress=False,
+                              overrides=TINY))
+
+
+def test_bop_to_coco_boxes_equal_bbox_visib_on_lmo(shared_data):
+    root = shared_data / "bop_lmo"
+    coco = bop_split_to_coco(root, "test")
+    assert len(coco["images"]) == 20
+    infos = json.loads((root / "test" / "000002" / "scene_gt_info.json").read_text())
+    truth = json.loads((root / "test" / "000002" / "scene_gt.json").read_text())
+    annotations = {}
+    for annotation in coco["annotations"]:
+        annotations.setdefault(annotation["image_id"], []).append(annotation)
+    for image in coco["images"]:
+        im_id = image["im_id"]
+        assert image["id"] == coco_image_id(2, im_id) and (image["width"], image["height"]) == (640, 480)
+        expected = [(entry["obj_id"], info["bbox_visib"], info["visib_fract"] < 0.1)
+                    for entry, info in zip(truth[str(im_id)], infos[str(im_id)]) if info["bbox_visib"][2] > 0]
+        got = [(a["category_id"], a["bbox"], bool(a["iscrowd"])) for a in annotations.get(image["id"], [])]
+        assert got == [(obj, [float(v) for v in box], ignored) for obj, box, ignored in expected]
+    assert [c["name"] for c in coco["categories"]] == [f"obj_{i:06d}" for i in (1, 5, 6, 8, 9, 10, 11, 12)]
+    with pytest.raises(ValueError, match="split folder not found"):
+        bop_split_to_coco(root, "train")
