@@ -17,6 +17,11 @@ killed) are dropped so every step appears once. Ctrl-C saves a checkpoint before
 For a deterministic data stream across resumes pass ``data`` as a function of the step index
 (``data(step) -> batch``); an iterable is also accepted (it is simply continued).
 
+Data-parallel training: pass ``strategy`` (:func:`paz6d.training.distribution.make_strategy`:
+several GPUs of one machine, or several machines) with the model and optimizer built in its scope;
+each global batch is split evenly between the replicas and the gradients are summed, so the loss
+curve is that of one device at the same global batch.
+
 Example:
     >>> trainer = Trainer(model, optimizer, loss_fn, data=lambda step: batches[step % len(batches)],
     ...                   run_dir="runs/x", steps=1000, checkpoint_every=200)   # doctest: +SKIP
@@ -25,6 +30,7 @@ Example:
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import os
@@ -40,6 +46,7 @@ import numpy as np
 
 from paz6d.backend.files import write_csv_atomically, write_json_atomically
 from paz6d.backend.tensorflow_guard import import_tensorflow
+from paz6d.training.distribution import is_chief, split_batch
 
 CHECKPOINT_POINTER = "checkpoint.json"
 LOG_FILE = "log.csv"
@@ -114,6 +121,11 @@ class Trainer:
         compile_step: wrap the built-in step in ``tf.function``.
         prefetch: with a callable ``data``, batches computed ahead in background threads (0 = none).
         prefetch_workers: threads computing batches (numpy/OpenCV release the GIL).
+        strategy: a ``tf.distribute`` strategy (:func:`~paz6d.training.distribution.make_strategy`)
+            whose scope created ``model`` and ``optimizer``; None trains on one device. The global
+            batch size must be divisible by its number of replicas; ``loss_fn`` sees one replica's
+            share and should return means over it. Only the chief of a multi-worker cluster writes
+            files. Not with ``train_step``.
     """
 
     def __init__(self, model, optimizer, loss_fn: Callable | None, data: Callable[[int], Any] | Iterable,
@@ -121,7 +133,7 @@ class Trainer:
                  sample_every: int = 0, sample_callback: Callable | None = None,
                  train_step: Callable[[Any], Mapping[str, Any]] | None = None, keep_checkpoints: int = 2,
                  tensorboard: bool = True, progress: bool = True, compile_step: bool = True, prefetch: int = 0,
-                 prefetch_workers: int = 1):
+                 prefetch_workers: int = 1, strategy: Any = None):
         if int(steps) <= 0:
             raise ValueError(f"steps: expected a positive number of training steps, got {steps}")
         for name, value in (("checkpoint_every", checkpoint_every), ("log_every", log_every),
@@ -137,6 +149,14 @@ class Trainer:
         if not callable(data) and not isinstance(data, Iterable):
             raise ValueError(f"data: expected a callable data(step) or an iterable of batches, "
                              f"got {type(data).__name__}")
+        if strategy is not None:
+            if train_step is not None:
+                raise ValueError("strategy: not with a custom train_step (it would have to distribute itself)")
+            outside = [variable.path for variable in model.trainable_variables
+                       if not strategy.extended.variable_created_in_scope(variable.value)]
+            if outside:
+                raise ValueError(f"model: {len(outside)} variables (e.g. {outside[0]}) were not created in "
+                                 f"strategy.scope(); build the model and optimizer inside it")
         self.model = model
         self.optimizer = optimizer
         self.loss_fn = loss_fn
@@ -155,6 +175,8 @@ class Trainer:
         self._step_function = None
         self.prefetch = int(prefetch)
         self.prefetch_workers = int(prefetch_workers)
+        self.strategy = strategy
+        self.writes_files = is_chief(strategy)
 
     # ----------------------------------------------------------------------------------- checkpoints
     @property
@@ -176,12 +198,17 @@ class Trainer:
         return step, folder
 
     def _ensure_optimizer_built(self) -> None:
+        """Creates the optimizer's variables (in the strategy's scope: mirrored like the model's)."""
         if not self.optimizer.built:
-            self.optimizer.build(self.model.trainable_variables)
+            with self.strategy.scope() if self.strategy is not None else contextlib.nullcontext():
+                self.optimizer.build(self.model.trainable_variables)
 
     def save_checkpoint(self, step: int, metrics: Mapping[str, float] | None = None) -> Path:
-        """Writes model weights + optimizer state for ``step`` (temp folder, then rename) and prunes old ones."""
+        """Writes model weights + optimizer state for ``step`` (temp folder, then rename) and prunes old ones
+        (only the chief of a multi-worker cluster writes; the others return the chief's folder)."""
         self._ensure_optimizer_built()
+        if not self.writes_files:
+            return self.checkpoint_dir / f"step_{step:08d}"
         self.checkpoint_dir.mkdir(parents=True, exist_ok=True)
         name = f"step_{step:08d}"
         final = self.checkpoint_dir / name
@@ -224,6 +251,8 @@ class Trainer:
         return rows
 
     def _write_log(self, rows: list[dict[str, Any]]) -> None:
+        if not self.writes_files:
+            return
         columns = list(_FIXED_COLUMNS)
         for row in rows:
             columns.extend(key for key in row if key not in columns)
@@ -234,7 +263,8 @@ class Trainer:
         if self._custom_step is not None:
             return self._custom_step
         tf = import_tensorflow()
-        model, optimizer, loss_fn = self.model, self.optimizer, self.loss_fn
+        model, optimizer, loss_fn, strategy = self.model, self.optimizer, self.loss_fn, self.strategy
+        replicas = 1 if strategy is None else strategy.num_replicas_in_sync
 
         def step(batch):
             with tf.GradientTape() as tape:
@@ -242,13 +272,31 @@ class Trainer:
                 metrics = dict(output) if isinstance(output, Mapping) else {"loss": output}
                 if "loss" not in metrics:
                     raise ValueError(f"loss_fn: returned a dict without a 'loss' key (keys {sorted(metrics)})")
-                loss = metrics["loss"]
+                loss = metrics["loss"] / replicas  # the optimizer sums the replicas' gradients
             variables = model.trainable_variables
             gradients = tape.gradient(loss, variables)
             optimizer.apply_gradients(zip(gradients, variables))
             return metrics
 
-        return tf.function(step) if self._compile_step else step
+        def distributed_step(batch):
+            metrics = strategy.run(step, args=(batch,))
+            return {key: strategy.reduce(tf.distribute.ReduceOp.MEAN, value, axis=None)
+                    for key, value in metrics.items()}
+
+        function = step if strategy is None else distributed_step
+        return tf.function(function) if self._compile_step else function
+
+    def _distribute(self, batch):
+        """``batch`` as the strategy's per-replica shares (unchanged without a strategy)."""
+        if self.strategy is None:
+            return batch
+        tf = import_tensorflow()
+
+        def share(context):
+            part = split_batch(batch, context.replica_id_in_sync_group, context.num_replicas_in_sync)
+            return tf.nest.map_structure(tf.convert_to_tensor, part)
+
+        return self.strategy.experimental_distribute_values_from_function(share)
 
     def _next_batch(self, step: int, iterator, pending: dict | None, executor):
         if iterator is not None:
@@ -267,12 +315,13 @@ class Trainer:
 
         self.run_dir.mkdir(parents=True, exist_ok=True)
         start_step = self.restore()
+        self._ensure_optimizer_built()  # not inside the first (distributed) step
         rows = self._prepare_log(start_step)
         self._write_log(rows)
         if self._step_function is None:
             self._step_function = self._build_step()
         writer = None
-        if self.tensorboard:
+        if self.tensorboard and self.writes_files:
             tf = import_tensorflow()
             writer = tf.summary.create_file_writer(str(self.run_dir / "tensorboard"))
         iterator = None if callable(self.data) else iter(self.data)
@@ -299,7 +348,7 @@ class Trainer:
                 except StopIteration:
                     break
                 tock = time.perf_counter()
-                metrics = self._step_function(batch)
+                metrics = self._step_function(self._distribute(batch))
                 values = {key: float(np.asarray(value)) for key, value in metrics.items()}
                 done = time.perf_counter()
                 if not all(np.isfinite(v) for v in values.values()):
@@ -355,6 +404,8 @@ class Trainer:
                                model_samples_per_second=samples / step_seconds if samples and step_seconds > 0 else None)
 
     def _draw_sample(self, step: int) -> None:
+        if not self.writes_files:
+            return
         folder = self.run_dir / "samples"
         folder.mkdir(parents=True, exist_ok=True)
         self.sample_callback(self.model, step, folder / f"step_{step:08d}.png")
