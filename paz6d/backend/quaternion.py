@@ -136,7 +136,8 @@ def from_rotation_vector(vector) -> np.ndarray:
     # The quaternion has period 4*pi in the angle; reducing first keeps sin/cos exact for huge angles.
     half = np.mod(angle, 4.0 * np.pi) / 2.0
     # sin(angle/2)/angle -> 1/2 - angle^2/48 as angle -> 0.
-    scale = np.where(small, 0.5 - angle ** 2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
+    small_angle = np.where(small, angle, 0.0)  # keeps the series term finite for huge angles
+    scale = np.where(small, 0.5 - small_angle ** 2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
     return np.concatenate([vector * scale[..., None], np.cos(half)[..., None]], axis=-1)
 
 
