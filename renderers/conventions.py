@@ -18,12 +18,12 @@ from paz6d.backend.checks import as_array, as_camera_matrix
 FLIP_YZ = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
-def model_pose_to_opengl(T_model2cam) -> np.ndarray:
+def opengl_transform_from_model2cam(T_model2cam) -> np.ndarray:
     """Maps an OpenCV ``T_model2cam`` ``(4, 4)`` to the pose of the model in the OpenGL camera frame."""
     return FLIP_YZ @ as_array(T_model2cam, "T_model2cam", (4, 4))
 
 
-def emitter_pose_to_opengl(T_emitter2cam) -> np.ndarray:
+def opengl_transform_from_emitter2cam(T_emitter2cam) -> np.ndarray:
     """Maps the pose ``(4, 4)`` of a camera-like emitter (looks along its own +z, OpenCV style)
     to the pyrender pose of the same emitter (looks along its own -z, OpenGL style)."""
     return FLIP_YZ @ as_array(T_emitter2cam, "T_emitter2cam", (4, 4)) @ FLIP_YZ

@@ -25,15 +25,13 @@ import numpy as np
 from paz6d.backend.checks import as_camera_matrix
 from paz6d.backend.transform import as_pose_matrix
 from renderers import conventions
+from renderers.antialias import ANTIALIAS_MODES
 from renderers.edge_coverage import soften_silhouette
 from renderers.lights import Lighting
 from renderers.platform import select_platform
 
 if TYPE_CHECKING:  # trimesh costs ~1 s to import; only needed once meshes are rendered
     import trimesh
-
-#: ``antialias`` values: 4× multisampled colour pass, single-sample with softened outlines, none.
-ANTIALIAS_MODES = ("msaa", "edges", "none")
 
 
 @dataclass
@@ -239,7 +237,7 @@ class Renderer:
             _, gpu_mesh, pool = self._gpu_mesh(mesh)
             slot = used.get(mesh_key, 0)
             used[mesh_key] = slot + 1
-            pose = conventions.model_pose_to_opengl(T_model2cam)
+            pose = conventions.opengl_transform_from_model2cam(T_model2cam)
             if slot < len(pool):
                 self._scene.set_pose(pool[slot], pose)
             else:
@@ -275,7 +273,7 @@ class Renderer:
                 gl_light = self._pyrender.DirectionalLight(color=light.color, intensity=light.intensity)
             else:
                 gl_light = self._pyrender.PointLight(color=light.color, intensity=light.intensity)
-            pose = conventions.emitter_pose_to_opengl(light.pose())
+            pose = conventions.opengl_transform_from_emitter2cam(light.pose())
             self._light_nodes.append(self._scene.add(gl_light, pose=pose))
         self._lighting = lighting
 

@@ -109,12 +109,12 @@ def test_depth_to_points_back_projects_pixel_centres():
     depth = np.zeros((4, 5), np.float32)
     depth[1, 2] = 2.0
     depth[3, 0] = 0.5
-    points = camera.depth_to_points(depth, K)
+    points = camera.points_from_depth(depth, K)
     assert points.shape == (2, 3)
     np.testing.assert_allclose(points[:, 2], [2.0, 0.5])
     np.testing.assert_allclose(camera.project_points(points, K), [[2, 1], [0, 3]], atol=1e-9)
     with pytest.raises(ValueError, match=r"depth: expected shape \(H, W\)"):
-        camera.depth_to_points(np.zeros((2, 2, 1)), K)
+        camera.points_from_depth(np.zeros((2, 2, 1)), K)
 
 
 def test_camera_object_projects_undistorts_and_serializes():

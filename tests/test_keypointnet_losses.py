@@ -170,5 +170,5 @@ def test_heatmap_and_coordinate_losses_hand_computed():
 def test_depth_to_metres():
     K = _pinhole(200.0, 200.0, 64.0, 64.0)[None]
     # z = z_hat * diameter * fx / S = 1.5 * 0.2 * 200 / 128
-    got = np.asarray(kp.depth_to_metres(np.array([[1.5]]), 0.2, K, 128))
+    got = np.asarray(kp.metres_from_depth_code(np.array([[1.5]]), 0.2, K, 128))
     assert got[0, 0] == pytest.approx(1.5 * 0.2 * 200 / 128, rel=1e-6)

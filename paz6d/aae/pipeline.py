@@ -31,7 +31,7 @@ from paz6d.aae.codebook import Codebook
 from paz6d.aae.model import encode_function, encoder_of, to_model_input
 from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
 from paz6d.backend import quaternion
-from paz6d.backend.camera import Camera, as_camera, depth_to_points, project_points, unproject
+from paz6d.backend.camera import Camera, as_camera, points_from_depth, project_points, unproject
 from paz6d.backend.checks import as_array, as_camera_matrix
 from paz6d.backend.image import as_image
 from paz6d.backend.transform import invert
@@ -275,7 +275,7 @@ class RefineWithDepth(Processor):
         x0, y0 = max(int(np.floor(box[0])), 0), max(int(np.floor(box[1])), 0)
         x1, y1 = min(int(np.ceil(box[2])), depth.shape[1]), min(int(np.ceil(box[3])), depth.shape[0])
         masked[y0:y1, x0:x1] = depth[y0:y1, x0:x1]
-        scene = depth_to_points(masked, camera.K)
+        scene = points_from_depth(masked, camera.K)
         model = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.surface_points))
         estimation = o3d.pipelines.registration.TransformationEstimationPointToPoint()
         criteria = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=self.max_iterations)

@@ -64,7 +64,7 @@ def unproject(pixels, depths, K) -> np.ndarray:
     return np.stack([x * depths, y * depths, depths], axis=-1)
 
 
-def depth_to_points(depth, K) -> np.ndarray:
+def points_from_depth(depth, K) -> np.ndarray:
     """Back-projects a depth image ``(H, W)`` (metres, 0 = none) to ``(N, 3)`` camera points.
 
     Pixel ``(row, col)`` is taken at its centre coordinate ``(u, v) = (col, row)``.

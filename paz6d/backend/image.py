@@ -111,7 +111,7 @@ def resize(image, size: tuple[int, int], interpolation: str = "linear") -> np.nd
     return cv2.resize(image, (width, height), interpolation=INTERPOLATIONS[interpolation])
 
 
-def box_to_pixel_slices(box, image_shape: tuple[int, ...]) -> tuple[slice, slice]:
+def pixel_slices_from_box(box, image_shape: tuple[int, ...]) -> tuple[slice, slice]:
     """Rows/columns slices of the pixels touched by ``xyxy`` ``box``, clipped to the image.
 
     With pixel ``i`` covering ``[i, i + 1)``, the box covers columns ``floor(x_min)`` to
@@ -155,7 +155,7 @@ def crop(image, box) -> np.ndarray:
     image = np.asarray(image)
     if image.ndim not in (2, 3):
         raise ValueError(f"image: expected (H, W) or (H, W, C), got shape {image.shape}")
-    rows, columns = box_to_pixel_slices(box, image.shape)
+    rows, columns = pixel_slices_from_box(box, image.shape)
     if rows.stop <= rows.start or columns.stop <= columns.start:
         raise ValueError(f"box: {np.asarray(box).tolist()} covers no pixel of a {image.shape[1]}x{image.shape[0]} image")
     return image[rows, columns].copy()

@@ -7,7 +7,7 @@ expectation ``[u_i, v_i] = sum g_i(u, v) [u, v]`` and ``z_i = sum g_i(u, v) d_i(
 
 Units: ``uv`` are pixels of the input crop (OpenCV pixel-centre convention: column ``j`` is at
 ``u = j``). ``depth`` is a dimensionless code ``z_hat``; callers turn it into metres with
-:func:`depth_to_metres` (``z = z_hat * depth_scale``, ``depth_scale = diameter * fx_crop / S``,
+:func:`metres_from_depth_code` (``z = z_hat * depth_scale``, ``depth_scale = diameter * fx_crop / S``,
 which makes ``z_hat`` about constant for box-centred crops of any size).
 
 Losses (batch-mean scalars; coordinates in any consistent unit, e.g. pixels/``S``):
@@ -222,7 +222,7 @@ def inference_function(model):
 
 # --------------------------------------------------------------------------- geometry (batched TF)
 
-def depth_to_metres(depth_code, diameter: float, K, input_size: int):
+def metres_from_depth_code(depth_code, diameter: float, K, input_size: int):
     """Depth code ``z_hat (B, N)`` to metres: ``z = z_hat * diameter * K[:, 0, 0] / input_size``.
 
     ``K (B, 3, 3)`` are the crops' intrinsics (pixels of the ``input_size`` crop).

@@ -204,7 +204,7 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
             outputs = model(batch["images"], training=True)
             K, T = batch["K"], batch["T_model2cam"]
             pairs = tf.shape(K)[0] // 2
-            depth = kp.depth_to_metres(outputs["depth"], object_diameter, K, int(size))
+            depth = kp.metres_from_depth_code(outputs["depth"], object_diameter, K, int(size))
             uv_unit = normalised(outputs["uv"])
             K_unit = tf.einsum("ij,bjk->bik", to_unit, K)
             T_a2b = tf.einsum("bij,bjk->bik", T[pairs:], kp.invert_transforms(T[:pairs]))
@@ -369,7 +369,7 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
     marked unusable.
     ``targets`` (supervised mode: the farthest-point keypoints) are stored alongside for reference.
     """
-    from paz6d.keypointnet.model import depth_to_metres
+    from paz6d.keypointnet.model import metres_from_depth_code
     from paz6d.keypointnet.keypoints import decode_keypoints, lift_keypoints, triangulate_keypoints
 
     method = settings.get("lifting", "triangulate")
@@ -379,7 +379,7 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
     outputs = predict_crops(model, images)
     uv = decode_keypoints(outputs, settings["downsample"])
     if method == "median":
-        depth = np.asarray(depth_to_metres(outputs["depth"], object_diameter, K, settings["input_size"]))
+        depth = np.asarray(metres_from_depth_code(outputs["depth"], object_diameter, K, settings["input_size"]))
         points, _ = lift_keypoints(uv, depth, K, T)
     else:
         points, _ = triangulate_keypoints(uv, K, T)
@@ -488,7 +488,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
 
     images, K, T = fixed_crops(validation_views, job.seed + 2)
     outputs = predict_crops(model, images)
-    depth = np.asarray(kp.depth_to_metres(outputs["depth"], object_diameter, K, settings["input_size"]))
+    depth = np.asarray(kp.metres_from_depth_code(outputs["depth"], object_diameter, K, settings["input_size"]))
     summary = {"mode": job.mode, "config": job.config, "steps": training.final_step,
                "train_seconds": round(train_seconds, 1), "render_seconds": round(render_seconds, 1),
                "final_losses": training.metrics,
