@@ -56,7 +56,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20)
     args = parser.parse_args()
     print(f"CPU cores: {os.cpu_count()}, load average (1 min) at start: {os.getloadavg()[0]:.1f}")
-    from paz6d.aae.train import FULL, QUICK
+    from paz6d.aae.config import FULL, QUICK
 
     for name, config in (("quick", QUICK), ("full", FULL)):
         r = measure(config, args.entries, args.batch, args.repeats)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from paz6d.cli_options import option
 from renderers.platform import PLATFORMS
-from renderers.renderer import ANTIALIAS_MODES
+from renderers.antialias import ANTIALIAS_MODES
 
 ROTATION_MODES = ("so3", "view-sphere")
 RGB_FORMATS = ("png", "jpg")

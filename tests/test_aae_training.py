@@ -21,8 +21,8 @@ import_tensorflow()  # before any renderer in this process
 from paz6d.abstract import Box2D, Pose6D  # noqa: E402
 from paz6d.assets.demo_object import write_demo_object  # noqa: E402
 from paz6d.backend.camera import Camera  # noqa: E402
-from paz6d.aae.train import QUICK, train_aae  # noqa: E402
-from paz6d.aae.augment import Augmentation  # noqa: E402
+from paz6d.aae.config import QUICK, Augmentation  # noqa: E402
+from paz6d.aae.train import train_aae  # noqa: E402
 
 TOY = replace(QUICK, crop_size=16, latent_size=16, filters=(8, 16), kernel_size=3, render_size=40, views=24,
               in_plane=6, steps=40, batch_size=8, learning_rate=2e-3, bootstrap_fraction=0.25,

@@ -16,15 +16,20 @@ import pytest
 from paz6d import cli
 
 
-def command_paths() -> list[tuple[str, ...]]:
-    """Every runnable command as its argument path, e.g. ``("train", "aae")``."""
-    paths = []
+def command_paths_and_modules() -> list[tuple[tuple[str, ...], str]]:
+    """Every runnable command's argument path and module name."""
+    pairs = []
     for name, (target, _) in cli.COMMANDS.items():
         if isinstance(target, dict):
-            paths += [(name, model) for model in target]
+            pairs += [((name, model), module) for model, (module, _) in target.items()]
         else:
-            paths.append((name,))
-    return paths
+            pairs.append(((name,), target))
+    return pairs
+
+
+def command_paths() -> list[tuple[str, ...]]:
+    """Every runnable command as its argument path, e.g. ``("train", "aae")``."""
+    return [path for path, _ in command_paths_and_modules()]
 
 
 def test_top_level_help_lists_every_command(capsys):
@@ -52,13 +57,35 @@ def test_console_script_help_is_cheap():
     assert "usage: paz6d" in result.stdout
     module = subprocess.run([sys.executable, "-m", "paz6d", "--help"], capture_output=True, text=True, timeout=120)
     assert module.returncode == 0 and module.stdout == result.stdout  # python -m paz6d is the same command
-    code = ("import json, sys\nfrom paz6d.cli import build_parser\nbuild_parser()\n"
-            "print(json.dumps([name for name in ('tensorflow', 'keras', 'pyrender', 'OpenGL', 'open3d', 'numba', "
-            "'matplotlib') "
-            "if name in sys.modules]))")
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+
+
+# Imported by no command at parser-build time: each costs 0.1-2 s (trimesh pulls scipy.spatial/linalg and networkx).
+# The renderers package itself loads nothing (its names are imported on first use), and renderers.platform
+# and renderers.antialias only hold names for the flags; renderers.renderer is the rendering code.
+HEAVY_MODULES = ("trimesh", "scipy.linalg", "scipy.spatial", "renderers.renderer", "tensorflow", "keras", "numba",
+                 "matplotlib", "open3d", "pyrender", "OpenGL")
+
+
+def _modules_loaded_by(code: str, names) -> list[str]:
+    """Which of ``names`` a fresh interpreter has imported after running ``code``."""
+    script = f"import json, sys\n{code}\nprint(json.dumps([name for name in {list(names)!r} if name in sys.modules]))"
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout) == []  # building every subcommand parser loads no heavy library
+    return json.loads(result.stdout.splitlines()[-1])
+
+
+def test_building_every_command_parser_loads_no_heavy_library():
+    code = "from paz6d.cli import build_parser\nbuild_parser(load_commands=True)"
+    assert _modules_loaded_by(code, HEAVY_MODULES) == []
+
+
+def test_a_command_parser_imports_only_its_own_module():
+    modules = [module for _, module in command_paths_and_modules()]
+    top = "from paz6d.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass"
+    assert _modules_loaded_by(top, modules) == []
+    evaluate = top.replace("['--help']", "['evaluate', 'coco', '--help']")
+    assert _modules_loaded_by(evaluate, modules) == ["evaluation.cli"]
+
 
 
 @pytest.fixture
@@ -97,9 +124,9 @@ def test_main_dispatches_and_reports_value_errors(fake_command, capsys):
 def _command_configs() -> dict[tuple[str, ...], list[tuple[type, tuple[str, ...]]]]:
     """Each command's config dataclasses and the fields that are not flags."""
     from data_gen.config import GenerationConfig, GenerationRun
-    from paz6d.aae.train import AAETraining
+    from paz6d.aae.config import AAETraining
     from paz6d.demo.command import DemoOptions
-    from paz6d.faces.emotion_train import EmotionTraining
+    from paz6d.faces.emotion_config import EmotionTraining
     from paz6d.keypointnet.train import KeypointTraining
 
     return {("generate",): [(GenerationConfig, ()), (GenerationRun, ())], ("train", "aae"): [(AAETraining, ())],
@@ -108,7 +135,7 @@ def _command_configs() -> dict[tuple[str, ...], list[tuple[type, tuple[str, ...]
 
 
 def _subparser(path: tuple[str, ...]) -> argparse.ArgumentParser:
-    parser = cli.build_parser()
+    parser = cli.build_parser(load_commands=True)
     for name in path:
         parser = next(action for action in parser._actions
                       if isinstance(action, argparse._SubParsersAction)).choices[name]
@@ -188,9 +215,9 @@ def test_generate_round_trip_and_errors_name_the_flag(tmp_path):
 
 
 def test_train_commands_resolve_the_mesh_scale_by_source_and_name_flags_in_errors():
-    from paz6d.aae.train import AAETraining
+    from paz6d.aae.config import AAETraining
     from paz6d.cli_options import config_from_args
-    from paz6d.faces.emotion_train import EmotionTraining
+    from paz6d.faces.emotion_config import EmotionTraining
 
     parser = _subparser(("train", "aae"))
     with pytest.raises(SystemExit):

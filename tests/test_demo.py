@@ -43,8 +43,8 @@ def test_demo_object_files_are_bop_millimetres(tmp_path):
 
 def test_demo_smoke_run(tmp_path):
     from paz6d.demo.aae_demo import run_demo
-    from paz6d.aae.train import QUICK
-    from paz6d.aae.augment import Augmentation
+    from paz6d.aae.config import QUICK
+    from paz6d.aae.config import Augmentation
 
     toy = replace(QUICK, crop_size=16, latent_size=16, filters=(8, 16), kernel_size=3, render_size=40, views=24,
                   in_plane=6, steps=20, batch_size=8, learning_rate=2e-3, bootstrap_fraction=0.25,

@@ -15,10 +15,9 @@ Every batch is a pure function of ``(seed, step)``, so training resumes on the s
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from paz6d.aae.config import Augmentation
 from paz6d.aae.model import crop_object
 from paz6d.aae.views import coverage_box, rotate_view
 from paz6d.abstract.processor import SequentialProcessor
@@ -26,54 +25,6 @@ from paz6d.synthesis.augment import (RandomContrastBrightnessNoise, RandomGaussi
                                      share_generator)
 from paz6d.synthesis.backgrounds import BackgroundBank
 from paz6d.synthesis.occluders import PolygonOccluders
-
-
-@dataclass(frozen=True)
-class Augmentation:
-    """Strengths of the input augmentations (paper: background, occlusion, lighting, colour, crop shift).
-
-    Attributes:
-        backgrounds: composite over random procedural backgrounds (else black).
-        occlusion_probability: chance that a sample gets 1..``max_occluders`` random occluders.
-        occluder_size: occluder size range as fractions of the object box's longest side.
-        max_occluders: most occluders per occluded sample.
-        shift: crop centre shift, uniform in ``±shift`` × box side.
-        scale: crop scale factor range.
-        light: strength of the re-lighting (gains ``1 ± light/2``, gradient up to ``± light``).
-        brightness: max brightness offset (intensity levels).
-        contrast / saturation: factor ranges.
-        hue: max hue rotation in degrees.
-        blur_probability: chance of a Gaussian blur (sigma 0.4-1.2 px).
-        noise: max Gaussian noise std (intensity levels).
-    """
-
-    backgrounds: bool = True
-    occlusion_probability: float = 0.5
-    occluder_size: tuple[float, float] = (0.2, 0.5)
-    max_occluders: int = 2
-    shift: float = 0.08
-    scale: tuple[float, float] = (0.9, 1.1)
-    light: float = 0.5
-    brightness: float = 30.0
-    contrast: tuple[float, float] = (0.6, 1.4)
-    saturation: tuple[float, float] = (0.6, 1.4)
-    hue: float = 10.0
-    blur_probability: float = 0.3
-    noise: float = 8.0
-
-    def __post_init__(self):
-        for name in ("occlusion_probability", "blur_probability"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"Augmentation.{name}: expected a probability in [0, 1], got {getattr(self, name)}")
-        for name in ("occluder_size", "scale", "contrast", "saturation"):
-            low, high = getattr(self, name)
-            if not 0.0 < low <= high:
-                raise ValueError(f"Augmentation.{name}: expected 0 < low <= high, got {getattr(self, name)}")
-        if int(self.max_occluders) < 1:
-            raise ValueError(f"Augmentation.max_occluders: expected at least 1, got {self.max_occluders}")
-        for name in ("shift", "light", "brightness", "hue", "noise"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"Augmentation.{name}: expected >= 0, got {getattr(self, name)}")
 
 
 def input_augmentation(augmentation: Augmentation, padding: float) -> SequentialProcessor:

@@ -1,4 +1,5 @@
-"""``paz6d train aae``: train an Augmented Autoencoder for one object and build its orientation codebook.
+"""Training for ``paz6d train aae`` (settings: :mod:`paz6d.aae.config`; flags and command:
+:mod:`paz6d.aae.command`): train an Augmented Autoencoder for one object and build its orientation codebook.
 
 Stages, each resumable from what is already in the run directory (its files and formats:
 :mod:`paz6d.aae.run_dir`): the settings (a re-run reuses them; --steps may extend training), the
@@ -11,139 +12,16 @@ the trained autoencoder, its codebook and a summary.
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from paz6d.aae import run_dir as run_files
-from paz6d.aae.augment import Augmentation
+from paz6d.aae.config import QUICK, AAEConfig
 from paz6d.backend.files import save_npz_atomically
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
-from paz6d.datasets.bop.units import MM_PER_M
-from renderers.platform import PLATFORMS
 
-
-
-@dataclass(frozen=True)
-class AAEConfig:
-    """Model, data and schedule of an AAE training run.
-
-    Attributes:
-        crop_size: side of the square model input (pixels).
-        latent_size: length of the latent code.
-        filters: encoder channels per strided convolution (the decoder mirrors them).
-        kernel_size: convolution kernel size.
-        batch_norm: batch normalisation after every convolution (not in the paper; trains faster).
-        padding: crop side / longest side of the object box.
-        render_size: side of the on-axis renderings the crops are cut from.
-        views: view-sphere directions rendered (training views and codebook share them).
-        in_plane: in-plane rotations per view in the codebook (codebook size = views * in_plane).
-        steps: optimisation steps.
-        batch_size: samples per step.
-        learning_rate: Adam learning rate.
-        bootstrap_fraction: fraction of largest pixel errors in the loss (1 = plain L2; paper 0.25).
-        augmentation: input augmentation strengths.
-        checkpoint_every / sample_every / log_every: Trainer intervals in steps.
-    """
-
-    crop_size: int = 64
-    latent_size: int = 64
-    filters: tuple[int, ...] = (32, 64, 64, 128)
-    kernel_size: int = 5
-    batch_norm: bool = False
-    padding: float = 1.2
-    render_size: int = 96
-    views: int = 1000
-    in_plane: int = 36
-    steps: int = 3000
-    batch_size: int = 32
-    learning_rate: float = 1e-3
-    bootstrap_fraction: float = 0.25
-    augmentation: Augmentation = field(default_factory=Augmentation)
-    checkpoint_every: int = 500
-    sample_every: int = 500
-    log_every: int = 25
-
-    def to_dict(self) -> dict:
-        data = asdict(self)
-        data["filters"] = list(self.filters)
-        return data
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "AAEConfig":
-        data = dict(data)
-        unknown = set(data) - {f for f in cls.__dataclass_fields__}
-        if unknown:
-            raise ValueError(f"AAE config: unknown field(s) {sorted(unknown)}")
-        augmentation = data.pop("augmentation", {})
-        for key in ("occluder_size", "scale", "contrast", "saturation"):
-            if key in augmentation:
-                augmentation[key] = tuple(augmentation[key])
-        return cls(filters=tuple(data.pop("filters", cls.filters)), augmentation=Augmentation(**augmentation), **data)
-
-    @property
-    def codebook_size(self) -> int:
-        return self.views * self.in_plane
-
-
-#: Sized for a 2-core CPU (the demo): 64x64 crops, batch normalisation (several times faster convergence),
-#: latent 128, 1,000 views x 72 in-plane = 72,000-entry codebook, 5,000 steps (~10 minutes); small crop
-#: shifts (the demo uses ground-truth boxes: measured, shifts of +-8 % doubled the rotation error at this
-#: training length).
-QUICK = AAEConfig(latent_size=128, batch_norm=True, in_plane=72, steps=5000,
-                  augmentation=Augmentation(shift=0.03, scale=(0.95, 1.05)))
-#: The paper's setting: 128x128 crops, latent 128, 30k iterations of 64, 2,562 x 36 = 92,232 codebook views.
-FULL = AAEConfig(crop_size=128, latent_size=128, filters=(128, 256, 256, 512), render_size=192, views=2562,
-                 in_plane=36, steps=30000, batch_size=64, learning_rate=2e-4, checkpoint_every=1000,
-                 sample_every=2000, log_every=50)
-CONFIGS = {"quick": QUICK, "full": FULL}
-
-
-@dataclass(frozen=True)
-class AAETraining:
-    """One ``paz6d train aae`` run (each field is a flag, see :mod:`paz6d.cli_options`): the object,
-    from a mesh or a BOP data set, the run directory, the config preset and how to run."""
-
-    out: Path = option(help="run directory (re-run to resume)")
-    mesh: Path | None = option(None, "mesh of the object (PLY/OBJ/GLB)", one_of="source")
-    dataset: Path | None = option(None, "BOP data set (e.g. from `paz6d generate`): its models/obj_XXXXXX.ply "
-                                        "(millimetres) is the object and its image crops are training inputs",
-                                  one_of="source")
-    object_id: int | None = option(None, "object of --dataset (default: the only one)")
-    split: str = option("train", "split of --dataset to read")
-    pair_fraction: float = option(0.5, "with --dataset: share of training samples taken from its crops "
-                                       "(the rest: rendered views)")
-    config: str = option("quick", "quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
-                                  "92,232-view codebook (hours on a CPU)", choices=tuple(sorted(CONFIGS)))
-    steps: int | None = option(None, "training steps (default: the config's)")
-    seed: int = option(0, "seed of the model initialisation and of the data stream")
-    mesh_scale: float | None = option(None, "mesh units to metres (default: 1 with --mesh, 0.001 with --dataset, "
-                                            "whose meshes are BOP millimetres)")
-    workers: int = option(2, "rendering processes (0: render in this process)")
-    platform: str | None = option(None, "OpenGL platform of the renderers (default: auto)", choices=PLATFORMS)
-    progress: bool = option(True, "progress bars")
-
-    def __post_init__(self):
-        if (self.mesh is None) == (self.dataset is None):
-            raise ValueError("mesh: expected exactly one of mesh and dataset")
-        if self.config not in CONFIGS:
-            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
-        if self.steps is not None and self.steps <= 0:
-            raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
-        if self.mesh_scale is None:
-            object.__setattr__(self, "mesh_scale", 1.0 if self.dataset is None else 1.0 / MM_PER_M)
-        if not np.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
-            raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
-
-    @property
-    def model_config(self) -> AAEConfig:
-        """The preset :attr:`config` with :attr:`steps` applied."""
-        preset = CONFIGS[self.config]
-        return preset if self.steps is None else replace(preset, steps=self.steps)
 
 
 def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, seed: int,
@@ -248,7 +126,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     Args:
         mesh_path: the object's mesh.
         run_dir: output folder (re-running resumes it).
-        config: :data:`QUICK`, :data:`FULL` or a custom :class:`AAEConfig`.
+        config: :data:`~paz6d.aae.config.QUICK`, :data:`~paz6d.aae.config.FULL` or a custom :class:`AAEConfig`.
         mesh_scale: factor from mesh units to metres (0.001 for BOP meshes in millimetres).
         seed: seed of the model initialisation and of the data stream.
         workers: rendering processes (0: render in this process).
@@ -320,34 +198,3 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
                "codebook_size": len(codebook), "dataset_pairs": 0 if pairs is None else len(pairs), **timings}
     run_files.write_summary(run_dir, summary)
     return summary
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    """Adds the ``paz6d train aae`` flags (the fields of :class:`AAETraining`)."""
-    add_config_arguments(parser, AAETraining)
-
-
-def _dataset_mesh(dataset: Path, object_id: int | None) -> tuple[Path, int]:
-    models = sorted((dataset / "models").glob("obj_*.ply"))
-    if not models:
-        raise ValueError(f"--dataset: {dataset / 'models'} holds no obj_XXXXXX.ply meshes")
-    if object_id is None:
-        if len(models) > 1:
-            raise ValueError(f"--dataset: {len(models)} objects in {dataset / 'models'}; choose one with --object-id")
-        return models[0], int(models[0].stem.split("_")[1])
-    path = dataset / "models" / f"obj_{object_id:06d}.ply"
-    if not path.exists():
-        raise ValueError(f"--object-id: {path} does not exist")
-    return path, object_id
-
-
-def run(args: argparse.Namespace) -> int:
-    """Runs ``paz6d train aae``."""
-    job = config_from_args(AAETraining, args)
-    with flags_in_errors(AAETraining):
-        mesh, object_id = (job.mesh, 1) if job.dataset is None else _dataset_mesh(job.dataset, job.object_id)
-        summary = train_aae(mesh, job.out, job.model_config, job.mesh_scale, job.seed, job.workers, job.platform,
-                            job.progress, dataset=job.dataset, object_id=object_id, split=job.split,
-                            pair_fraction=job.pair_fraction)
-    print(json.dumps(summary, indent=2))
-    return 0

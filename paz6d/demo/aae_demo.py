@@ -163,7 +163,8 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     from data_gen.config import GenerationConfig
     from data_gen.generator import generate
     from paz6d.assets.demo_object import OBJECT_ID, write_demo_object
-    from paz6d.aae.train import QUICK, train_aae
+    from paz6d.aae.config import QUICK
+    from paz6d.aae.train import train_aae
 
     config = QUICK if config is None else config
     if int(test_images) <= 0:

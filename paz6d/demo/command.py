@@ -9,10 +9,9 @@ import argparse
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from paz6d.aae.train import QUICK
+from paz6d.aae.config import QUICK
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.units import MM_PER_M
-from paz6d.demo import aae_demo, keypoint_demo
 from renderers.platform import PLATFORMS
 
 
@@ -40,6 +39,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Runs ``paz6d demo``."""
+    from paz6d.demo import aae_demo, keypoint_demo  # here: they load OpenCV, scipy, the renderers and TensorFlow
+
     options = config_from_args(DemoOptions, args)
     config = QUICK if options.steps is None else replace(QUICK, steps=options.steps)
     with flags_in_errors(DemoOptions):

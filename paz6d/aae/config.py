@@ -1,0 +1,182 @@
+"""Settings of the Augmented Autoencoder: input augmentation strengths (:class:`Augmentation`), the
+model/data/schedule presets (:class:`AAEConfig`: :data:`QUICK`, :data:`FULL`) and one
+``paz6d train aae`` run (:class:`AAETraining`, one flag per field).
+
+No heavy imports, so that the command line builds fast; the training itself is :mod:`paz6d.aae.train`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+from paz6d.cli_options import option
+from paz6d.datasets.bop.units import MM_PER_M
+from renderers.platform import PLATFORMS
+
+
+@dataclass(frozen=True)
+class Augmentation:
+    """Strengths of the input augmentations (paper: background, occlusion, lighting, colour, crop shift).
+
+    Attributes:
+        backgrounds: composite over random procedural backgrounds (else black).
+        occlusion_probability: chance that a sample gets 1..``max_occluders`` random occluders.
+        occluder_size: occluder size range as fractions of the object box's longest side.
+        max_occluders: most occluders per occluded sample.
+        shift: crop centre shift, uniform in ``±shift`` × box side.
+        scale: crop scale factor range.
+        light: strength of the re-lighting (gains ``1 ± light/2``, gradient up to ``± light``).
+        brightness: max brightness offset (intensity levels).
+        contrast / saturation: factor ranges.
+        hue: max hue rotation in degrees.
+        blur_probability: chance of a Gaussian blur (sigma 0.4-1.2 px).
+        noise: max Gaussian noise std (intensity levels).
+    """
+
+    backgrounds: bool = True
+    occlusion_probability: float = 0.5
+    occluder_size: tuple[float, float] = (0.2, 0.5)
+    max_occluders: int = 2
+    shift: float = 0.08
+    scale: tuple[float, float] = (0.9, 1.1)
+    light: float = 0.5
+    brightness: float = 30.0
+    contrast: tuple[float, float] = (0.6, 1.4)
+    saturation: tuple[float, float] = (0.6, 1.4)
+    hue: float = 10.0
+    blur_probability: float = 0.3
+    noise: float = 8.0
+
+    def __post_init__(self):
+        for name in ("occlusion_probability", "blur_probability"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"Augmentation.{name}: expected a probability in [0, 1], got {getattr(self, name)}")
+        for name in ("occluder_size", "scale", "contrast", "saturation"):
+            low, high = getattr(self, name)
+            if not 0.0 < low <= high:
+                raise ValueError(f"Augmentation.{name}: expected 0 < low <= high, got {getattr(self, name)}")
+        if int(self.max_occluders) < 1:
+            raise ValueError(f"Augmentation.max_occluders: expected at least 1, got {self.max_occluders}")
+        for name in ("shift", "light", "brightness", "hue", "noise"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"Augmentation.{name}: expected >= 0, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class AAEConfig:
+    """Model, data and schedule of an AAE training run.
+
+    Attributes:
+        crop_size: side of the square model input (pixels).
+        latent_size: length of the latent code.
+        filters: encoder channels per strided convolution (the decoder mirrors them).
+        kernel_size: convolution kernel size.
+        batch_norm: batch normalisation after every convolution (not in the paper; trains faster).
+        padding: crop side / longest side of the object box.
+        render_size: side of the on-axis renderings the crops are cut from.
+        views: view-sphere directions rendered (training views and codebook share them).
+        in_plane: in-plane rotations per view in the codebook (codebook size = views * in_plane).
+        steps: optimisation steps.
+        batch_size: samples per step.
+        learning_rate: Adam learning rate.
+        bootstrap_fraction: fraction of largest pixel errors in the loss (1 = plain L2; paper 0.25).
+        augmentation: input augmentation strengths.
+        checkpoint_every / sample_every / log_every: Trainer intervals in steps.
+    """
+
+    crop_size: int = 64
+    latent_size: int = 64
+    filters: tuple[int, ...] = (32, 64, 64, 128)
+    kernel_size: int = 5
+    batch_norm: bool = False
+    padding: float = 1.2
+    render_size: int = 96
+    views: int = 1000
+    in_plane: int = 36
+    steps: int = 3000
+    batch_size: int = 32
+    learning_rate: float = 1e-3
+    bootstrap_fraction: float = 0.25
+    augmentation: Augmentation = field(default_factory=Augmentation)
+    checkpoint_every: int = 500
+    sample_every: int = 500
+    log_every: int = 25
+
+    def to_dict(self) -> dict:
+        data = asdict(self)
+        data["filters"] = list(self.filters)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "AAEConfig":
+        data = dict(data)
+        unknown = set(data) - {f for f in cls.__dataclass_fields__}
+        if unknown:
+            raise ValueError(f"AAE config: unknown field(s) {sorted(unknown)}")
+        augmentation = data.pop("augmentation", {})
+        for key in ("occluder_size", "scale", "contrast", "saturation"):
+            if key in augmentation:
+                augmentation[key] = tuple(augmentation[key])
+        return cls(filters=tuple(data.pop("filters", cls.filters)), augmentation=Augmentation(**augmentation), **data)
+
+    @property
+    def codebook_size(self) -> int:
+        return self.views * self.in_plane
+
+
+#: Sized for a 2-core CPU (the demo): 64x64 crops, batch normalisation (several times faster convergence),
+#: latent 128, 1,000 views x 72 in-plane = 72,000-entry codebook, 5,000 steps (~10 minutes); small crop
+#: shifts (the demo uses ground-truth boxes: measured, shifts of +-8 % doubled the rotation error at this
+#: training length).
+QUICK = AAEConfig(latent_size=128, batch_norm=True, in_plane=72, steps=5000,
+                  augmentation=Augmentation(shift=0.03, scale=(0.95, 1.05)))
+#: The paper's setting: 128x128 crops, latent 128, 30k iterations of 64, 2,562 x 36 = 92,232 codebook views.
+FULL = AAEConfig(crop_size=128, latent_size=128, filters=(128, 256, 256, 512), render_size=192, views=2562,
+                 in_plane=36, steps=30000, batch_size=64, learning_rate=2e-4, checkpoint_every=1000,
+                 sample_every=2000, log_every=50)
+CONFIGS = {"quick": QUICK, "full": FULL}
+
+
+@dataclass(frozen=True)
+class AAETraining:
+    """One ``paz6d train aae`` run (each field is a flag, see :mod:`paz6d.cli_options`): the object,
+    from a mesh or a BOP data set, the run directory, the config preset and how to run."""
+
+    out: Path = option(help="run directory (re-run to resume)")
+    mesh: Path | None = option(None, "mesh of the object (PLY/OBJ/GLB)", one_of="source")
+    dataset: Path | None = option(None, "BOP data set (e.g. from `paz6d generate`): its models/obj_XXXXXX.ply "
+                                        "(millimetres) is the object and its image crops are training inputs",
+                                  one_of="source")
+    object_id: int | None = option(None, "object of --dataset (default: the only one)")
+    split: str = option("train", "split of --dataset to read")
+    pair_fraction: float = option(0.5, "with --dataset: share of training samples taken from its crops "
+                                       "(the rest: rendered views)")
+    config: str = option("quick", "quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
+                                  "92,232-view codebook (hours on a CPU)", choices=tuple(sorted(CONFIGS)))
+    steps: int | None = option(None, "training steps (default: the config's)")
+    seed: int = option(0, "seed of the model initialisation and of the data stream")
+    mesh_scale: float | None = option(None, "mesh units to metres (default: 1 with --mesh, 0.001 with --dataset, "
+                                            "whose meshes are BOP millimetres)")
+    workers: int = option(2, "rendering processes (0: render in this process)")
+    platform: str | None = option(None, "OpenGL platform of the renderers (default: auto)", choices=PLATFORMS)
+    progress: bool = option(True, "progress bars")
+
+    def __post_init__(self):
+        if (self.mesh is None) == (self.dataset is None):
+            raise ValueError("mesh: expected exactly one of mesh and dataset")
+        if self.config not in CONFIGS:
+            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
+        if self.steps is not None and self.steps <= 0:
+            raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
+        if self.mesh_scale is None:
+            object.__setattr__(self, "mesh_scale", 1.0 if self.dataset is None else 1.0 / MM_PER_M)
+        if not math.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
+            raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
+
+    @property
+    def model_config(self) -> AAEConfig:
+        """The preset :attr:`config` with :attr:`steps` applied."""
+        preset = CONFIGS[self.config]
+        return preset if self.steps is None else replace(preset, steps=self.steps)
