@@ -15,6 +15,9 @@ from renderers.platform import PLATFORMS
 from renderers.antialias import ANTIALIAS_MODES
 
 ROTATION_MODES = ("so3", "view-sphere")
+#: floating: objects at independent distances and orientations (paz6d.synthesis.scene); tabletop:
+#: upright on a textured table seen from above (paz6d.synthesis.tabletop).
+SCENE_STYLES = ("floating", "tabletop")
 RGB_FORMATS = ("png", "jpg")
 BACKENDS = ("local", "ray")  # where images are rendered: local processes or Ray actors
 BACKGROUND_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
@@ -69,6 +72,11 @@ class GenerationConfig:
     distance: tuple[float, float] | None = option(
         None, "camera-to-object-centre distance range in metres (default: the largest mesh spans 15 %...60 % "
               "of the shorter image side)", metavar=("MIN", "MAX"))
+    scene: str = option("floating", "floating: objects at independent distances and orientations; tabletop: "
+                                    "objects upright on a photo-textured table seen from above (the camera's "
+                                    "elevation above the table from --elevation-degrees within 15..85, its roll "
+                                    "up to --inplane-degrees, at most 30; --rotation is not used)",
+                        choices=SCENE_STYLES)
     rotation: str = option("so3", "object rotations: uniform (so3) or a viewpoint on a sphere plus an "
                                   "in-plane angle (view-sphere)", choices=ROTATION_MODES)
     inplane_degrees: float = option(180.0, "maximum absolute in-plane angle (degrees), view-sphere")
@@ -124,6 +132,11 @@ class GenerationConfig:
             raise ValueError(f"rgb_format: expected one of {RGB_FORMATS}, got {self.rgb_format!r}")
         if self.antialias not in ANTIALIAS_MODES:
             raise ValueError(f"antialias: expected one of {ANTIALIAS_MODES}, got {self.antialias!r}")
+        if self.scene not in SCENE_STYLES:
+            raise ValueError(f"scene: expected one of {SCENE_STYLES}, got {self.scene!r}")
+        if self.scene == "tabletop" and (self.elevation_degrees[1] < 15 or self.elevation_degrees[0] > 85):
+            raise ValueError(f"elevation_degrees: a tabletop camera needs elevations within 15..85 degrees, "
+                             f"got {tuple(self.elevation_degrees)}")
         if self.rotation not in ROTATION_MODES:
             raise ValueError(f"rotation: expected one of {ROTATION_MODES}, got {self.rotation!r}")
         if not 0 <= self.inplane_degrees <= 180:
@@ -165,6 +178,8 @@ class GenerationConfig:
         for name in ("out", "num_images", "platform"):
             data.pop(name)
         data["scale"] = data.pop("mesh_scale")  # the key data sets made before the field's rename hold
+        if data["scene"] == "floating":
+            data.pop("scene")  # data sets made before scene styles existed are floating ones
         data["meshes"] = [str(path.resolve()) for path in self.meshes]
         for name in ("backgrounds", "symmetries"):
             data[name] = None if data[name] is None else str(Path(data[name]).resolve())

@@ -20,7 +20,9 @@ from paz6d.synthesis.augment import RandomGaussianBlur, RandomImageNoise, share_
 from paz6d.synthesis.backgrounds import background_image
 from paz6d.synthesis.lighting import random_lighting, random_tints
 from paz6d.synthesis.occluders import random_colors
+from paz6d.synthesis.photo_backgrounds import sample_photographs
 from paz6d.synthesis.scene import ZNEAR, sample_scene
+from paz6d.synthesis.tabletop import sample_tabletop_scene
 
 CROP_MARGIN = 1.2
 
@@ -65,6 +67,7 @@ class ImageProducer:
         self.renderer = Renderer(config.width, config.height, platform=config.platform, znear=ZNEAR, zfar=zfar,
                                  antialias=config.antialias)
         self.degrade = degradation(config)
+        self.photographs = sample_photographs() if config.scene == "tabletop" else []  # table textures
 
     def close(self) -> None:
         self.renderer.close()
@@ -73,12 +76,18 @@ class ImageProducer:
         """Samples, renders, composites and degrades image ``index`` (all draws from its own seed)."""
         config, assets = self.config, self.assets
         generator = image_generator(config.seed, index)
-        scene = sample_scene(generator, assets, config)
+        if config.scene == "tabletop":
+            scene = sample_tabletop_scene(generator, assets, config, self.photographs)
+        else:
+            scene = sample_scene(generator, assets, config)
         lighting = random_lighting(generator, "scene", config.light_count, float(np.mean(assets.distance)))
         tints = np.concatenate([random_tints(generator, len(scene.object_indices), config.color_jitter),
                                 random_colors(generator, len(scene.clutter_indices))])
         objects = [(assets.meshes[i], pose) for i, pose in zip(scene.object_indices, scene.poses)]
         objects += [(assets.distractors[i], pose) for i, pose in zip(scene.clutter_indices, scene.clutter_poses)]
+        if scene.support is not None:
+            objects.append(scene.support)
+            tints = np.concatenate([tints, np.ones((1, 3))])
         out = self.renderer.render(self.K, objects, lighting=lighting, tints=tints,
                                    masked_objects=len(scene.object_indices))
         background = background_image(generator, assets.backgrounds, config.width, config.height)

@@ -57,12 +57,15 @@ class Scene:
         poses: ``(N, 4, 4)`` ``T_model2cam`` of the annotated objects (metres, OpenCV).
         clutter_indices: index into ``assets.distractors`` of each distractor/occluder.
         clutter_poses: ``(C, 4, 4)`` their poses.
+        support: ``(mesh, T_model2cam)`` of a surface the objects rest on (a tabletop scene's table,
+            :mod:`paz6d.synthesis.tabletop`), rendered untinted and unannotated; ``None`` for floating scenes.
     """
 
     object_indices: list[int]
     poses: np.ndarray
     clutter_indices: list[int]
     clutter_poses: np.ndarray
+    support: tuple | None = None
 
 
 def sample_scene(generator: np.random.Generator, assets: SceneAssets, settings: SceneSettings) -> Scene:
