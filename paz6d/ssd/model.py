@@ -144,7 +144,7 @@ def _conv(x, filters: int, kernel: int, name: str, strides: int = 1, padding: st
                                activation="relu", kernel_initializer="he_normal", name=name)(x)
 
 
-def _vgg16_body(inputs, input_size: int) -> tuple[list, object]:
+def _vgg16_body(inputs) -> tuple[list, object]:
     """VGG16 up to fc7: returns ``([L2-normalised conv4_3, fc7], fc7)``."""
     x = inputs
     for block, (filters, count) in enumerate(((64, 2), (128, 2), (256, 3), (512, 3)), start=1):
@@ -254,7 +254,7 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
     if architecture == "light":
         features = _light_body(inputs, float(width))
     else:
-        features, fc7 = _vgg16_body(inputs, spec.input_size)
+        features, fc7 = _vgg16_body(inputs)
         features += _vgg_extras(fc7, 2 if architecture == "ssd300" else 4, 2 if architecture == "ssd300" else 0)
         if architecture == "ssd512":
             features.append(_vgg_extras_last(features[-1]))

@@ -1,0 +1,71 @@
+"""DetectSingleShot inference speed on the CPU for a 640x480 image: resize/normalise -> network -> decode ->
+per-class NMS -> Box2D (target <= 100 ms for the quick model), against the raw Keras ``model.predict``
+call on the already resized input (the ratio says what the pipeline adds or saves).
+
+Without ``--run-dir`` a randomly initialised network of the config is used (speed does not depend on
+the weights; NMS does a little, through the number of candidates above the score threshold, so a
+trained run's figure is the one to report).
+
+Run: ``.venv/bin/python benchmarks/ssd_inference.py [--run-dir runs/ssd] [--config quick] [--repeats 20]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from timing import median_seconds
+
+
+def _random_run(folder: Path, config: str) -> Path:
+    """A run directory holding a randomly initialised network of ``config`` for 8 classes."""
+    from paz6d.ssd import run_dir as run_files
+    from paz6d.ssd.model import build_ssd, save_ssd
+    from paz6d.ssd.train import CONFIGS
+
+    settings = CONFIGS[config]
+    model, spec = build_ssd(9, settings["architecture"], settings["input_size"], settings["width"])
+    save_ssd(model, run_files.model_path(folder))
+    run_files.write_detector(folder, settings["architecture"], [f"obj_{i:06d}" for i in range(1, 9)], spec.to_dict())
+    return folder
+
+
+def measure(run_dir: Path | None, config: str, repeats: int, score_threshold: float, image: np.ndarray) -> dict:
+    from paz6d.backend.tensorflow_guard import import_keras
+    from paz6d.ssd.pipeline import DetectSingleShot
+
+    import_keras().utils.set_random_seed(0)
+    with tempfile.TemporaryDirectory() as folder:
+        detector = DetectSingleShot(run_dir or _random_run(Path(folder), config), score_threshold=score_threshold)
+    size = detector.input_size
+    network_input = detector.run_steps({"image": image}, stop="predict")["input"][None]
+    infer = detector["predict"].processor.predict.function
+    pipeline_ms = 1000 * median_seconds(lambda: detector(image), repeats)
+    predict_ms = 1000 * median_seconds(lambda: detector.model.predict(network_input, verbose=0), repeats)
+    return {"run_dir": None if run_dir is None else str(run_dir), "config": config, "input_size": size,
+            "image": list(image.shape), "score_threshold": score_threshold, "detections": len(detector(image)),
+            "pipeline_ms": round(pipeline_ms, 2),
+            "network_compiled_ms": round(1000 * median_seconds(lambda: infer(network_input), repeats), 2),
+            "keras_predict_ms": round(predict_ms, 2), "pipeline_over_predict": round(pipeline_ms / predict_ms, 3)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--run-dir", type=Path, help="trained SSD run (default: random weights of --config)")
+    parser.add_argument("--config", default="quick", help="config of the random network (default: quick)")
+    parser.add_argument("--image", type=Path, help="a 640x480 RGB image (default: random pixels)")
+    parser.add_argument("--score-threshold", type=float, default=0.3)
+    parser.add_argument("--repeats", type=int, default=20)
+    args = parser.parse_args()
+    from paz6d.backend.image import load_image
+
+    image = (load_image(args.image) if args.image is not None
+             else np.random.default_rng(1).integers(0, 256, (480, 640, 3), dtype=np.uint8))
+    print(json.dumps(measure(args.run_dir, args.config, args.repeats, args.score_threshold, image), indent=2))
+
+
+if __name__ == "__main__":
+    main()
