@@ -10,7 +10,9 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from paz6d.backend.files import check_plain_name
 from paz6d.cli_options import option
+from paz6d.datasets.bop.units import DEPTH_PNG_MAX, MM_PER_M
 from renderers.platform import PLATFORMS
 from renderers.antialias import ANTIALIAS_MODES
 
@@ -21,11 +23,21 @@ SCENE_STYLES = ("floating", "tabletop")
 RGB_FORMATS = ("png", "jpg")
 BACKENDS = ("local", "ray")  # where images are rendered: local processes or Ray actors
 BACKGROUND_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
+#: Largest image side (pixels): OpenGL render buffers of common drivers go no further.
+MAX_IMAGE_SIDE = 16384
+#: Largest number of annotated objects, distractors or lights in one image.
+MAX_PER_IMAGE = 100
+#: Largest side of the per-object crops (pixels).
+MAX_CROP_SIZE = 2048
+#: BOP image ids have six digits.
+MAX_IMAGES_PER_SCENE = 1_000_000
 
 
-def _positive_int(value, name: str) -> int:
+def _positive_int(value, name: str, maximum: int | None = None) -> int:
     if isinstance(value, bool) or int(value) != value or value <= 0:
         raise ValueError(f"{name}: expected a positive integer, got {value!r}")
+    if maximum is not None and value > maximum:
+        raise ValueError(f"{name}: expected at most {maximum}, got {value!r}")
     return int(value)
 
 
@@ -109,25 +121,32 @@ class GenerationConfig:
             raise ValueError("meshes: expected at least one mesh file")
         object.__setattr__(self, "meshes", meshes)
         object.__setattr__(self, "out", Path(self.out))
-        for name in ("num_images", "width", "height", "images_per_scene"):
-            _positive_int(getattr(self, name), name)
+        _positive_int(self.num_images, "num_images")
+        _positive_int(self.width, "width", MAX_IMAGE_SIDE)
+        _positive_int(self.height, "height", MAX_IMAGE_SIDE)
+        _positive_int(self.images_per_scene, "images_per_scene", MAX_IMAGES_PER_SCENE)
         if isinstance(self.seed, bool) or int(self.seed) != self.seed or self.seed < 0:
             raise ValueError(f"seed: expected a non-negative integer, got {self.seed!r}")
-        if not self.split or "/" in self.split or self.split.startswith("."):
-            raise ValueError(f"split: expected a plain folder name, got {self.split!r}")
+        check_plain_name(self.split, "split")
         if not math.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
             raise ValueError(f"mesh_scale: expected a positive number (file units to metres), got {self.mesh_scale}")
         if self.intrinsics is not None:
             fx, fy, cx, cy = self.intrinsics
             if not all(math.isfinite(v) for v in self.intrinsics) or fx <= 0 or fy <= 0:
                 raise ValueError(f"intrinsics: expected finite (fx, fy, cx, cy) with fx, fy > 0, got {self.intrinsics}")
-        low, high = _range(self.objects_per_image, "objects_per_image", minimum=1)
+        low, high = _range(self.objects_per_image, "objects_per_image", minimum=1, maximum=MAX_PER_IMAGE)
         if int(low) != low or int(high) != high:
             raise ValueError(f"objects_per_image: expected integers, got {self.objects_per_image}")
         if self.distance is not None:
             _range(self.distance, "distance")
             if self.distance[0] <= 0:
                 raise ValueError(f"distance: expected a positive range in metres, got {tuple(self.distance)}")
+        if not math.isfinite(self.depth_scale) or self.depth_scale <= 0:
+            raise ValueError(f"depth_scale: expected a positive number (mm per PNG unit), got {self.depth_scale}")
+        deepest = DEPTH_PNG_MAX * self.depth_scale / MM_PER_M  # metres
+        if self.distance is not None and self.distance[1] > deepest:
+            raise ValueError(f"depth_scale: {self.depth_scale:g} mm per unit stores depths up to {deepest:.4g} m in "
+                             f"16-bit PNGs, less than the maximum distance {self.distance[1]:.4g} m")
         if self.rgb_format not in RGB_FORMATS:
             raise ValueError(f"rgb_format: expected one of {RGB_FORMATS}, got {self.rgb_format!r}")
         if self.antialias not in ANTIALIAS_MODES:
@@ -142,21 +161,22 @@ class GenerationConfig:
         if not 0 <= self.inplane_degrees <= 180:
             raise ValueError(f"inplane_degrees: expected 0..180, got {self.inplane_degrees}")
         _range(self.elevation_degrees, "elevation_degrees", -90.0, 90.0)
-        if isinstance(self.distractors, bool) or int(self.distractors) != self.distractors or self.distractors < 0:
-            raise ValueError(f"distractors: expected a non-negative integer, got {self.distractors!r}")
+        if isinstance(self.distractors, bool) or int(self.distractors) != self.distractors or \
+                not 0 <= self.distractors <= MAX_PER_IMAGE:
+            raise ValueError(f"distractors: expected an integer in 0..{MAX_PER_IMAGE}, got {self.distractors!r}")
         _fraction(self.occluder_probability, "occluder_probability")
         _fraction(self.blur_probability, "blur_probability")
-        low, high = _range(self.light_count, "light_count", minimum=0)
+        low, high = _range(self.light_count, "light_count", minimum=0, maximum=MAX_PER_IMAGE)
         if int(low) != low or int(high) != high:
             raise ValueError(f"light_count: expected integers, got {self.light_count}")
         if not 0 <= self.color_jitter < 1:
             raise ValueError(f"color_jitter: expected 0 <= j < 1, got {self.color_jitter}")
         if not math.isfinite(self.noise_std) or self.noise_std < 0:
             raise ValueError(f"noise_std: expected a non-negative number of grey levels, got {self.noise_std}")
-        if not math.isfinite(self.depth_scale) or self.depth_scale <= 0:
-            raise ValueError(f"depth_scale: expected a positive number (mm per PNG unit), got {self.depth_scale}")
-        if isinstance(self.crop_size, bool) or int(self.crop_size) != self.crop_size or self.crop_size < 0:
-            raise ValueError(f"crop_size: expected 0 (off) or a positive pixel size, got {self.crop_size!r}")
+        if isinstance(self.crop_size, bool) or int(self.crop_size) != self.crop_size or \
+                not 0 <= self.crop_size <= MAX_CROP_SIZE:
+            raise ValueError(f"crop_size: expected 0 (off) or a pixel size up to {MAX_CROP_SIZE}, "
+                             f"got {self.crop_size!r}")
 
     @property
     def K(self) -> list[list[float]]:

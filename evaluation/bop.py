@@ -316,7 +316,8 @@ def greedy_match(pairs: EvaluationPairs, errors: np.ndarray, thresholds: np.ndar
     """
     thresholds = np.asarray(thresholds, dtype=np.float64).ravel()
     errors = np.asarray(errors, dtype=np.float64)
-    errors = np.broadcast_to(errors.reshape(len(errors), -1), (len(errors), len(thresholds)))
+    errors = errors[:, None] if errors.ndim == 1 else errors  # (P,): the same errors in every column
+    errors = np.broadcast_to(errors, (len(errors), len(thresholds)))
     below = errors < thresholds
     matched = np.zeros_like(below)
     if len(pairs) == 0:

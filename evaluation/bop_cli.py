@@ -13,8 +13,12 @@ imported inside :func:`run`.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
+
+from paz6d.backend.files import check_output_file, check_output_folder, check_plain_name
+from paz6d.cli_errors import shorten
 
 METRIC_NAMES = ("vsd", "mssd", "mspd", "add")
 SKIPPED_ROWS_IN_JSON = 100
@@ -33,6 +37,30 @@ def _visibility(text: str) -> float:
     if not (value == -1 or 0.0 <= value <= 1.0):
         raise argparse.ArgumentTypeError(f"expected a fraction in [0, 1] or -1, got {text}")
     return value
+
+
+def _positive_millimetres(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number of millimetres, got {text}")
+    return value
+
+
+def _workers(text: str) -> int:
+    value = int(text)
+    if value == 0 or value < -1:
+        raise argparse.ArgumentTypeError(f"expected a positive number of threads or -1 (all cores), got {text}")
+    return value
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """Checks names and output paths before any file is read (bad ones raise ``ValueError`` naming the flag)."""
+    check_plain_name(args.split, "--split")
+    check_output_file(args.out, "--out")
+    if args.errors is not None:
+        check_output_file(args.errors, "--errors")
+    if args.plots is not None:
+        check_output_folder(args.plots, "--plots")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -56,8 +84,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="GT instances that count: -1 (default, as the BOP toolkit's eval_bop19_pose.py) = "
                              "the inst_count most visible of each target; a fraction such as 0.1 = every "
                              "instance of a target object at least that visible")
-    parser.add_argument("--vsd-delta", type=float, default=15.0, help="VSD visibility tolerance in mm (default 15)")
-    parser.add_argument("--workers", type=int, default=1, help="threads for the ADD-S search (-1 = all cores; results do not depend on it)")
+    parser.add_argument("--vsd-delta", type=_positive_millimetres, default=15.0, help="VSD visibility tolerance in mm (default 15)")
+    parser.add_argument("--workers", type=_workers, default=1, help="threads for the ADD-S search (-1 = all cores; results do not depend on it)")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
                         help="progress bars (default: --progress)")
 
@@ -130,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
     from paz6d.backend.files import write_json_atomically
     from paz6d.datasets.bop.results import read_pose_results
 
+    check_arguments(args)
     data = load_evaluation_data(args.dataset, args.split, args.targets)
     metrics, skipped_metrics = _choose_metrics(args.metrics, data)
     settings = bop.BopSettings(metrics=metrics, visib_gt_min=args.visib_gt_min, vsd_delta=args.vsd_delta,
@@ -138,7 +167,12 @@ def run(args: argparse.Namespace) -> int:
                                 skip_invalid=args.skip_invalid, units="mm")
     if results.skipped:
         print(f"warning: skipped {len(results.skipped)} invalid rows of {args.results} "
-              f"(first: line {results.skipped[0][0]}: {results.skipped[0][1]})", file=sys.stderr)
+              f"(first: line {results.skipped[0][0]}: {shorten(results.skipped[0][1], 300)})", file=sys.stderr)
+    note = None
+    if len(results) == 0:
+        note = (f"no estimates in {args.results}" + (f" (all {len(results.skipped)} rows skipped as invalid)"
+                                                       if results.skipped else "") + ": every target scores 0")
+        print(f"note: {note}", file=sys.stderr)
     evaluation = bop.evaluate(data, results, settings, progress=args.progress)
     evaluation.skipped_metrics.update(skipped_metrics)
     print_table(evaluation, f"BOP'19 evaluation of {args.results} on {args.dataset}/{args.split} "
@@ -146,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
                             f"{len(results.skipped)} skipped)")
     summary = {"dataset": str(args.dataset), "split": args.split, "results": str(args.results),
                "targets": str(args.targets) if args.targets else None, "models": str(data.models_folder),
-               **evaluation.to_dict(),
+               **evaluation.to_dict(), **({"note": note} if note else {}),
                "skipped_rows": [{"line": line, "reason": reason}
                                 for line, reason in results.skipped[:SKIPPED_ROWS_IN_JSON]]}
     write_json_atomically(args.out, summary, indent=2)

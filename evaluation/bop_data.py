@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from evaluation.pose_errors import MAX_SYMMETRY_STEP, ObjectModel, symmetry_transformations
+from paz6d.backend.files import check_plain_name
 from paz6d.datasets.bop.camera import load_camera, load_scene_camera
 from paz6d.datasets.bop.models import MODELS_INFO, load_model, load_models_info, model_path
 from paz6d.datasets.bop.scene import DEPTH_SUFFIXES, find_image, load_scene_gt, load_scene_gt_info, read_depth
@@ -159,13 +160,15 @@ def load_evaluation_data(root: str | Path, split: str = "test", targets_path: st
             :func:`evaluation.pose_errors.symmetry_transformations`).
     """
     root = Path(root)
+    check_plain_name(split, "split")
     if not (root / split).is_dir():
         raise ValueError(f"{root / split}: split folder not found")
     camera_path = root / "camera.json"
     if not camera_path.is_file():
         raise ValueError(f"{camera_path}: file not found (the image width is needed for MSPD)")
     camera = load_camera(camera_path)
-    targets = read_targets(root / TARGETS_FILE if targets_path is None else targets_path)
+    targets_file = root / TARGETS_FILE if targets_path is None else Path(targets_path)
+    targets = read_targets(targets_file)
     models_folder = _models_folder(root)
     info = load_models_info(models_folder / MODELS_INFO, units="mm")
     diameters, symmetries = {}, {}
@@ -181,10 +184,15 @@ def load_evaluation_data(root: str | Path, split: str = "test", targets_path: st
         images.update(_scene_images(folder, scene_id))
     for index, target in enumerate(targets):
         if (target.scene_id, target.im_id) not in images:
-            raise ValueError(f"targets: target {index} names scene {target.scene_id}, image {target.im_id}, "
+            raise ValueError(f"{targets_file}: target {index} names scene {target.scene_id}, image {target.im_id}, "
                              "which has no ground truth")
         if target.obj_id not in diameters:
-            raise ValueError(f"targets: target {index} names object {target.obj_id}, which is not in "
+            raise ValueError(f"{targets_file}: target {index} names object {target.obj_id}, which is not in "
                              f"{models_folder / MODELS_INFO}")
+        present = int(np.count_nonzero(images[(target.scene_id, target.im_id)].obj_ids == target.obj_id))
+        if target.inst_count > present:
+            raise ValueError(f"{targets_file}: target {index} asks for {target.inst_count} instances of object "
+                             f"{target.obj_id} in scene {target.scene_id}, image {target.im_id}; the ground truth "
+                             f"has {present} (field 'inst_count')")
     return BopEvaluationData(root, split, models_folder, camera.width, camera.height, diameters, symmetries,
                              images, targets)

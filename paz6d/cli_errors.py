@@ -15,7 +15,7 @@ import zipfile
 
 #: Longest message printed (characters); longer ones keep their start and end.
 MESSAGE_LIMIT = 1000
-#: Longest repr of a single value inside a message (see :func:`short_repr`).
+#: Longest repr of a missing key quoted in a message.
 VALUE_LIMIT = 80
 
 #: Errors that bad input or environment cause; anything else is a bug and keeps its traceback.
@@ -33,12 +33,6 @@ def shorten(text: str, limit: int = MESSAGE_LIMIT) -> str:
     return f"{head} ... [{len(text) - len(head) - len(tail)} characters left out] ... {tail}"
 
 
-def short_repr(value, limit: int = VALUE_LIMIT) -> str:
-    """``repr(value)`` shortened to about ``limit`` characters (for values quoted in messages)."""
-    text = repr(value) if not isinstance(value, str) or len(value) <= 4 * limit else repr(value[:4 * limit])
-    return shorten(text, limit)
-
-
 def describe(error: BaseException) -> str:
     """A one-line description of an expected error (see :data:`EXPECTED_ERRORS`), naming the file
     when the error knows it."""
@@ -49,7 +43,8 @@ def describe(error: BaseException) -> str:
         names = [name for name in (error.filename, error.filename2) if name is not None]
         return f"{' -> '.join(map(str, names))}: {reason}" if names else reason
     if isinstance(error, KeyError):
-        return f"missing entry {short_repr(error.args[0]) if error.args else ''} (incomplete or corrupt input)"
+        key = shorten(repr(error.args[0]), VALUE_LIMIT) if error.args else ""
+        return f"missing entry {key} (incomplete or corrupt input)"
     if isinstance(error, zipfile.BadZipFile):
         return f"corrupt or truncated archive (.npz/.keras): {error}"
     if isinstance(error, RecursionError):

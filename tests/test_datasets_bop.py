@@ -110,7 +110,7 @@ def test_scene_camera_and_gt_info_parsers(lmo):
      "image 3, instance 0: missing field 'cam_t_m2c'"),
     ('{"3": [{"cam_R_m2c": [1, 0, 0], "cam_t_m2c": [0, 0, 1], "obj_id": 1}]}', "field 'cam_R_m2c' must hold 9"),
     ('{"3": [{"cam_R_m2c": [1, 0, 0, 0, 2, 0, 0, 0, 1], "cam_t_m2c": [0, 0, 1], "obj_id": 1}]}',
-     "image 3, instance 0: not a rotation matrix"),
+     "image 3, instance 0, field 'cam_R_m2c': not a rotation matrix"),
 ])
 def test_malformed_files_name_file_and_field(tmp_path, content, pattern):
     path = tmp_path / "scene_gt.json"
@@ -149,7 +149,7 @@ def test_camera_json_errors(tmp_path):
     with pytest.raises(ValueError, match="invalid JSON"):
         load_camera(tmp_path / "bad.json")
     (tmp_path / "partial.json").write_text(json.dumps({"fx": 1.0, "fy": 1.0, "cx": 0.5}))
-    with pytest.raises(ValueError, match="partial.json: missing field 'cy' of a BOP camera.json"):
+    with pytest.raises(ValueError, match="partial.json: missing field 'cy'"):
         load_camera(tmp_path / "partial.json")
 
 

@@ -15,6 +15,19 @@ UNIT_NORM_TOLERANCE = 1e-6
 BLOCK_ROWS = 8192
 
 
+def short_repr(value, limit: int = 60) -> str:
+    """``repr(value)`` cut to about ``limit`` characters, for values quoted in error messages (an
+    input file may hold megabytes in one value; long strings, lists and dicts are described by
+    their length)."""
+    if isinstance(value, (str, bytes, list, tuple, dict)) and len(value) > limit:
+        return f"a {type(value).__name__} of length {len(value)}"
+    try:
+        text = repr(value)
+    except ValueError:  # an int with more digits than Python converts to text
+        return f"a {type(value).__name__} too long to print"
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 def _as_shaped_array(value, name: str, trailing_shape: tuple[int, ...], min_leading: int = 0) -> np.ndarray:
     try:
         array = np.asarray(value, dtype=np.float64)

@@ -36,27 +36,43 @@ def _current_umask() -> int:
     return mask
 
 
-def prepare_output_file(path: str | Path) -> Path:
-    """Checks that ``path`` may receive an output file and creates its folder.
-
-    Only a missing path or an existing regular file may be (re)placed: a symbolic link, folder,
-    device, FIFO or socket at ``path`` is refused, as is a parent that is not a folder.
+def check_output_file(path: str | Path, name: str | None = None) -> Path:
+    """Checks, creating nothing, that ``path`` may receive an output file: only a missing path or an
+    existing regular file may be (re)placed; a symbolic link, folder, device, FIFO or socket at
+    ``path`` is refused, as is a file standing where one of its folders should be. Commands call it
+    before their long work, so a bad output path fails at once.
 
     Raises:
-        ValueError: naming ``path`` and what stands there.
+        ValueError: naming ``name`` (the flag, when given) and ``path`` and what stands there.
     """
     path = Path(path)
+    label = f"{name}: {path}" if name else str(path)
     try:
         mode = os.lstat(path).st_mode
     except FileNotFoundError:
         mode = None
     except NotADirectoryError as error:
-        raise ValueError(f"{path}: a parent of this output path is a file, not a folder") from error
+        raise ValueError(f"{label}: a parent of this output path is a file, not a folder") from error
     if mode is not None and not stat.S_ISREG(mode):
         kind = ("a symbolic link" if stat.S_ISLNK(mode) else "a folder" if stat.S_ISDIR(mode)
                 else "a device, FIFO or socket")
-        raise ValueError(f"{path}: refusing to replace {kind} with an output file; "
+        raise ValueError(f"{label}: refusing to replace {kind} with an output file; "
                          "give the path of a new or existing regular file")
+    existing = path.parent
+    while not os.path.lexists(existing) and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{label}: cannot create its folder {path.parent} ({existing} is not a folder)")
+    return path
+
+
+def prepare_output_file(path: str | Path) -> Path:
+    """Checks that ``path`` may receive an output file (:func:`check_output_file`) and creates its folder.
+
+    Raises:
+        ValueError: naming ``path`` and what stands there.
+    """
+    path = check_output_file(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError) as error:
@@ -131,15 +147,85 @@ def null_non_finite(data: Any) -> Any:
     return data
 
 
-def load_json(path: str | Path) -> Any:
-    """Parses a JSON file; ``ValueError`` naming the file when it is missing or malformed."""
+#: Longest quoted excerpt of a parser's message about a bad input file (characters).
+EXCERPT_LIMIT = 200
+
+
+def _excerpt(text: str) -> str:
+    return text if len(text) <= EXCERPT_LIMIT else text[:EXCERPT_LIMIT] + " ..."
+
+
+def read_input_bytes(path: str | Path, what: str = "file") -> bytes:
+    """The bytes of an input file; ``ValueError`` naming it when it is missing, a folder or unreadable."""
     path = Path(path)
     try:
-        return json.loads(path.read_text())
+        return path.read_bytes()
     except FileNotFoundError as error:
-        raise ValueError(f"{path}: file not found") from error
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise ValueError(f"{path}: invalid JSON ({error})") from error
+        raise ValueError(f"{path}: {what} not found") from error
+    except IsADirectoryError as error:
+        raise ValueError(f"{path}: expected a {what}, found a folder") from error
+    except OSError as error:
+        raise ValueError(f"{path}: cannot read the {what} ({error.strerror or error})") from error
+
+
+def read_input_text(path: str | Path, what: str = "file") -> str:
+    """An input file as UTF-8 text (a leading byte-order mark is dropped); ``ValueError`` naming the
+    file when it is missing, a folder, unreadable or not UTF-8."""
+    data = read_input_bytes(path, what)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not UTF-8 text (byte {error.start}: {error.reason})") from error
+
+
+def load_json(path: str | Path) -> Any:
+    """Parses a JSON file; ``ValueError`` naming the file when it is missing, a folder, not UTF-8,
+    malformed, nested too deeply or holds a number too long to convert."""
+    path = Path(path)
+    text = read_input_text(path)
+    try:
+        return json.loads(text)
+    except RecursionError as error:
+        raise ValueError(f"{path}: invalid JSON (nested too deeply)") from error
+    except ValueError as error:  # JSONDecodeError, and int() of a number with too many digits
+        raise ValueError(f"{path}: invalid JSON ({_excerpt(str(error))})") from error
+
+
+def check_plain_name(value: str, name: str) -> str:
+    """``value`` when it is a plain file or folder name (no separator, not ``.``/``..``/hidden, no NUL),
+    as BOP split and scene names are; else ``ValueError`` naming ``name``. Keeps such names from
+    reaching outside the folder they name something in."""
+    if (not isinstance(value, str) or not value or value.startswith(".") or "/" in value or "\\" in value
+            or "\0" in value or value != value.strip()):
+        raise ValueError(f"{name}: expected a plain folder name (such as test or train_pbr), got {value!r:.80}")
+    return value
+
+
+def check_output_folder(path: str | Path, name: str) -> Path:
+    """``path`` when it may become (or is) an output folder: refused when something other than a
+    folder stands there (a file, device, FIFO, or a symbolic link) or in place of one of its
+    parents. Creates nothing.
+
+    Raises:
+        ValueError: naming ``name`` and ``path``.
+    """
+    path = Path(path)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    except NotADirectoryError as error:
+        raise ValueError(f"{name}: {path}: a parent of this output folder is a file") from error
+    if mode is not None and not stat.S_ISDIR(mode):
+        kind = "a symbolic link" if stat.S_ISLNK(mode) else "a file" if stat.S_ISREG(mode) else \
+            "a device, FIFO or socket"
+        raise ValueError(f"{name}: {path} is {kind}, not a folder; give a new or existing folder")
+    existing = path
+    while not os.path.lexists(existing) and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{name}: {path}: its parent {existing} is not a folder")
+    return path
 
 
 def write_json_atomically(path: str | Path, data: Any, indent: int | None = None) -> Path:

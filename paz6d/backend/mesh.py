@@ -46,8 +46,14 @@ def load_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
         raise MeshError(f"{path}: mesh is empty (expected vertices and triangle faces)")
     if not np.all(np.isfinite(loaded.vertices)):
         raise MeshError(f"{path}: mesh has NaN or infinite vertex coordinates")
+    faces = np.asarray(loaded.faces)
+    if faces.min() < 0 or faces.max() >= len(loaded.vertices):
+        bad = int(faces.min()) if faces.min() < 0 else int(faces.max())
+        raise MeshError(f"{path}: a face refers to vertex {bad}, but the mesh has {len(loaded.vertices)} vertices")
     if scale != 1.0:
         loaded.apply_scale(scale)
+        if not np.all(np.isfinite(loaded.vertices)):
+            raise MeshError(f"{path}: vertex coordinates times scale {scale:g} overflow; check the scale")
     return loaded
 
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from paz6d.backend.camera import Camera
 from paz6d.backend.files import load_json
-from paz6d.datasets.bop.fields import entries_by_id, required_field
+from paz6d.datasets.bop.fields import entries_by_id, integer_field, number_field, required_field
 from paz6d.datasets.bop.scene import pose_from_bop
 from paz6d.datasets.bop.units import Units
 
@@ -24,11 +24,14 @@ def load_camera(path: str | Path) -> Camera:
     if not path.is_file():
         raise ValueError(f"{path}: camera file not found")
     data = load_json(path)
-    for name in ("fx", "fy", "cx", "cy", "width", "height"):
-        if not isinstance(data, dict) or name not in data:
-            raise ValueError(f"{path}: missing field {name!r} of a BOP camera.json")
-    K = np.array([[data["fx"], 0.0, data["cx"]], [0.0, data["fy"], data["cy"]], [0.0, 0.0, 1.0]])
-    return Camera(K, data["width"], data["height"])
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object with fx, fy, cx, cy, width, height")
+    where = str(path)
+    fx, fy = (number_field(data, name, where, positive=True) for name in ("fx", "fy"))
+    cx, cy = (number_field(data, name, where) for name in ("cx", "cy"))
+    width, height = (integer_field(data, name, where, minimum=1) for name in ("width", "height"))
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    return Camera(K, width, height)
 
 
 @dataclass(frozen=True)
@@ -47,10 +50,14 @@ def load_scene_camera(path: str | Path, units: Units = "m") -> dict[int, SceneCa
     result = {}
     for im_id, entry in entries_by_id(path).items():
         where = f"{path}: image {im_id}"
+        if not isinstance(entry, dict):
+            raise ValueError(f"{where}: expected an object with cam_K (and depth_scale)")
         K = required_field(entry, "cam_K", where, 9).reshape(3, 3)
-        depth_scale = entry.get("depth_scale")
-        if depth_scale is not None and (not np.isfinite(depth_scale) or depth_scale <= 0):
-            raise ValueError(f"{where}: field 'depth_scale' must be positive, got {depth_scale}")
+        if K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise ValueError(f"{where}: field 'cam_K' must have positive focal lengths, got fx={K[0, 0]:g}, "
+                             f"fy={K[1, 1]:g}")
+        depth_scale = None if entry.get("depth_scale") is None else \
+            number_field(entry, "depth_scale", where, positive=True)
         T_world2cam = None
         if "cam_R_w2c" in entry:
             T_world2cam = pose_from_bop(required_field(entry, "cam_R_w2c", where, 9),

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from paz6d.backend.files import check_plain_name
 from paz6d.backend.image import load_image
 from paz6d.datasets.bop.camera import load_camera
 from paz6d.datasets.bop.fields import entries_by_id, required_field
@@ -57,6 +58,7 @@ def bop_split_to_coco(root: str | Path, split: str = "test", min_visible_fractio
             no image at all.
     """
     root = Path(root)
+    check_plain_name(split, "split")
     folder = root / split
     if not folder.is_dir():
         raise ValueError(f"{folder}: split folder not found")

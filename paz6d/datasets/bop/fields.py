@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.checks import short_repr
 from paz6d.backend.files import load_json
 
 
@@ -21,12 +23,43 @@ def required_field(entry, name: str, where: str, size: int | None = None):
     if size is not None:
         try:
             array = np.asarray(value, dtype=np.float64).ravel()
-        except (TypeError, ValueError) as error:
-            raise ValueError(f"{where}: field {name!r} is not numeric") from error
+        except (TypeError, ValueError, OverflowError) as error:
+            raise ValueError(f"{where}: field {name!r} is not numeric, got {short_repr(value)}") from error
         if array.size != size or not np.all(np.isfinite(array)):
-            raise ValueError(f"{where}: field {name!r} must hold {size} finite numbers, got {array.size}")
+            found = f"{array.size} numbers" if array.size != size else "NaN or infinite values"
+            raise ValueError(f"{where}: field {name!r} must hold {size} finite numbers, got {found}")
         return array
     return value
+
+
+def integer_field(entry, name: str, where: str, minimum: int = 0) -> int:
+    """``entry[name]`` as an ``int`` ``>= minimum`` (a JSON integer, not ``1.5``, ``"1"`` or ``true``).
+
+    Raises:
+        ValueError: ``"<where>: missing field 'name'"`` or naming the field and the value found.
+    """
+    value = required_field(entry, name, where)
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{where}: field {name!r} must be an integer >= {minimum}, got {short_repr(value)}")
+    return value
+
+
+def number_field(entry, name: str, where: str, minimum: float | None = None, maximum: float | None = None,
+                 positive: bool = False) -> float:
+    """``entry[name]`` as a finite ``float`` (within ``[minimum, maximum]``; ``> 0`` with ``positive``).
+
+    Raises:
+        ValueError: naming ``where``, the field and the value found.
+    """
+    value = required_field(entry, name, where)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or \
+            (minimum is not None and value < minimum) or (maximum is not None and value > maximum) or \
+            (positive and value <= 0):
+        expected = "a positive number" if positive else "a finite number"
+        if minimum is not None or maximum is not None:
+            expected += f" in [{'-inf' if minimum is None else minimum}, {'inf' if maximum is None else maximum}]"
+        raise ValueError(f"{where}: field {name!r} must be {expected}, got {short_repr(value)}")
+    return float(value)
 
 
 def entries_by_id(path: Path, kind: str = "image") -> dict[int, object]:

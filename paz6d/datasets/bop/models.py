@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.mesh import load_mesh
-from paz6d.datasets.bop.fields import entries_by_id, required_field
+from paz6d.datasets.bop.fields import entries_by_id, number_field, required_field
+from paz6d.datasets.bop.scene import nearest_rotation
 from paz6d.datasets.bop.units import Units, lengths_from_mm, units_per_mm
 
 MODELS_INFO = "models_info.json"
@@ -34,28 +35,62 @@ class ModelInfo:
     symmetries_continuous: list = field(default_factory=list)
 
 
+def parse_symmetries(entry: dict, where: str, units: Units = "m") -> tuple[np.ndarray, list]:
+    """The symmetry fields of a ``models_info.json`` entry (millimetre offsets), checked.
+
+    Returns:
+        ``(discrete, continuous)``: ``(S, 4, 4)`` transforms (translations in ``units``) whose
+        rotation parts are (rounded) rotations, and ``[(axis (3,), offset (3,) in units), ...]``
+        with non-zero axes.
+
+    Raises:
+        ValueError: ``"<where>, symmetries_discrete[i]: ..."`` and the like.
+    """
+    discrete_values = entry.get("symmetries_discrete", [])
+    if not isinstance(discrete_values, list):
+        raise ValueError(f"{where}: field 'symmetries_discrete' must be a list of 16-number transforms")
+    discrete = []
+    for index, values in enumerate(discrete_values):
+        inner = f"{where}, symmetries_discrete[{index}]"
+        T = required_field({"symmetries_discrete": values}, "symmetries_discrete", inner, 16).reshape(4, 4)
+        nearest_rotation(T[:3, :3], inner)
+        if np.abs(T[3] - [0, 0, 0, 1]).max() > 1e-6:
+            raise ValueError(f"{inner}: the last row of a 4x4 transform must be 0 0 0 1, got {T[3].tolist()}")
+        T[:3, 3] = lengths_from_mm(T[:3, 3], units)
+        discrete.append(T)
+    continuous_values = entry.get("symmetries_continuous", [])
+    if not isinstance(continuous_values, list):
+        raise ValueError(f"{where}: field 'symmetries_continuous' must be a list of {{axis, offset}} objects")
+    continuous = []
+    for index, symmetry in enumerate(continuous_values):
+        inner = f"{where}, symmetries_continuous[{index}]"
+        axis = required_field(symmetry, "axis", inner, 3)
+        if not np.linalg.norm(axis) > 0:
+            raise ValueError(f"{inner}: field 'axis' must be a non-zero vector, got {axis.tolist()}")
+        continuous.append((axis, lengths_from_mm(required_field(symmetry, "offset", inner, 3), units)))
+    return np.array(discrete).reshape(-1, 4, 4), continuous
+
+
 def load_models_info(path: str | Path, units: Units = "m") -> dict[int, ModelInfo]:
-    """``models_info.json`` → ``{obj_id: ModelInfo}`` with lengths in ``units`` (``"m"`` or ``"mm"``)."""
+    """``models_info.json`` → ``{obj_id: ModelInfo}`` with lengths in ``units`` (``"m"`` or ``"mm"``).
+
+    Raises:
+        ValueError: naming the file, object and field: a missing or non-positive diameter, a
+            malformed box or symmetry.
+    """
     path = Path(path)
     result = {}
     for obj_id, entry in entries_by_id(path, "object").items():
         where = f"{path}: object {obj_id}"
-        diameter = float(lengths_from_mm(required_field(entry, "diameter", where, 1)[0], units))
+        if not isinstance(entry, dict):
+            raise ValueError(f"{where}: expected an object with diameter (and min_x.., symmetries)")
+        diameter = float(lengths_from_mm(number_field(entry, "diameter", where, positive=True), units))
         minimum = size = None
         if "min_x" in entry:
             minimum = lengths_from_mm([required_field(entry, f"min_{axis}", where, 1)[0] for axis in "xyz"], units)
             size = lengths_from_mm([required_field(entry, f"size_{axis}", where, 1)[0] for axis in "xyz"], units)
-        discrete = []
-        for index, values in enumerate(entry.get("symmetries_discrete", [])):
-            T = required_field({"value": values}, "value", f"{where}, symmetries_discrete[{index}]", 16).reshape(4, 4)
-            T[:3, 3] = lengths_from_mm(T[:3, 3], units)
-            discrete.append(T)
-        continuous = []
-        for index, symmetry in enumerate(entry.get("symmetries_continuous", [])):
-            inner = f"{where}, symmetries_continuous[{index}]"
-            continuous.append((required_field(symmetry, "axis", inner, 3),
-                               lengths_from_mm(required_field(symmetry, "offset", inner, 3), units)))
-        result[obj_id] = ModelInfo(diameter, minimum, size, np.array(discrete).reshape(-1, 4, 4), continuous)
+        discrete, continuous = parse_symmetries(entry, where, units)
+        result[obj_id] = ModelInfo(diameter, minimum, size, discrete, continuous)
     return result
 
 

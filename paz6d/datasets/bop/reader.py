@@ -22,6 +22,7 @@ from typing import Iterator
 import numpy as np
 
 from paz6d.backend.camera import Camera
+from paz6d.backend.files import check_plain_name
 from paz6d.backend.image import load_image
 from paz6d.datasets.bop.camera import load_camera, load_scene_camera
 from paz6d.datasets.bop.models import MODELS_INFO, ModelInfo, load_model, load_models_info
@@ -133,6 +134,7 @@ class BOPDataset:
 
     def __init__(self, root: str | Path, split: str = "test", scene_ids: list[int] | None = None):
         self.root = Path(root)
+        check_plain_name(split, "split")
         split_folder = self.root / split
         if not split_folder.is_dir():
             raise ValueError(f"{split_folder}: split folder not found")

@@ -15,13 +15,15 @@ Example:
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import write_csv_atomically
+from paz6d.backend.checks import short_repr
+from paz6d.backend.files import read_input_text, write_csv_atomically
 from paz6d.datasets.bop.units import Units, lengths_from_mm, mm_from_lengths
 
 HEADER = ("scene_id", "im_id", "obj_id", "score", "R", "t", "time")
@@ -74,8 +76,18 @@ class PoseResults:
 def _integer(text: str, name: str) -> int:
     text = text.strip()
     if not text.isdigit():
-        raise ValueError(f"field {name!r}: expected a non-negative integer, got {text!r}")
+        raise ValueError(f"field {name!r}: expected a non-negative integer, got {short_repr(text)}")
+    if len(text) > 18:
+        raise ValueError(f"field {name!r}: id of {len(text)} digits is too large")
     return int(text)
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _numbers(text: str, name: str, count: int) -> np.ndarray:
@@ -84,8 +96,9 @@ def _numbers(text: str, name: str, count: int) -> np.ndarray:
         raise ValueError(f"field {name!r}: expected {count} numbers separated by spaces, got {len(parts)}")
     try:
         values = np.array([float(part) for part in parts])
-    except ValueError as error:
-        raise ValueError(f"field {name!r}: not a number ({error})") from error
+    except ValueError:
+        bad = next(part for part in parts if not _is_float(part))
+        raise ValueError(f"field {name!r}: not a number: {short_repr(bad)}") from None
     if not np.all(np.isfinite(values)):
         raise ValueError(f"field {name!r}: contains NaN or infinite values")
     return values
@@ -127,16 +140,15 @@ def read_pose_results(path: str | Path, object_ids=None, image_ids=None, skip_in
             header is always checked, also with ``skip_invalid``).
     """
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: results file not found")
+    text = read_input_text(path, "results file")
     object_ids = None if object_ids is None else {int(value) for value in object_ids}
     image_ids = None if image_ids is None else {(int(scene), int(image)) for scene, image in image_ids}
     parsed, lines, skipped = [], [], []
-    with open(path, newline="", encoding="utf-8") as file:
-        reader = csv.reader(file)
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
         header = next(reader, None)
         if header is None or tuple(field.strip() for field in header) != HEADER:
-            found = "an empty file" if header is None else repr(",".join(header))
+            found = "an empty file" if header is None else short_repr(",".join(header))
             raise ValueError(f"{path}:1: expected the header {','.join(HEADER)}, got {found}")
         for row in reader:
             if not row or all(not field.strip() for field in row):
@@ -155,6 +167,8 @@ def read_pose_results(path: str | Path, object_ids=None, image_ids=None, skip_in
                 continue
             parsed.append(values)
             lines.append(reader.line_num)
+    except csv.Error as error:  # a NUL byte, an unterminated quote, a field beyond the csv field size limit
+        raise ValueError(f"{path}:{reader.line_num}: malformed CSV ({error})") from None
     count = len(parsed)
     columns = list(zip(*parsed)) if parsed else [()] * len(HEADER)
     return PoseResults(

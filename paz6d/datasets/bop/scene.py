@@ -10,7 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from paz6d.datasets.bop.fields import entries_by_id, required_field
+from paz6d.datasets.bop.fields import entries_by_id, integer_field, number_field, required_field
 from paz6d.datasets.bop.units import Units, lengths_from_mm
 
 RGB_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif")
@@ -40,11 +40,12 @@ def pose_from_bop(R_values, t_mm, where: str = "cam_R_m2c", snap_rotation: bool 
 
     With ``snap_rotation`` a slightly non-orthonormal stored rotation is replaced by the nearest
     rotation (see :func:`nearest_rotation`); without it the stored matrix is kept as is (what
-    bop_toolkit's evaluation uses).
+    bop_toolkit's evaluation uses); either way a matrix that is no rotation raises ``ValueError``.
     """
     T = np.eye(4)
     rotation = np.asarray(R_values, dtype=np.float64).reshape(3, 3)
-    T[:3, :3] = nearest_rotation(rotation, where) if snap_rotation else rotation
+    snapped = nearest_rotation(rotation, where)  # also checks that a kept matrix is a (rounded) rotation
+    T[:3, :3] = snapped if snap_rotation else rotation
     T[:3, 3] = lengths_from_mm(np.asarray(t_mm, dtype=np.float64).reshape(3), units)
     return T
 
@@ -76,8 +77,8 @@ def load_scene_gt(path: str | Path, snap_rotations: bool = True,
             where = f"{path}: image {im_id}, instance {index}"
             R = required_field(entry, "cam_R_m2c", where, 9)
             t = required_field(entry, "cam_t_m2c", where, 3)
-            T = pose_from_bop(R, t, where, snap_rotations, units)
-            poses.append(GroundTruthPose(int(required_field(entry, "obj_id", where)), T))
+            T = pose_from_bop(R, t, f"{where}, field 'cam_R_m2c'", snap_rotations, units)
+            poses.append(GroundTruthPose(integer_field(entry, "obj_id", where), T))
         result[im_id] = poses
     return result
 
@@ -87,11 +88,14 @@ def load_scene_gt_info(path: str | Path) -> dict[int, list[dict]]:
     path = Path(path)
     result = {}
     for im_id, entries in entries_by_id(path).items():
+        if not isinstance(entries, list):
+            raise ValueError(f"{path}: image {im_id}: expected a list of instances")
         infos = []
         for index, entry in enumerate(entries):
             where = f"{path}: image {im_id}, instance {index}"
             for name in GT_INFO_FIELDS:
                 required_field(entry, name, where, 4 if name.startswith("bbox") else 1)
+            number_field(entry, "visib_fract", where, minimum=0.0, maximum=1.0)
             infos.append(entry)
         result[im_id] = infos
     return result

@@ -35,6 +35,8 @@ def read_targets(path: str | Path) -> list[Target]:
     data = load_json(path)
     if not isinstance(data, list):
         raise ValueError(f"{path}: expected a list of targets")
+    if not data:
+        raise ValueError(f"{path}: holds no targets (expected [{{scene_id, im_id, obj_id, inst_count}}, ...])")
     targets, first_index = [], {}
     for index, entry in enumerate(data):
         values = []

@@ -15,6 +15,8 @@ import numpy as np
 
 #: Millimetres per metre.
 MM_PER_M = 1000.0
+#: Largest value of a 16-bit depth PNG (depth = value x depth_scale millimetres).
+DEPTH_PNG_MAX = 65535
 #: Length units a BOP reader or writer can hand to its caller.
 Units = Literal["m", "mm"]
 UNITS = ("m", "mm")

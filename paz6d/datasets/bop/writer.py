@@ -15,10 +15,7 @@ from paz6d.backend.files import write_bytes_atomically, write_json_atomically
 from paz6d.backend.image import nonzero_window
 from paz6d.backend.mesh import bounding_box
 from paz6d.datasets.bop.models import MODELS_INFO, model_path
-from paz6d.datasets.bop.units import Units, mm_from_lengths, mm_per_unit
-
-#: Largest value of a 16-bit depth PNG.
-DEPTH_PNG_MAX = 65535
+from paz6d.datasets.bop.units import DEPTH_PNG_MAX, Units, mm_from_lengths, mm_per_unit
 
 
 def write_camera(path: str | Path, K, width: int, height: int, depth_scale: float) -> Path:
