@@ -14,6 +14,7 @@ import trimesh
 from data_gen.config import GenerationConfig, list_backgrounds
 from paz6d.backend.files import load_json
 from paz6d.backend.mesh import MeshError, diameter, load_mesh
+from paz6d.datasets.bop.models import parse_symmetries
 from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.synthesis.occluders import distractor_library
 from paz6d.synthesis.sampling import hull_points
@@ -127,6 +128,7 @@ def _load_symmetries(path: Path | None, object_ids: list[int]) -> dict[int, dict
             raise ValueError(f"symmetries: {path}: key {key!r} is not one of the object ids {object_ids}")
         if not isinstance(fields, dict) or set(fields) - set(_SYMMETRY_FIELDS):
             raise ValueError(f"symmetries: {path}: object {key}: expected only fields {_SYMMETRY_FIELDS}")
+        parse_symmetries(fields, f"symmetries: {path}: object {key}", units="mm")  # well-formed, as BOP reads them
         symmetries[int(key)] = fields
     return symmetries
 

@@ -15,7 +15,8 @@ entries themselves (millimetres) come from :mod:`paz6d.datasets.bop.writer`, whi
 
 from __future__ import annotations
 
-import json
+import os
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,7 @@ import numpy as np
 from data_gen.assets import Assets
 from data_gen.coco import encode_rle
 from data_gen.config import GenerationConfig
-from paz6d.backend.files import json_bytes, write_json_atomically
+from paz6d.backend.files import json_bytes, load_json, write_json_atomically
 from paz6d.datasets.bop.targets import TARGETS_FILE, targets_from_gt, write_targets
 from paz6d.datasets.bop.writer import gt_entry, scene_camera_entry, write_camera, write_models
 
@@ -65,8 +66,15 @@ def write_state(config: GenerationConfig) -> None:
     """Records the run's fingerprint; raises ``ValueError`` if the folder holds a different run."""
     path = config.out / STATE_FOLDER / "config.json"
     fingerprint = config.fingerprint()
-    if path.exists():
-        previous = json.loads(path.read_text())
+    if os.path.lexists(path):
+        try:
+            previous = load_json(path)
+        except ValueError as error:
+            raise ValueError(f"out: the state file of a previous run is unreadable ({error}); delete {path} "
+                             "only if the folder holds nothing else you need, or use another --out") from error
+        if not isinstance(previous, dict):
+            raise ValueError(f"out: {path}: the state file of a previous run is not a JSON object; "
+                             "use another --out")
         if previous != fingerprint:
             keys = set(previous) | set(fingerprint)
             changed = sorted(key for key in keys if previous.get(key) != fingerprint.get(key))
@@ -74,6 +82,44 @@ def write_state(config: GenerationConfig) -> None:
                              f"({', '.join(changed)} differ); use another --out or the same settings to resume")
         return
     write_json_atomically(path, fingerprint)
+
+
+def _shard_record(config: GenerationConfig, index: int) -> dict | None:
+    """The shard of image ``index`` when it is a readable record of this run, else ``None``."""
+    try:
+        shard = load_json(shard_path(config, index))
+    except ValueError:
+        return None
+    keys = ("im_id", "scene_gt", "scene_camera", "scene_gt_info", "coco_annotations", "crops")
+    if not isinstance(shard, dict) or any(key not in shard for key in keys) or \
+            shard["im_id"] != image_location(index, config.images_per_scene)[1] or \
+            not isinstance(shard["scene_gt"], list) or not isinstance(shard["crops"], list):
+        return None
+    return shard
+
+
+def image_complete(config: GenerationConfig, index: int) -> bool:
+    """True when image ``index`` needs no rendering: its shard is a readable record and every file
+    it implies (RGB, depth, both masks of each instance, the crops it lists) exists and is not
+    empty. Anything less (a deleted or zero-byte file, a corrupt shard) means the image is made again."""
+    shard = _shard_record(config, index)
+    if shard is None:
+        return False
+    paths = image_relative_paths(config, index, len(shard["scene_gt"]))
+    needed = ["rgb", "depth"] + [f"{kind}/{instance}" for instance in range(len(shard["scene_gt"]))
+                                 for kind in ("mask", "mask_visib")]
+    needed += [f"{kind}/{crop.get('inst_id')}" for crop in shard["crops"] if isinstance(crop, dict)
+               for kind in ("crop_rgb", "crop_mask")]
+    for key in needed:
+        if key not in paths:
+            return False
+        try:
+            info = os.lstat(config.out / paths[key])
+        except OSError:
+            return False
+        if not stat.S_ISREG(info.st_mode) or info.st_size == 0:
+            return False
+    return True
 
 
 def write_static_files(config: GenerationConfig, assets: Assets) -> list[Path]:
@@ -110,7 +156,10 @@ def merge_scenes(config: GenerationConfig, object_ids: list[int]) -> list[Path]:
         coco = {"info": {"description": f"paz6d generate, split {config.split}, scene {scene_id}"},
                 "licenses": [], "categories": categories, "images": [], "annotations": []}
         for index in indices:
-            shard = json.loads(shard_path(config, index).read_text())
+            shard = _shard_record(config, index)
+            if shard is None:
+                raise ValueError(f"out: {shard_path(config, index)}: missing or unreadable record of image {index}; "
+                                 "run the same command again to make it anew")
             key = str(shard["im_id"])
             scene_gt[key], scene_camera[key] = shard["scene_gt"], shard["scene_camera"]
             scene_gt_info[key] = shard["scene_gt_info"]

@@ -8,8 +8,9 @@ libraries load only inside :func:`run`.
 from __future__ import annotations
 
 import argparse
+import sys
 
-from data_gen.config import GenerationConfig, GenerationRun
+from data_gen.config import GenerationConfig, GenerationRun, capped_workers
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
 
 
@@ -25,8 +26,11 @@ def run(args: argparse.Namespace) -> int:
 
     config = config_from_args(GenerationConfig, args)
     execution = config_from_args(GenerationRun, args)
+    workers, message = capped_workers(execution.workers, execution.backend)
+    if message:
+        print(f"paz6d generate: {message}", file=sys.stderr)
     with flags_in_errors(GenerationConfig, GenerationRun):
-        summary = generate(config, workers=execution.workers, backend=execution.backend,
+        summary = generate(config, workers=workers, backend=execution.backend,
                            ray_address=execution.ray_address, show_progress=execution.progress)
     print(f"paz6d generate: {summary.images_total} images in {config.out} "
           f"({summary.images_rendered} rendered, {summary.images_skipped} already done), "

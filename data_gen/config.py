@@ -210,7 +210,7 @@ class GenerationConfig:
 class GenerationRun:
     """How a ``paz6d generate`` run is executed (no influence on the images); each field is a flag.
 
-    Checked by :func:`data_gen.generator.generate`, whose keyword arguments these are.
+    Checked here and again by :func:`data_gen.generator.generate`, whose keyword arguments these are.
     """
 
     workers: int = option(1, "worker processes (Ray actors with --backend ray)")
@@ -219,9 +219,44 @@ class GenerationRun:
     ray_address: str | None = option(None, "Ray cluster address, e.g. ray://head:10001 (default: start a local Ray)")
     progress: bool = option(True, "progress bar on stderr")
 
+    def __post_init__(self):
+        _positive_int(self.workers, "workers")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend: expected one of {BACKENDS}, got {self.backend!r}")
+
+
+def usable_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the system has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def capped_workers(workers: int, backend: str) -> tuple[int, str | None]:
+    """``(workers to start, message)``: local workers beyond :func:`usable_cores` only compete for the
+    same cores (each holds a renderer of ~280 MB), so they are capped there, with a message saying
+    so (``None`` when nothing changed). Ray actors may live on other machines and are not capped."""
+    cores = usable_cores()
+    if backend != "local" or workers <= cores:
+        return workers, None
+    return cores, f"--workers {workers} capped at {cores}, the number of usable CPU cores"
+
+
+def _symbolic_links_inside(output: Path) -> list[Path]:
+    """Symbolic links anywhere below ``output`` (not followed)."""
+    found = []
+    for folder, folders, files in os.walk(output):
+        for name in folders + files:
+            if os.path.islink(os.path.join(folder, name)):
+                found.append(Path(folder) / name)
+    return found
+
 
 def check_output_writable(output: Path) -> None:
-    """Raises ``ValueError`` unless ``output`` is (or can be made) a writable folder.
+    """Raises ``ValueError`` unless ``output`` is (or can be made) a writable folder whose contents
+    are real files and folders: a symbolic link inside it could make ``paz6d generate`` write
+    outside the folder, so one is refused.
 
     Leaves nothing behind: creates and deletes a probe file in the folder, or in its nearest
     existing ancestor when the folder does not exist yet.
@@ -229,6 +264,11 @@ def check_output_writable(output: Path) -> None:
     output = Path(output)
     if output.exists() and not output.is_dir():
         raise ValueError(f"out: {output} exists and is not a folder")
+    if output.is_dir():
+        links = _symbolic_links_inside(output)
+        if links:
+            raise ValueError(f"out: {links[0]} is a symbolic link ({len(links)} inside {output}); paz6d generate "
+                             "writes only into real folders inside --out, so remove the links or use another --out")
     existing = output
     while not existing.exists():
         existing = existing.parent

@@ -99,7 +99,8 @@ def generate(config: GenerationConfig, workers: int = 1, backend: str = "local",
     bop_writer.write_state(config)
     remove_stale_temporaries(config.out)
     written = len(bop_writer.write_static_files(config, assets))
-    pending = [index for index in range(config.num_images) if not bop_writer.shard_path(config, index).exists()]
+    # Resume: an image is redone unless its record and every file it names are on disk (not empty).
+    pending = [index for index in range(config.num_images) if not bop_writer.image_complete(config, index)]
     with progress_bar(config.num_images, "paz6d generate", "img", show_progress,
                       initial=config.num_images - len(pending)) as progress:
         if pending and backend == "local":

@@ -20,7 +20,6 @@ size differs from the image raise ``ValueError`` instead of getting IoU ``-1``.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from evaluation import coco_masks
+from paz6d.backend.files import load_json
 
 STAT_NAMES = ("AP", "AP50", "AP75", "AP_small", "AP_medium", "AP_large",
               "AR1", "AR10", "AR100", "AR_small", "AR_medium", "AR_large")
@@ -54,12 +54,9 @@ def _is_box(value) -> bool:
 def _read_json(path: str | Path, expected: type, what: str):
     path = Path(path)
     try:
-        with open(path, encoding="utf-8") as file:
-            data = json.load(file)
-    except FileNotFoundError:
-        raise ValueError(f"{path}: file not found (expected {what})") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise ValueError(f"{path}: malformed JSON ({error}); expected {what}") from None
+        data = load_json(path)
+    except ValueError as error:  # missing, a folder, not UTF-8, malformed, nested too deeply, huge numbers
+        raise ValueError(f"{error}; expected {what}") from None
     if not isinstance(data, expected):
         raise ValueError(f"{path}: expected {what}, found a JSON {type(data).__name__}")
     return data

@@ -14,15 +14,20 @@ Images without an RGB file are skipped (reported), as are instances below ``--mi
 from __future__ import annotations
 
 import argparse
+import re
 import time
 from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.files import check_output_file, check_plain_name
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION
 
 METHODS = ("aae", "keypoints")
+#: ``--method`` value -> the method name of its run directories (:func:`paz6d.run_dirs.method_of`).
+RUN_METHODS = {"aae": "aae", "keypoints": "keypointnet"}
+_OBJECT_MESH = re.compile(r"^obj_(\d+)$")
 BOXES = {"obj": "bbox_obj", "visib": "bbox_visib"}
 
 
@@ -111,19 +116,67 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
     return result
 
 
+def run_object_id(run_dir: Path, method: str) -> int | None:
+    """The BOP object id a run directory was trained on, from its mesh's ``obj_XXXXXX`` file name
+    (``None`` when the mesh is named otherwise, e.g. a mesh given with ``--mesh``).
+
+    Reads the run's files through its method's ``run_dir`` module, so a corrupt or incomplete run
+    directory fails here, naming the file, before any image is read.
+    """
+    if method == "aae":
+        from paz6d.aae import run_dir as aae_run_dir
+        from paz6d.aae.codebook import Codebook
+
+        mesh = aae_run_dir.read_config(run_dir)["mesh"]
+        aae_run_dir.read_object(run_dir)
+        Codebook.load(aae_run_dir.codebook_path(run_dir))
+    else:
+        from paz6d.keypointnet import run_dir as keypointnet_run_dir
+
+        mesh = keypointnet_run_dir.read_config(run_dir).get("mesh_path")
+        keypointnet_run_dir.read_keypoints(run_dir)
+    match = _OBJECT_MESH.match(Path(str(mesh)).stem) if mesh else None
+    return int(match.group(1)) if match else None
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """Checks every flag, the run directory (its method, its files, its object) and the output paths
+    before any image is read; bad input raises ``ValueError`` naming the flag or file."""
+    from paz6d.run_dirs import method_of
+
+    check_plain_name(args.split, "--split")
+    if args.object_id < 1:
+        raise ValueError(f"--object-id: expected a BOP object id (a positive integer), got {args.object_id}")
+    if not 0.0 <= args.min_visible <= 1.0:
+        raise ValueError(f"--min-visible: expected a visible fraction in [0, 1], got {args.min_visible}")
+    check_output_file(args.out, "--out")
+    if args.targets_out is not None:
+        check_output_file(args.targets_out, "--targets-out")
+    if not args.run.is_dir():
+        raise ValueError(f"--run: {args.run} is not a directory")
+    method = method_of(args.run)
+    if method != RUN_METHODS[args.method]:
+        wanted = next(name for name, value in RUN_METHODS.items() if value == method)
+        raise ValueError(f"--method: {args.run} is a {method} run directory; use --method {wanted}")
+    trained_on = run_object_id(args.run, args.method)
+    if trained_on is not None and trained_on != args.object_id:
+        raise ValueError(f"--object-id: {args.run} was trained on object {trained_on}, not {args.object_id}")
+
+
 def run(args: argparse.Namespace) -> int:
     from paz6d.backend.tensorflow_guard import import_tensorflow
 
+    check_arguments(args)
     import_tensorflow()
-
-    if not args.run.is_dir():
-        raise ValueError(f"--run: {args.run} is not a directory")
     found = estimate_dataset(args.run, args.method, args.dataset, args.split, args.object_id, args.box,
                              args.min_visible)
     count = len(found["im_ids"])
     if count == 0 and found["failed"] == 0:
         raise ValueError(f"{args.dataset}: no instance of object {args.object_id} with an RGB image and visible "
                          f"fraction >= {args.min_visible} in split {args.split!r}")
+    if count == 0:
+        raise ValueError(f"every estimate failed ({found['failed']} instances of object {args.object_id}); "
+                         f"{args.out} not written (is {args.run} a model of this object and data set?)")
     write_pose_results(args.out, found["scene_ids"], found["im_ids"], np.full(count, args.object_id),
                        np.ones(count), found["rotations"].reshape(-1, 3, 3), found["translations"].reshape(-1, 3),
                        found["seconds"], units="m")

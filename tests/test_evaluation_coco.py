@@ -220,7 +220,7 @@ def test_per_category_ap_is_mean_over_thresholds_and_recalls():
 def test_malformed_json_names_the_file(tmp_path):
     path = tmp_path / "broken.json"
     path.write_text('{"images": [')
-    with pytest.raises(ValueError, match="broken.json.*malformed JSON"):
+    with pytest.raises(ValueError, match="broken.json.*invalid JSON"):
         coco.CocoGroundTruth.from_file(path)
     with pytest.raises(ValueError, match="missing.json.*not found"):
         coco.CocoGroundTruth.from_file(tmp_path / "missing.json")

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.checks import as_array, as_camera_matrix
-from paz6d.backend.files import save_npz_atomically
+from paz6d.backend.files import load_npz, save_npz_atomically
 
 CODEBOOK_FORMAT = 1
 
@@ -190,13 +190,7 @@ class Codebook:
     def load(cls, path: str | Path) -> "Codebook":
         """Reads a codebook written by :meth:`save`; ``ValueError`` naming the file when it is unusable."""
         path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"{path}: codebook file not found")
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                fields = {key: data[key] for key in data.files}
-        except (OSError, ValueError) as error:
-            raise ValueError(f"{path}: not a readable .npz codebook ({error})") from error
+        fields = load_npz(path, "codebook")
         missing = {"codes", "rotations", "render_boxes", "render_K", "render_distance"} - set(fields)
         if missing:
             raise ValueError(f"{path}: codebook is missing field(s) {sorted(missing)}")

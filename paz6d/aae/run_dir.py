@@ -23,7 +23,7 @@ import numpy as np
 
 from paz6d.aae.codebook import Codebook
 from paz6d.aae.model import load_model
-from paz6d.backend.files import load_json, save_npz_atomically, write_json_atomically
+from paz6d.backend.files import load_json, load_npz, save_npz_atomically, write_json_atomically
 
 CONFIG_FILE = "config.json"
 OBJECT_FILE = "object.npz"
@@ -135,11 +135,7 @@ def write_object(run_dir: str | Path, hull_points, surface_points, diameter: flo
 def read_object(run_dir: str | Path) -> dict[str, np.ndarray | float]:
     """``{"hull_points", "surface_points", "vertices"}`` ``(N, 3)`` arrays and ``"diameter"`` (metres)."""
     path = _required(Path(run_dir) / OBJECT_FILE)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            fields = {key: data[key] for key in data.files}
-    except (OSError, ValueError) as error:
-        raise ValueError(f"{path}: not a readable .npz file ({error})") from error
+    fields = load_npz(path, "object geometry")
     missing = [key for key in OBJECT_KEYS if key not in fields]
     if missing:
         raise ValueError(f"{path}: missing key(s) {missing} of the object geometry")

@@ -20,7 +20,7 @@ import numpy as np
 
 from paz6d.aae import run_dir as run_files
 from paz6d.aae.config import QUICK, AAEConfig
-from paz6d.backend.files import save_npz_atomically
+from paz6d.backend.files import read_cache, save_npz_atomically
 
 
 
@@ -64,10 +64,10 @@ def _views(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig,
 
     path = run_files.views_path(run_dir)
     rotations = look_at_rotations(fibonacci_sphere(config.views))
-    if path.exists():
-        with np.load(path) as data:
-            if data["rgb"].shape[:2] == (config.views, config.render_size) and np.allclose(data["rotations"], rotations):
-                return {key: data[key] for key in data.files}
+    cached = read_cache(path, ("rgb", "alpha", "rotations", "K", "distance"))
+    if cached is not None and cached["rgb"].shape[:2] == (config.views, config.render_size) and \
+            cached["rotations"].shape == rotations.shape and np.allclose(cached["rotations"], rotations):
+        return cached
     rgb, alpha = render_views(mesh_path, mesh_scale, rotations, geometry, workers=workers, platform=platform,
                               progress=progress)
     save_npz_atomically(path, rgb=rgb, alpha=alpha, rotations=rotations, K=geometry.K, distance=geometry.distance)
@@ -107,10 +107,9 @@ def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Pat
     from paz6d.aae.dataset import CropPairs, dataset_pairs
 
     path = run_files.pairs_path(run_dir)
-    if path.exists():
-        with np.load(path) as data:
-            if data["inputs"].shape[1] == config.crop_size:
-                return CropPairs(data["inputs"], data["targets"], data["poses"])
+    cached = read_cache(path, ("inputs", "targets", "poses"))
+    if cached is not None and cached["inputs"].ndim == 4 and cached["inputs"].shape[1] == config.crop_size:
+        return CropPairs(cached["inputs"], cached["targets"], cached["poses"])
     pairs = dataset_pairs(dataset, obj_id, mesh_path, mesh_scale, config.crop_size, config.padding, split, workers,
                           platform, progress)
     save_npz_atomically(path, inputs=pairs.inputs, targets=pairs.targets, poses=pairs.poses)

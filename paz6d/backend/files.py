@@ -13,6 +13,7 @@ import json
 import os
 import stat
 import tempfile
+import zipfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, BinaryIO, Iterator
@@ -189,6 +190,32 @@ def load_json(path: str | Path) -> Any:
         raise ValueError(f"{path}: invalid JSON (nested too deeply)") from error
     except ValueError as error:  # JSONDecodeError, and int() of a number with too many digits
         raise ValueError(f"{path}: invalid JSON ({_excerpt(str(error))})") from error
+
+
+def load_npz(path: str | Path, what: str = "arrays") -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` file (no pickled objects); ``ValueError`` naming the file when it is
+    missing, a folder, truncated or not an ``.npz`` archive (``what`` says what it should hold)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: {what} file not found" if not path.exists() else f"{path}: not a file ({what})")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {key: data[key] for key in data.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as error:
+        raise ValueError(f"{path}: not a readable .npz file of {what} ({_excerpt(str(error)) or type(error).__name__}; "
+                         "truncated or overwritten?)") from error
+
+
+def read_cache(path: str | Path, keys: tuple[str, ...]) -> dict[str, np.ndarray] | None:
+    """The arrays of a cache ``.npz`` file, or ``None`` when it is absent, unreadable (truncated,
+    overwritten) or lacks one of ``keys``: a cache that cannot be used is made again."""
+    if not Path(path).is_file():
+        return None
+    try:
+        arrays = load_npz(path, "cached arrays")
+    except ValueError:
+        return None
+    return arrays if all(key in arrays for key in keys) else None
 
 
 def check_plain_name(value: str, name: str) -> str:

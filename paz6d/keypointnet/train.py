@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import finite_or_none, save_npz_atomically
+from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.keypointnet import run_dir as run_files
@@ -344,9 +344,9 @@ def inference_crops(test, K, margin: float, size: int) -> tuple[np.ndarray, np.n
 
 def _cached_lifting_crops(path: Path, render, K, margin: float, size: int):
     """:func:`inference_crops` of freshly rendered whole images, cached in ``path`` (``.npz``)."""
-    if path.exists():
-        with np.load(path) as data:
-            return data["images"], data["K"], data["T_model2cam"]
+    cached = read_cache(path, ("images", "K", "T_model2cam"))
+    if cached is not None:
+        return cached["images"], cached["K"], cached["T_model2cam"]
     images, intrinsics, poses = inference_crops(render(), K, margin, size)
     save_npz_atomically(path, images=images, K=intrinsics, T_model2cam=poses)
     return images, intrinsics, poses

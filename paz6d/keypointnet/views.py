@@ -31,7 +31,7 @@ import numpy as np
 from paz6d.abstract.processor import SequentialProcessor
 from paz6d.backend import image as image_backend
 from paz6d.backend.camera import Camera
-from paz6d.backend.files import save_npz_atomically
+from paz6d.backend.files import load_npz, save_npz_atomically
 from paz6d.backend.mesh import diameter, load_mesh
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_box, square_window
 from paz6d.synthesis.augment import (BlendBackground, RandomBrightness, RandomContrast, RandomGaussianBlur, RandomHue,
@@ -127,11 +127,11 @@ class ViewSet:
     @classmethod
     def load(cls, path: str | Path) -> "ViewSet":
         path = Path(path)
-        try:
-            with np.load(path) as data:
-                return cls(**{name: data[name] for name in ("rgb", "alpha", "masks", "K", "T_model2cam")})
-        except (OSError, KeyError, ValueError) as error:
-            raise ValueError(f"{path}: not a readable view set ({error})") from error
+        arrays = load_npz(path, "a view set")
+        missing = [name for name in ("rgb", "alpha", "masks", "K", "T_model2cam") if name not in arrays]
+        if missing:
+            raise ValueError(f"{path}: not a view set (missing arrays {missing})")
+        return cls(**{name: arrays[name] for name in ("rgb", "alpha", "masks", "K", "T_model2cam")})
 
 
 @dataclass
