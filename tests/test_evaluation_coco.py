@@ -312,7 +312,7 @@ def test_cli_reports_malformed_results_file(tmp_path):
     gt, _ = synthetic_dataset(0, with_masks=False)
     (tmp_path / "gt.json").write_text(json.dumps(gt))
     (tmp_path / "dt.json").write_text("[{'image_id': 1}]")
-    with pytest.raises(ValueError, match="dt.json: malformed JSON"):
+    with pytest.raises(ValueError, match="dt.json: invalid JSON"):
         run_cli(["coco", "--gt", str(tmp_path / "gt.json"), "--results", str(tmp_path / "dt.json"),
                  "--out", str(tmp_path / "out.json")])
     assert not (tmp_path / "out.json").exists()
