@@ -11,9 +11,9 @@
     ADI builds a ``cKDTree`` on the estimated posed points and queries the ground-truth posed
     points; MSSD loops over the symmetries and takes ``np.linalg.norm(...).max()`` over all points;
   - paz6d (``evaluation.pose_errors``): all estimates of an object in one call, one
-    ``evaluation.point_tree.PointTree`` per object (queries mapped into the model frame), MSSD on
-    the convex-hull vertices with the symmetries as one ``(S, 4, 4)`` array. Object setup (trees,
-    hulls) is included in the timing.
+    ``evaluation.point_tree.PointTree`` per object (queries mapped into the model frame), MSSD in a
+    numba kernel over all points with the symmetries as one ``(S, 4, 4)`` array. Object setup (trees)
+    is included in the timing.
 
 Best of ``--repeats`` runs; wall and CPU (process) seconds are printed: on a shared machine the CPU
 time is the steadier one. Run: ``.venv/bin/python benchmarks/evaluate.py [--repeats 3] [--workers 1]``
@@ -133,7 +133,7 @@ def ours_mssd(objects) -> dict[int, np.ndarray]:
     result = {}
     for obj_id, entry in objects.items():
         model = pose_errors.ObjectModel(entry["points"], entry["diameter"], entry["symmetries"])
-        result[obj_id] = pose_errors.mssd_error(entry["T_est"], entry["T_gt"], model.extreme_points, model.symmetries)
+        result[obj_id] = pose_errors.mssd_error(entry["T_est"], entry["T_gt"], model.points, model.symmetries)
     return result
 
 

@@ -404,7 +404,7 @@ def compute_errors(data: BopEvaluationData, results: PoseResults, pairs: Evaluat
         errors["te"][rows] = pose_errors.translation_error(T_est[:, :3, 3], T_gt[:, :3, 3])
         errors["proj"][rows] = pose_errors.projection_error(T_est, T_gt, model.points, K)
         if "mssd" in metrics:
-            errors["mssd"][rows] = pose_errors.mssd_error(T_est, T_gt, model.extreme_points, model.symmetries)
+            errors["mssd"][rows] = pose_errors.mssd_error(T_est, T_gt, model.points, model.symmetries)
         if "mspd" in metrics:
             errors["mspd"][rows] = pose_errors.mspd_error(T_est, T_gt, model.points, K, model.symmetries)
         if "add" in metrics:

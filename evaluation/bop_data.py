@@ -20,7 +20,7 @@ import numpy as np
 from evaluation.pose_errors import MAX_SYMMETRY_STEP, ObjectModel, symmetry_transformations
 from paz6d.backend.files import check_plain_name
 from paz6d.datasets.bop.camera import load_camera, load_scene_camera
-from paz6d.datasets.bop.models import MODELS_INFO, load_model, load_models_info, model_path
+from paz6d.datasets.bop.models import MODELS_INFO, load_model, load_model_points, load_models_info, model_path
 from paz6d.datasets.bop.scene import DEPTH_SUFFIXES, find_image, load_scene_gt, load_scene_gt_info, read_depth
 from paz6d.datasets.bop.targets import TARGETS_FILE, Target, read_targets
 
@@ -84,9 +84,8 @@ class BopEvaluationData:
     def object_model(self, obj_id: int) -> ObjectModel:
         """Points (all mesh vertices, mm), diameter and symmetries of ``obj_id`` (cached)."""
         if obj_id not in self._models:
-            mesh = load_model(self.models_folder, obj_id, units="mm")
-            self._models[obj_id] = ObjectModel(np.asarray(mesh.vertices, dtype=np.float64),
-                                               self.diameters[obj_id], self.symmetries[obj_id])
+            points = load_model_points(self.models_folder, obj_id, units="mm")
+            self._models[obj_id] = ObjectModel(points, self.diameters[obj_id], self.symmetries[obj_id])
         return self._models[obj_id]
 
     def render_mesh(self, obj_id: int):

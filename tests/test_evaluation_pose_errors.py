@@ -166,15 +166,6 @@ def test_translation_and_projection_errors_against_loops():
                                [np.sqrt(np.sum((a - b) ** 2)) for a, b in zip(T_est[:, :3, 3], T_gt[:, :3, 3])])
 
 
-def test_mssd_on_hull_vertices_equals_mssd_on_all_points():
-    model = pose_errors.ObjectModel(random_points(21, 2000), diameter=170.0,
-                                    symmetries=pose_errors.symmetry_transformations([np.diag([1.0, -1, -1, 1])]))
-    assert len(model.extreme_points) < len(model.points) / 4
-    T_est, T_gt = random_poses(22, 30), random_poses(23, 30)
-    np.testing.assert_allclose(pose_errors.mssd_error(T_est, T_gt, model.extreme_points, model.symmetries),
-                               pose_errors.mssd_error(T_est, T_gt, model.points, model.symmetries), rtol=1e-13)
-
-
 def test_accuracy_auc_integrates_the_accuracy_threshold_curve():
     errors = np.array([0.0, 12.5, 40.0, 99.0, 100.0, 250.0, np.inf])
     thresholds = np.linspace(0.0, 100.0, 200001)

@@ -132,3 +132,41 @@ def test_broken_mesh_files_raise_mesh_error(tmp_path):
     with pytest.raises(MeshError, match=r"good.ply: scale must be a positive finite number, got 0"):
         mesh.load_mesh(tmp_path / "good.ply", scale=0)
     assert issubclass(MeshError, ValueError)
+
+
+# --- PLY vertices without trimesh -------------------------------------------------------------
+
+def test_ply_vertices_equal_trimesh_vertices_for_ascii_and_binary_bop_models(shared_data):
+    for folder in ("models", "models_eval"):  # LM-O: ASCII PLY with normals/colours; binary little-endian
+        for path in sorted((shared_data / "bop_lmo" / folder).glob("obj_*.ply")):
+            expected = np.asarray(trimesh.load(path, force="mesh", process=False).vertices, dtype=np.float64)
+            np.testing.assert_array_equal(mesh.load_ply_vertices(path), expected, err_msg=str(path))
+
+
+def test_ply_vertices_big_endian_fallback_and_errors(tmp_path):
+    vertices = np.array([[0.5, -1.25, 3.0], [1.0, 2.0, -0.125], [4.0, 0.0, 1.5]], dtype=">f4")
+    header = ("ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+              "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n")
+    face = np.array([3], ">u1").tobytes() + np.array([0, 1, 2], ">i4").tobytes()
+    path = tmp_path / "big.ply"
+    path.write_bytes(header.encode() + vertices.tobytes() + face)
+    np.testing.assert_array_equal(mesh.load_ply_vertices(path), vertices.astype(np.float64))
+    written = tmp_path / "trimesh.ply"  # binary little-endian, as trimesh writes it
+    trimesh.creation.box((1, 2, 3)).export(written)
+    np.testing.assert_array_equal(mesh.load_ply_vertices(written),
+                                  np.asarray(trimesh.load(written, process=False).vertices))
+    faces_first = tmp_path / "faces_first.ply"  # not the layout read directly: through trimesh
+    faces_first.write_text("ply\nformat ascii 1.0\nelement face 0\nproperty list uchar int vertex_indices\n"
+                           "element vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+                           "0 0 0\n1 0 0\n0 1 0\n")
+    with pytest.raises(MeshError, match="faces_first.ply"):  # trimesh finds no triangles: load_mesh's error
+        mesh.load_ply_vertices(faces_first)
+    (tmp_path / "text.ply").write_text("solid nothing\n")
+    with pytest.raises(MeshError, match="text.ply: not a PLY file"):
+        mesh.load_ply_vertices(tmp_path / "text.ply")
+    truncated = tmp_path / "truncated.ply"
+    truncated.write_bytes(header.encode() + vertices.tobytes()[:20])
+    with pytest.raises(MeshError, match="truncated.ply: malformed PLY vertex data"):
+        mesh.load_ply_vertices(truncated)
+    with pytest.raises(MeshError, match="missing.ply: could not read mesh"):
+        mesh.load_ply_vertices(tmp_path / "missing.ply")

@@ -57,6 +57,61 @@ def load_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
     return loaded
 
 
+_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+              "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+              "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
+
+
+def load_ply_vertices(path: str | Path) -> np.ndarray:
+    """The ``(N, 3)`` float64 vertex coordinates of a PLY file, in the file's units, in file order
+    (as :func:`load_mesh` with ``process=False`` gives them), read with numpy alone.
+
+    For evaluation, which needs the points and not a mesh: reading a BOP model this way takes
+    milliseconds, where importing trimesh takes ~0.5 s. Supports ASCII and binary PLY whose vertex
+    element comes first and has no list properties (every BOP model); anything else falls back to
+    :func:`load_mesh`. Raises :class:`MeshError` naming the file when it is missing or malformed.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as error:
+        raise MeshError(f"{path}: could not read mesh ({error.strerror or error})") from error
+    end = data.find(b"end_header")
+    header = data[:end].decode("ascii", errors="replace").splitlines() if end >= 0 else []
+    if not header or header[0].strip() != "ply":
+        raise MeshError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header)")
+    body = data.index(b"\n", end) + 1
+    words = [line.split() for line in header[1:] if line.split() and line.split()[0] != "comment"]
+    formats = [w[1] for w in words if w[0] == "format" and len(w) > 1]
+    elements = [index for index, w in enumerate(words) if w[0] == "element"]
+    first = words[elements[0]] if elements else []
+    properties = words[elements[0] + 1:elements[1] if len(elements) > 1 else len(words)] if elements else []
+    names = [w[-1] for w in properties]
+    simple = all(w[0] == "property" and len(w) == 3 and w[1] in _PLY_TYPES for w in properties)
+    if (len(formats) != 1 or len(first) != 3 or first[1] != "vertex" or not simple
+            or not {"x", "y", "z"} <= set(names)):
+        return np.asarray(load_mesh(path).vertices, dtype=np.float64)
+    try:
+        count = int(first[2])
+        if formats[0] == "ascii":
+            rows = data[body:].split(b"\n", count)[:count]
+            table = np.array([row.split() for row in rows], dtype=np.float64).reshape(count, len(names))
+            vertices = np.stack([table[:, names.index(axis)].astype(_PLY_TYPES[properties[names.index(axis)][1]])
+                                 for axis in "xyz"], axis=1).astype(np.float64)  # as declared, e.g. float32
+        elif formats[0] in ("binary_little_endian", "binary_big_endian"):
+            order = "<" if formats[0] == "binary_little_endian" else ">"
+            dtype = np.dtype([(name, order + _PLY_TYPES[w[1]]) for name, w in zip(names, properties)])
+            table = np.frombuffer(data, dtype=dtype, count=count, offset=body)
+            vertices = np.stack([table[axis].astype(np.float64) for axis in "xyz"], axis=1)
+        else:
+            raise ValueError(f"unknown PLY format {formats[0]!r}")
+    except ValueError as error:
+        raise MeshError(f"{path}: malformed PLY vertex data ({error})") from error
+    if len(vertices) == 0 or not np.all(np.isfinite(vertices)):
+        raise MeshError(f"{path}: mesh has no vertices or NaN/infinite vertex coordinates")
+    return vertices
+
+
 def diameter(points) -> float:
     """Largest distance between two of the ``(N, 3)`` points (same unit as the points).
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.mesh import load_mesh
+from paz6d.backend.mesh import load_mesh, load_ply_vertices
 from paz6d.datasets.bop.fields import entries_by_id, number_field, required_field
 from paz6d.datasets.bop.scene import nearest_rotation
 from paz6d.datasets.bop.units import Units, lengths_from_mm, units_per_mm
@@ -102,3 +102,10 @@ def model_path(models_folder: str | Path, obj_id: int) -> Path:
 def load_model(models_folder: str | Path, obj_id: int, units: Units = "m"):
     """The PLY model of ``obj_id`` as a ``trimesh.Trimesh`` with vertices in ``units`` (colours kept)."""
     return load_mesh(model_path(models_folder, obj_id), scale=units_per_mm(units))
+
+
+def load_model_points(models_folder: str | Path, obj_id: int, units: Units = "m") -> np.ndarray:
+    """The ``(N, 3)`` vertices of ``obj_id``'s PLY model in ``units``, without building a mesh: the
+    vertices of ``load_model(...)`` in the same order (bit for bit in ``"mm"``, as stored); see
+    :func:`paz6d.backend.mesh.load_ply_vertices`."""
+    return load_ply_vertices(model_path(models_folder, obj_id)) * units_per_mm(units)
