@@ -10,9 +10,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from paz6d.backend.files import check_plain_name
+from paz6d.backend.paths import check_plain_name
 from paz6d.cli_options import option
-from paz6d.datasets.bop.units import DEPTH_PNG_MAX, MM_PER_M
 from renderers.platform import PLATFORMS
 from renderers.antialias import ANTIALIAS_MODES
 
@@ -27,6 +26,8 @@ BACKGROUND_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"
 MAX_IMAGE_SIDE = 16384
 #: Largest number of annotated objects, distractors or lights in one image.
 MAX_PER_IMAGE = 100
+#: Largest camera distance (metres): keeps the geometry of the distance checks finite.
+MAX_DISTANCE = 1e6
 #: Largest side of the per-object crops (pixels).
 MAX_CROP_SIZE = 2048
 #: BOP image ids have six digits.
@@ -141,12 +142,10 @@ class GenerationConfig:
             _range(self.distance, "distance")
             if self.distance[0] <= 0:
                 raise ValueError(f"distance: expected a positive range in metres, got {tuple(self.distance)}")
+            if self.distance[1] > MAX_DISTANCE:
+                raise ValueError(f"distance: expected at most {MAX_DISTANCE:g} m, got {tuple(self.distance)}")
         if not math.isfinite(self.depth_scale) or self.depth_scale <= 0:
             raise ValueError(f"depth_scale: expected a positive number (mm per PNG unit), got {self.depth_scale}")
-        deepest = DEPTH_PNG_MAX * self.depth_scale / MM_PER_M  # metres
-        if self.distance is not None and self.distance[1] > deepest:
-            raise ValueError(f"depth_scale: {self.depth_scale:g} mm per unit stores depths up to {deepest:.4g} m in "
-                             f"16-bit PNGs, less than the maximum distance {self.distance[1]:.4g} m")
         if self.rgb_format not in RGB_FORMATS:
             raise ValueError(f"rgb_format: expected one of {RGB_FORMATS}, got {self.rgb_format!r}")
         if self.antialias not in ANTIALIAS_MODES:

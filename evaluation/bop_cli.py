@@ -17,7 +17,7 @@ import math
 import sys
 from pathlib import Path
 
-from paz6d.backend.files import check_output_file, check_output_folder, check_plain_name
+from paz6d.backend.paths import check_output_file, check_output_folder, check_plain_name
 from paz6d.cli_errors import shorten
 
 METRIC_NAMES = ("vsd", "mssd", "mspd", "add")

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from evaluation.pose_errors import MAX_SYMMETRY_STEP, ObjectModel, symmetry_transformations
-from paz6d.backend.files import check_plain_name
+from paz6d.backend.paths import check_plain_name
 from paz6d.datasets.bop.camera import load_camera, load_scene_camera
 from paz6d.datasets.bop.models import MODELS_INFO, load_model, load_model_points, load_models_info, model_path
 from paz6d.datasets.bop.scene import DEPTH_SUFFIXES, find_image, load_scene_gt, load_scene_gt_info, read_depth

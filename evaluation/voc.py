@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.files import read_input_bytes, read_input_text
+
 METHODS = ("11point", "allpoint")
 BOX_FORMATS = ("xyxy", "xywh")
 _DEVKIT_NAME = re.compile(r"^comp\d+_det_[^_]+_(?P<class_name>.+)\.txt$")
@@ -144,9 +146,7 @@ def _class_token(token: str, class_names: list[str] | None, where: str) -> str:
 def read_class_names(path: str | Path) -> list[str]:
     """Reads a class-name list (one name per line, e.g. ``voc.names``); line ``i`` names class id ``i``."""
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: class-name file not found")
-    names = [line.strip() for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    names = [line.strip() for line in read_input_text(path, "class-name file").splitlines() if line.strip()]
     if not names:
         raise ValueError(f"{path}: expected one class name per line, found none")
     return names
@@ -163,9 +163,11 @@ def read_xml_annotation(path: str | Path) -> list[tuple[str, list[float], bool]]
     """
     path = Path(path)
     try:
-        root = ElementTree.parse(path).getroot()
+        root = ElementTree.fromstring(read_input_bytes(path, "XML annotation file"))
     except ElementTree.ParseError as error:
         raise ValueError(f"{path}: malformed XML ({error}); expected a VOC <annotation> file") from None
+    except RecursionError:
+        raise ValueError(f"{path}: XML nested too deeply; expected a VOC <annotation> file") from None
     objects = []
     for number, element in enumerate(root.iter("object")):
         where = f"{path}: <object> #{number + 1}"
@@ -185,10 +187,7 @@ def read_xml_annotation(path: str | Path) -> list[tuple[str, list[float], bool]]
 
 
 def _read_lines(path: Path) -> list[tuple[int, list[str]]]:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: not a UTF-8 text file") from None
+    text = read_input_text(path, "text file")
     return [(number, line.split()) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]
 
 

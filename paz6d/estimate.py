@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import check_output_file, check_plain_name
+from paz6d.backend.paths import check_output_file, check_plain_name
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION
 

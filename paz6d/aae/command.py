@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 from paz6d.aae.config import AAETraining
+from paz6d.backend.paths import check_output_folder
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
 
 
@@ -36,10 +37,14 @@ def _dataset_mesh(dataset: Path, object_id: int | None) -> tuple[Path, int]:
 def run(args: argparse.Namespace) -> int:
     """Runs ``paz6d train aae``."""
     from paz6d.aae.train import train_aae  # here: the trainer loads the renderers and TensorFlow
+    from paz6d.datasets.bop.reader import check_object_in_split
 
     job = config_from_args(AAETraining, args)
     with flags_in_errors(AAETraining):
+        check_output_folder(job.out, "out")
         mesh, object_id = (job.mesh, 1) if job.dataset is None else _dataset_mesh(job.dataset, job.object_id)
+        if job.dataset is not None:  # before any view is rendered
+            check_object_in_split(job.dataset, job.split, object_id)
         summary = train_aae(mesh, job.out, job.model_config, job.mesh_scale, job.seed, job.workers, job.platform,
                             job.progress, dataset=job.dataset, object_id=object_id, split=job.split,
                             pair_fraction=job.pair_fraction)

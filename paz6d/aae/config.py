@@ -11,6 +11,7 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+from paz6d.backend.paths import check_plain_name
 from paz6d.cli_options import option
 from paz6d.datasets.bop.units import MM_PER_M
 from renderers.platform import PLATFORMS
@@ -174,6 +175,16 @@ class AAETraining:
             object.__setattr__(self, "mesh_scale", 1.0 if self.dataset is None else 1.0 / MM_PER_M)
         if not math.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
             raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
+        if not 0.0 <= self.pair_fraction <= 1.0:
+            raise ValueError(f"pair_fraction: expected a fraction in [0, 1], got {self.pair_fraction}")
+        if self.seed < 0:
+            raise ValueError(f"seed: expected a non-negative integer, got {self.seed}")
+        if self.workers < 0:
+            raise ValueError(f"workers: expected 0 (render in this process) or a number of processes, "
+                             f"got {self.workers}")
+        if self.object_id is not None and self.object_id < 1:
+            raise ValueError(f"object_id: expected a BOP object id (a positive integer), got {self.object_id}")
+        check_plain_name(self.split, "split")
 
     @property
     def model_config(self) -> AAEConfig:

@@ -31,6 +31,7 @@ from paz6d.aae.codebook import Codebook
 from paz6d.aae.model import encode_function, encoder_of, to_model_input
 from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
 from paz6d.backend import quaternion
+from paz6d.backend.boxes import check_box_in_image
 from paz6d.backend.camera import Camera, as_camera, points_from_depth, project_points, unproject
 from paz6d.backend.checks import as_array, as_camera_matrix
 from paz6d.backend.image import as_image
@@ -150,19 +151,8 @@ def pose_from_codebook_view(R_codebook, box, K, render_box, render_K, render_dis
 
 # ------------------------------------------------------------------------------------------ steps
 def _as_box(box, image_shape: tuple[int, ...], name: str = "box") -> np.ndarray:
-    if isinstance(box, Box2D):
-        coordinates = box.to_array()
-    else:
-        coordinates = as_array(box, name, (4,))
-        if coordinates.shape != (4,):
-            raise ValueError(f"{name}: expected (x_min, y_min, x_max, y_max) or a Box2D, got shape {coordinates.shape}")
-    x_min, y_min, x_max, y_max = coordinates
-    if not (x_max > x_min and y_max > y_min):
-        raise ValueError(f"{name}: empty box {coordinates.tolist()}; expected x_max > x_min and y_max > y_min")
     height, width = image_shape[:2]
-    if x_max <= 0 or y_max <= 0 or x_min >= width or y_min >= height:
-        raise ValueError(f"{name}: {coordinates.tolist()} lies outside the {width}x{height} image")
-    return coordinates
+    return check_box_in_image(box.to_array() if isinstance(box, Box2D) else box, width, height, name)
 
 
 class EncodeCrops(Processor):

@@ -109,6 +109,9 @@ class Pose6D:
             raise ValueError(f"Pose6D.translation: expected shape (3,), got {t.shape}")
         object.__setattr__(self, "quaternion", _frozen_array(quaternion_backend.canonical(q / np.linalg.norm(q))))
         object.__setattr__(self, "translation", _frozen_array(t))
+        if isinstance(self.score, bool) or not isinstance(self.score, (int, float, np.number)) or \
+                not np.isfinite(self.score):
+            raise ValueError(f"Pose6D.score: expected a finite number, got {self.score!r}")
         object.__setattr__(self, "score", float(self.score))
 
     @property

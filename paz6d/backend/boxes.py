@@ -33,6 +33,34 @@ def as_boxes(value, name: str = "boxes") -> np.ndarray:
     return as_array(value, name, (4,))
 
 
+#: Largest box side that crop steps accept, in multiples of the image's longer side: a crop
+#: resizes the box's window to the model input, so a box far larger than the image (±1e9 px) would
+#: only cost time (blur and resampling scale with it) and cannot hold the object's image.
+MAX_BOX_TO_IMAGE = 4.0
+
+
+def check_box_in_image(box, width: int, height: int, name: str = "box") -> np.ndarray:
+    """``box`` ``(4,)`` xyxy as float64 when it is finite, non-empty, overlaps the ``width x height``
+    image and its sides are at most :data:`MAX_BOX_TO_IMAGE` times the image's longer side.
+
+    Raises:
+        ValueError: naming ``name``, the box and the image size.
+    """
+    coordinates = as_array(box, name, (4,))
+    if coordinates.shape != (4,):
+        raise ValueError(f"{name}: expected (x_min, y_min, x_max, y_max), got shape {coordinates.shape}")
+    x_min, y_min, x_max, y_max = coordinates
+    if not (x_max > x_min and y_max > y_min):
+        raise ValueError(f"{name}: empty box {coordinates.tolist()}; expected x_max > x_min and y_max > y_min")
+    if x_max <= 0 or y_max <= 0 or x_min >= width or y_min >= height:
+        raise ValueError(f"{name}: {coordinates.tolist()} lies outside the {width}x{height} image")
+    limit = MAX_BOX_TO_IMAGE * max(width, height)
+    if max(x_max - x_min, y_max - y_min) > limit:
+        raise ValueError(f"{name}: {coordinates.tolist()} is larger than {MAX_BOX_TO_IMAGE:g} times the "
+                         f"{width}x{height} image (sides up to {limit:g} px)")
+    return coordinates
+
+
 def _as_box_list(value, name: str) -> np.ndarray:
     boxes = as_boxes(value, name)
     if boxes.ndim != 2:

@@ -17,6 +17,9 @@ if TYPE_CHECKING:
     import trimesh
 
 MESH_SUFFIXES = (".ply", ".obj", ".glb", ".gltf", ".off", ".stl")
+#: Largest vertex coordinate of a loaded mesh (in the units asked for: a kilometre-scale scene in
+#: millimetres still fits); beyond it distances between vertices overflow.
+MAX_COORDINATE = 1e12
 
 
 class MeshError(ValueError):
@@ -52,8 +55,10 @@ def load_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
         raise MeshError(f"{path}: a face refers to vertex {bad}, but the mesh has {len(loaded.vertices)} vertices")
     if scale != 1.0:
         loaded.apply_scale(scale)
-        if not np.all(np.isfinite(loaded.vertices)):
-            raise MeshError(f"{path}: vertex coordinates times scale {scale:g} overflow; check the scale")
+    extent = float(np.abs(loaded.vertices).max())
+    if not extent <= MAX_COORDINATE:
+        raise MeshError(f"{path}: vertex coordinates reach {extent:.3g} after scaling by {scale:g} (at most "
+                        f"{MAX_COORDINATE:g} allowed); check the scale")
     return loaded
 
 

@@ -17,6 +17,8 @@ from paz6d.backend.checks import as_camera_matrix, as_points
 
 METHODS = {"iterative": cv2.SOLVEPNP_ITERATIVE, "epnp": cv2.SOLVEPNP_EPNP, "sqpnp": cv2.SOLVEPNP_SQPNP}
 COLLINEARITY_TOLERANCE = 1e-6
+#: Numbers of distortion coefficients OpenCV accepts.
+DISTORTION_SIZES = (4, 5, 8, 12, 14)
 
 
 class PnPError(ValueError):
@@ -63,6 +65,9 @@ def _check_correspondences(points3d, points2d) -> tuple[np.ndarray, np.ndarray]:
     singular = np.linalg.svd(points3d - points3d.mean(axis=0), compute_uv=False)
     if singular[0] <= 0 or singular[1] <= COLLINEARITY_TOLERANCE * singular[0]:
         raise PnPError("points3d: points are collinear (or coincident); PnP needs points spanning a plane or volume")
+    spread = np.linalg.svd(points2d - points2d.mean(axis=0), compute_uv=False)
+    if spread[0] <= 0 or spread[1] <= COLLINEARITY_TOLERANCE * spread[0]:
+        raise PnPError("points2d: pixels are collinear or identical; PnP needs them to span an area")
     return points3d, points2d
 
 
@@ -92,7 +97,37 @@ def solve_pnp(points3d, points2d, K, method: str = "sqpnp", ransac: bool = False
     K = as_camera_matrix(K)
     if method not in METHODS:
         raise PnPError(f"method: expected one of {sorted(METHODS)}, got {method!r}")
-    distortion = None if distortion is None else np.asarray(distortion, dtype=np.float64)
+    distortion = _checked_distortion(distortion)
+    if not (np.isfinite(reprojection_threshold) and reprojection_threshold > 0):
+        raise PnPError(f"reprojection_threshold: expected a positive number of pixels, got {reprojection_threshold}")
+    if not 0.0 < confidence < 1.0:
+        raise PnPError(f"confidence: expected a probability in (0, 1), got {confidence}")
+    if isinstance(iterations, bool) or not float(iterations).is_integer() or iterations < 1:
+        raise PnPError(f"iterations: expected a positive integer, got {iterations!r}")
+    try:
+        return _solve(points3d, points2d, K, method, ransac, distortion, refine, float(reprojection_threshold),
+                      int(iterations), float(confidence), seed)
+    except cv2.error as error:  # inputs OpenCV rejects despite the checks above
+        message = str(error).strip().splitlines()[-1] if str(error).strip() else "cv2.error"
+        raise PnPError(f"solve_pnp: OpenCV could not solve these correspondences ({message[:200]})") from None
+
+
+def _checked_distortion(distortion) -> np.ndarray | None:
+    """``None`` or the OpenCV distortion coefficients as a finite float64 vector of 4, 5, 8, 12 or 14."""
+    if distortion is None:
+        return None
+    try:
+        values = np.asarray(distortion, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise PnPError(f"distortion: expected 4, 5, 8, 12 or 14 numbers, got {type(distortion).__name__}") from None
+    if values.size not in DISTORTION_SIZES or not np.all(np.isfinite(values)):
+        raise PnPError(f"distortion: expected 4, 5, 8, 12 or 14 finite numbers, got {values.size} "
+                       f"({'with NaN/inf' if not np.all(np.isfinite(values)) else 'finite'})")
+    return values
+
+
+def _solve(points3d, points2d, K, method, ransac, distortion, refine, reprojection_threshold, iterations,
+           confidence, seed) -> PnPSolution:
     inliers = np.arange(len(points3d))
     if ransac:
         cv2.setRNGSeed(seed)

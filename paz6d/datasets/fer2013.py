@@ -13,11 +13,13 @@ Example:
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from paz6d.backend.files import read_input_text
 from paz6d.backend.image import load_image
 
 FER2013_CLASSES = ("angry", "disgust", "fear", "happy", "sad", "surprise", "neutral")
@@ -40,8 +42,8 @@ def load_fer2013_csv(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if not path.is_file():
         raise ValueError(f"data: FER-2013 CSV file {path} does not exist")
     faces, labels, usage = [], [], []
-    with path.open(newline="") as handle:
-        reader = csv.DictReader(handle)
+    reader = csv.DictReader(io.StringIO(read_input_text(path, "FER-2013 CSV file"), newline=""))
+    try:
         missing = [column for column in CSV_COLUMNS if column not in (reader.fieldnames or [])]
         if missing:
             raise ValueError(f"{path}: expected the FER-2013 header {','.join(CSV_COLUMNS)}, missing {missing}")
@@ -49,8 +51,9 @@ def load_fer2013_csv(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             try:
                 label = int(row["emotion"])
                 pixels = np.array(row["pixels"].split(), dtype=np.int64)
-            except (TypeError, ValueError) as error:
-                raise ValueError(f"{path}, line {line}: cannot parse emotion/pixels ({error})") from error
+            except (TypeError, ValueError, AttributeError):
+                raise ValueError(f"{path}, line {line}: cannot parse emotion/pixels (expected an integer label "
+                                 "and space-separated grey levels)") from None
             if not 0 <= label < len(FER2013_CLASSES):
                 raise ValueError(f"{path}, line {line}: emotion {label} outside 0..{len(FER2013_CLASSES) - 1}")
             if pixels.size != FER2013_SIZE ** 2 or pixels.min() < 0 or pixels.max() > 255:
@@ -59,6 +62,8 @@ def load_fer2013_csv(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             faces.append(pixels.astype(np.uint8).reshape(FER2013_SIZE, FER2013_SIZE))
             labels.append(label)
             usage.append(row["Usage"])
+    except csv.Error as error:  # a NUL byte, an unterminated quote, a field beyond the csv field size limit
+        raise ValueError(f"{path}, line {reader.line_num}: malformed CSV ({error})") from None
     if not faces:
         raise ValueError(f"{path}: no data rows")
     return np.stack(faces), np.array(labels, dtype=np.int64), np.array(usage)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 
+from paz6d.backend.paths import check_output_folder
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
 from paz6d.faces.emotion_config import EmotionTraining
 
@@ -24,5 +25,6 @@ def run(args: argparse.Namespace) -> int:
 
     job = config_from_args(EmotionTraining, args)
     with flags_in_errors(EmotionTraining):
+        check_output_folder(job.out, "out")
         train_emotion(job)
     return 0

@@ -8,6 +8,9 @@ from pathlib import Path
 
 from paz6d.cli_options import option
 
+#: Largest side of the network's square input (pixels); FER-2013 faces are 48.
+MAX_INPUT_SIZE = 512
+
 
 @dataclass(frozen=True)
 class EmotionTraining:
@@ -37,3 +40,9 @@ class EmotionTraining:
                              f"got {self.validate_every}")
         if not math.isfinite(self.learning_rate) or self.learning_rate <= 0:
             raise ValueError(f"learning_rate: expected a positive number, got {self.learning_rate}")
+        if self.input_size > MAX_INPUT_SIZE:
+            raise ValueError(f"input_size: expected at most {MAX_INPUT_SIZE} pixels, got {self.input_size}")
+        if not 0.0 < self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction: expected a fraction in (0, 1), got {self.val_fraction}")
+        if self.seed < 0:
+            raise ValueError(f"seed: expected a non-negative integer, got {self.seed}")

@@ -10,6 +10,7 @@ Example:
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import cv2
@@ -20,6 +21,9 @@ from paz6d.backend.image import as_image
 from paz6d.processors.boxes import ConvertBoxFormat, ToBoxes2D
 
 CASCADE_PREFIX = "haarcascade_"
+#: Largest image-pyramid step: beyond it the pyramid has a single level (and OpenCV's buffers
+#: overflow for infinite steps).
+MAX_SCALE_FACTOR = 100.0
 
 
 def cascade_folder() -> Path:
@@ -91,8 +95,8 @@ class RunCascade(Processor):
                  min_size: tuple[int, int] = (30, 30), max_size: tuple[int, int] | None = None,
                  name: str | None = None):
         super().__init__(name)
-        if not scale_factor > 1.0:
-            raise ValueError(f"scale_factor: expected a number > 1, got {scale_factor}")
+        if not (math.isfinite(scale_factor) and 1.0 < scale_factor <= MAX_SCALE_FACTOR):
+            raise ValueError(f"scale_factor: expected a finite number in (1, {MAX_SCALE_FACTOR:g}], got {scale_factor}")
         if int(min_neighbors) < 0:
             raise ValueError(f"min_neighbors: expected a non-negative integer, got {min_neighbors}")
         self.min_size = _as_size(min_size, "min_size")

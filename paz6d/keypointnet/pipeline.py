@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.abstract import Box2D, KeyedStep, Keypoints2D, Pose6D, Processor, SequentialProcessor
+from paz6d.backend.boxes import check_box_in_image
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.checks import as_array
 from paz6d.backend.image import as_image
@@ -194,10 +195,7 @@ class KeypointPose6D(SequentialProcessor):
         height, width = image.shape[:2]
         camera = self._camera(camera, width, height)
         box = _as_box(box)
-        if box.width <= 0 or box.height <= 0:
-            raise ValueError(f"box2d: expected a box with positive width and height, got {box.to_array().tolist()}")
-        if box.x_max <= 0 or box.y_max <= 0 or box.x_min >= width or box.y_min >= height:
-            raise ValueError(f"box2d: {box.to_array().tolist()} lies outside the {width}x{height} image")
+        check_box_in_image(box.to_array(), width, height, "box2d")
         return image, box, camera
 
     def _values(self, images, boxes, cameras) -> dict:

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
+from paz6d.backend.paths import check_output_folder, check_plain_name
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.keypointnet import run_dir as run_files
@@ -98,6 +99,15 @@ class KeypointTraining:
             self.mesh_scale = 1.0 if self.dataset is None else 1.0 / MM_PER_M
         if not np.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
             raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
+        if self.seed < 0:
+            raise ValueError(f"seed: expected a non-negative integer, got {self.seed}")
+        if self.workers < 0:
+            raise ValueError(f"workers: expected 0 (render in this process) or a number of processes, "
+                             f"got {self.workers}")
+        if self.object_id is not None and self.object_id < 1:
+            raise ValueError(f"object_id: expected a BOP object id (a positive integer), got {self.object_id}")
+        if self.split is not None:
+            check_plain_name(self.split, "split")
         self.settings()  # checks config, mode and steps
 
     def settings(self) -> dict:
@@ -135,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of ``paz6d train keypointnet``."""
     job = config_from_args(KeypointTraining, args, exclude=("overrides",))
     with flags_in_errors(KeypointTraining):
+        check_output_folder(job.out, "out")
         views = None
         if job.dataset is not None:
             from paz6d.keypointnet.dataset import bop_object_views

@@ -11,6 +11,7 @@ import numpy as np
 
 from paz6d.abstract.messages import Box2D
 from paz6d.abstract.processor import Processor
+from paz6d.backend.boxes import check_box_in_image
 from paz6d.backend.square_crop import crop_square, square_window, to_full_image
 
 
@@ -31,7 +32,8 @@ class SquareCrop(Processor):
         self.margin, self.size = float(margin), int(size)
 
     def call(self, image: np.ndarray, box) -> tuple[np.ndarray, tuple[int, int, int]]:
-        coordinates = box.to_array() if isinstance(box, Box2D) else np.asarray(box, dtype=np.float64)
+        coordinates = check_box_in_image(box.to_array() if isinstance(box, Box2D) else box, image.shape[1],
+                                         image.shape[0])
         window = square_window(coordinates, self.margin)
         return crop_square(image, window, self.size), window
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from paz6d.backend.files import check_plain_name
+from paz6d.backend.paths import check_plain_name
 from paz6d.backend.image import load_image
 from paz6d.datasets.bop.camera import load_camera
 from paz6d.datasets.bop.fields import entries_by_id, required_field

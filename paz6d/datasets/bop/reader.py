@@ -22,7 +22,7 @@ from typing import Iterator
 import numpy as np
 
 from paz6d.backend.camera import Camera
-from paz6d.backend.files import check_plain_name
+from paz6d.backend.paths import check_plain_name
 from paz6d.backend.image import load_image
 from paz6d.datasets.bop.camera import load_camera, load_scene_camera
 from paz6d.datasets.bop.models import MODELS_INFO, ModelInfo, load_model, load_models_info
@@ -163,3 +163,18 @@ class BOPDataset:
     def __iter__(self) -> Iterator[BOPSample]:
         for scene in self.scenes:
             yield from scene
+
+
+def check_object_in_split(root: str | Path, split: str, obj_id: int | None = None) -> None:
+    """Checks a split before long work: its scene folders and their ground truth are read (each
+    file checked as :class:`BOPScene` does) and, with ``obj_id``, at least one instance of it is annotated.
+
+    Raises:
+        ValueError: naming the file or field (``object_id: ...`` when the object is not annotated).
+    """
+    dataset = BOPDataset(root, split)
+    if not dataset.scenes:
+        raise ValueError(f"{Path(root) / split}: no scene folders (000000, 000001, ...) in the split")
+    if obj_id is not None and not any(pose.obj_id == obj_id for scene in dataset.scenes
+                                      for poses in scene.ground_truth.values() for pose in poses):
+        raise ValueError(f"object_id: no instance of object {obj_id} in {Path(root) / split}/*/scene_gt.json")

@@ -1,0 +1,78 @@
+"""Checks of paths given by users, creating nothing: plain names (a split, a scene) that must not
+reach outside their folder, and output files/folders that must not replace what is not ours.
+
+Standard library only, so command-line settings can use it while the parser is built.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+
+def check_output_file(path: str | Path, name: str | None = None) -> Path:
+    """Checks, creating nothing, that ``path`` may receive an output file: only a missing path or an
+    existing regular file may be (re)placed; a symbolic link, folder, device, FIFO or socket at
+    ``path`` is refused, as is a file standing where one of its folders should be. Commands call it
+    before their long work, so a bad output path fails at once.
+
+    Raises:
+        ValueError: naming ``name`` (the flag, when given) and ``path`` and what stands there.
+    """
+    path = Path(path)
+    label = f"{name}: {path}" if name else str(path)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    except NotADirectoryError as error:
+        raise ValueError(f"{label}: a parent of this output path is a file, not a folder") from error
+    if mode is not None and not stat.S_ISREG(mode):
+        kind = ("a symbolic link" if stat.S_ISLNK(mode) else "a folder" if stat.S_ISDIR(mode)
+                else "a device, FIFO or socket")
+        raise ValueError(f"{label}: refusing to replace {kind} with an output file; "
+                         "give the path of a new or existing regular file")
+    existing = path.parent
+    while not os.path.lexists(existing) and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{label}: cannot create its folder {path.parent} ({existing} is not a folder)")
+    return path
+
+
+def check_plain_name(value: str, name: str) -> str:
+    """``value`` when it is a plain file or folder name (no separator, not ``.``/``..``/hidden, no NUL),
+    as BOP split and scene names are; else ``ValueError`` naming ``name``. Keeps such names from
+    reaching outside the folder they name something in."""
+    if (not isinstance(value, str) or not value or value.startswith(".") or "/" in value or "\\" in value
+            or "\0" in value or value != value.strip()):
+        raise ValueError(f"{name}: expected a plain folder name (such as test or train_pbr), got {value!r:.80}")
+    return value
+
+
+def check_output_folder(path: str | Path, name: str) -> Path:
+    """``path`` when it may become (or is) an output folder: refused when something other than a
+    folder stands there (a file, device, FIFO, or a symbolic link) or in place of one of its
+    parents. Creates nothing.
+
+    Raises:
+        ValueError: naming ``name`` and ``path``.
+    """
+    path = Path(path)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    except NotADirectoryError as error:
+        raise ValueError(f"{name}: {path}: a parent of this output folder is a file") from error
+    if mode is not None and not stat.S_ISDIR(mode):
+        kind = "a symbolic link" if stat.S_ISLNK(mode) else "a file" if stat.S_ISREG(mode) else \
+            "a device, FIFO or socket"
+        raise ValueError(f"{name}: {path} is {kind}, not a folder; give a new or existing folder")
+    existing = path
+    while not os.path.lexists(existing) and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{name}: {path}: its parent {existing} is not a folder")
+    return path
