@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from paz6d.aae.config import QUICK
+from paz6d.backend.paths import check_output_folder
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.units import MM_PER_M
 from renderers.platform import PLATFORMS
@@ -30,6 +31,10 @@ class DemoOptions:
     def __post_init__(self):
         if self.steps is not None and self.steps <= 0:
             raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
+        if self.workers < 1:
+            raise ValueError(f"workers: expected a positive number of rendering processes, got {self.workers}")
+        if self.test_images < 1:
+            raise ValueError(f"test_images: expected a positive number of images, got {self.test_images}")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -44,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
     options = config_from_args(DemoOptions, args)
     config = QUICK if options.steps is None else replace(QUICK, steps=options.steps)
     with flags_in_errors(DemoOptions):
+        check_output_folder(options.out, "out")
         report = aae_demo.run_demo(options.out, config, options.test_images, options.workers, options.platform)
         if options.keypoints:
             keypoint_demo.run_keypoint_demo(Path(options.out) / "keypoints", Path(report["files"]["mesh"]),

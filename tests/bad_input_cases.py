@@ -1,0 +1,906 @@
+"""Bad inputs for every ``paz6d`` command, as data: a tiny world of valid inputs, a table of cases that
+spoil one thing each, and a runner that checks what ``paz6d`` did with them.
+
+Used by ``tests/test_bad_inputs.py`` (the table) and ``scripts/fuzz_inputs.py`` (seeded mutations of
+the same world). A case passes when ``paz6d.cli.main(argv)`` (in-process)
+
+* returns the expected exit code (2 for bad input; argparse's own errors also exit 2),
+* prints a message naming the file or flag (``expect``: substrings of stderr),
+* prints no traceback and raises nothing but ``SystemExit``,
+* finishes within its time limit (a hang is a failure), and
+* touches no file outside the case's own output folder (the world is snapshotted before and after).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import shutil
+import signal
+import stat
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from paz6d import cli
+
+TRACEBACK = "Traceback (most recent call last)"
+#: Every case's folder lives under ``<world>/cases/<name>``; its outputs under ``.../out``.
+CASES_FOLDER = "cases"
+
+
+# ------------------------------------------------------------------------------------------------ the world
+
+@dataclass(frozen=True)
+class World:
+    """Valid inputs of every command, built once (see :func:`build_world`).
+
+    Attributes:
+        root: the folder.
+        mesh: ``obj_000001.ply``, a 5 x 4 x 3 cm box (metres).
+        bop: a generated BOP data set (split ``test``, 2 images 64 x 48, depth, masks, targets).
+        results: a BOP results CSV with the ground-truth poses (mm).
+        coco_gt, coco_results: COCO ground truth (of ``bop``) and detections.
+        voc_annotations, voc_detections: a VOC text-annotation folder and per-image detections.
+        aae_run, keypointnet_run: run directories (valid files, untrained stand-in models).
+        fer_csv: a FER-2013 style CSV with 14 faces.
+    """
+
+    root: Path
+    mesh: Path
+    bop: Path
+    results: Path
+    coco_gt: Path
+    coco_results: Path
+    voc_annotations: Path
+    voc_detections: Path
+    aae_run: Path
+    keypointnet_run: Path
+    fer_csv: Path
+
+
+def _write_results(world_bop: Path, path: Path) -> None:
+    gt = json.loads((world_bop / "test" / "000000" / "scene_gt.json").read_text())
+    lines = ["scene_id,im_id,obj_id,score,R,t,time"]
+    for im_id, instances in gt.items():
+        for instance in instances:
+            R = " ".join(repr(v) for v in instance["cam_R_m2c"])
+            t = " ".join(repr(v) for v in instance["cam_t_m2c"])
+            lines.append(f"0,{im_id},{instance['obj_id']},0.9,{R},{t},-1")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _write_runs(root: Path) -> tuple[Path, Path]:
+    from paz6d.aae import run_dir as aae_run
+    from paz6d.aae.codebook import Codebook
+    from paz6d.keypointnet import run_dir as keypointnet_run
+
+    hull = np.array([[x, y, z] for x in (-0.025, 0.025) for y in (-0.02, 0.02) for z in (-0.015, 0.015)])
+    aae = root / "runs" / "aae"
+    aae_run.write_config(aae, {"crop_size": 16, "padding": 1.2, "latent_size": 8}, root / "obj_000001.ply", 1.0, 0,
+                         None)
+    aae_run.write_object(aae, hull, hull * 0.9, 0.07, hull)
+    Codebook(np.eye(2, 8), np.stack([np.eye(3)] * 2), np.array([[0.0, 0, 10, 10]] * 2),
+             np.diag([100.0, 100.0, 1.0]), 0.5).save(aae_run.codebook_path(aae))
+    aae_run.model_path(aae).write_bytes(b"not a keras model")
+    keypoints = root / "runs" / "keypointnet"
+    keypointnet_run.write_config(keypoints, {"input_size": 32, "margin": 1.25, "downsample": 2, "mode": "supervised"})
+    keypointnet_run.write_keypoints(keypoints, hull, np.ones(8, bool), "farthest-point")
+    keypointnet_run.write_object(keypoints, 0.07, hull)
+    keypointnet_run.model_path(keypoints).write_bytes(b"not a keras model")
+    return aae, keypoints
+
+
+def build_world(root: Path) -> World:
+    """Writes the valid inputs under ``root`` (about 2 s: two 64 x 48 images are rendered)."""
+    import trimesh
+
+    from data_gen.config import GenerationConfig
+    from data_gen.generator import generate
+
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    mesh = root / "obj_000001.ply"
+    trimesh.creation.box((0.05, 0.04, 0.03)).export(mesh)
+    bop = root / "bop"
+    generate(GenerationConfig(meshes=(mesh,), out=bop, num_images=2, width=64, height=48, split="test", seed=3,
+                              objects_per_image=(2, 2)), show_progress=False)
+    results = root / "results.csv"
+    _write_results(bop, results)
+    coco_gt = root / "coco_gt.json"
+    shutil.copy(bop / "test" / "000000" / "scene_gt_coco.json", coco_gt)
+    annotations = json.loads(coco_gt.read_text())["annotations"]
+    coco_results = root / "coco_results.json"
+    coco_results.write_text(json.dumps([{"image_id": a["image_id"], "category_id": a["category_id"],
+                                         "bbox": a["bbox"], "score": 0.8} for a in annotations]))
+    voc_annotations, voc_detections = root / "voc" / "annotations", root / "voc" / "detections"
+    voc_annotations.mkdir(parents=True)
+    voc_detections.mkdir(parents=True)
+    for name in ("a", "b"):
+        (voc_annotations / f"{name}.txt").write_text("box 10 10 30 30\n")
+        (voc_detections / f"{name}.txt").write_text("box 0.9 11 10 30 29\n")
+    aae_run, keypointnet_run = _write_runs(root)
+    fer_csv = root / "fer.csv"
+    rng = np.random.default_rng(0)
+    rows = [f"{index % 7},{' '.join(str(v) for v in rng.integers(0, 256, 48 * 48))},Training" for index in range(14)]
+    fer_csv.write_text("emotion,pixels,Usage\n" + "\n".join(rows) + "\n")
+    return World(root, mesh, bop, results, coco_gt, coco_results, voc_annotations, voc_detections, aae_run,
+                 keypointnet_run, fer_csv)
+
+
+# ------------------------------------------------------------------------------------------------ snapshots
+
+def snapshot(root: Path, skip: Path | None = None) -> dict[str, tuple]:
+    """``{relative path: (kind, size, mtime_ns, mode)}`` of everything under ``root`` (links not
+    followed), leaving out ``skip`` and what is inside it."""
+    found = {}
+    for folder, folders, files in os.walk(root):
+        here = Path(folder)
+        if skip is not None and (here == skip or skip in here.parents):
+            folders[:] = []
+            continue
+        for name in folders + files:
+            path = here / name
+            if skip is not None and path == skip:
+                continue
+            info = os.lstat(path)
+            kind = stat.S_IFMT(info.st_mode)
+            found[str(path.relative_to(root))] = (kind, info.st_size if stat.S_ISREG(info.st_mode) else 0,
+                                                  info.st_mtime_ns if not stat.S_ISDIR(info.st_mode) else 0,
+                                                  stat.S_IMODE(info.st_mode))
+    return found
+
+
+def world_snapshot(world: World, case_folder: Path) -> dict[str, tuple]:
+    """:func:`snapshot` of the world's inputs (other cases' folders left out, for speed) and of the
+    case's folder except its output folder."""
+    found = snapshot(world.root, skip=world.root / CASES_FOLDER)
+    found.update({f"{CASES_FOLDER}/{case_folder.name}/{path}": value
+                  for path, value in snapshot(case_folder, skip=case_folder / "out").items()})
+    return found
+
+
+def changes(before: dict, after: dict) -> list[str]:
+    """Paths created, removed or modified between two snapshots."""
+    return sorted(path for path in set(before) | set(after) if before.get(path) != after.get(path))
+
+
+# ------------------------------------------------------------------------------------------------ running
+
+@dataclass
+class Outcome:
+    """What one run of ``paz6d`` did."""
+
+    code: int | None
+    stdout: str
+    stderr: str
+    exception: str | None  # formatted traceback of an exception main() let through
+    seconds: float
+
+
+class CaseTimeout(BaseException):
+    """Raised by the alarm in a case that runs past its time limit (not an ``Exception``, so no
+    ``except Exception`` in paz6d swallows it)."""
+
+
+def _alarm(signum, frame):
+    raise CaseTimeout()
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float):
+    """Interrupts the block after ``seconds`` with :class:`CaseTimeout` (main thread only; elsewhere
+    the limit is checked afterwards)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGALRM, _alarm)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def run_cli(argv: list[str], timeout: float = 60.0) -> Outcome:
+    """``paz6d.cli.main(argv)`` in this process, with stdout/stderr captured; a run longer than
+    ``timeout`` seconds is interrupted (``code`` None, ``exception`` "timeout")."""
+    out, err = io.StringIO(), io.StringIO()
+    code, exception = None, None
+    started = time.perf_counter()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            with time_limit(timeout):
+                code = cli.main(argv)
+        except CaseTimeout:
+            exception = "timeout"
+        except SystemExit as exit_:
+            code = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
+        except BaseException:  # noqa: BLE001 - a case reports it instead of stopping the run
+            exception = traceback.format_exc()
+    return Outcome(code, out.getvalue(), err.getvalue(), exception, time.perf_counter() - started)
+
+
+@dataclass(frozen=True)
+class Case:
+    """One bad input.
+
+    Attributes:
+        name: unique, also the case's folder name.
+        argv: the command line; ``{world}``, ``{case}`` and ``{out}`` are replaced by the world's
+            folder, the case's folder and its output folder (``{case}/out``, absent at the start).
+        setup: writes the case's spoiled inputs into its folder: ``setup(world, case_folder)``.
+        expect: substrings the error output must contain (file, field, flag).
+        code: expected exit code.
+    """
+
+    name: str
+    argv: tuple[str, ...]
+    setup: Callable[[World, Path], Any] | None = None
+    expect: tuple[str, ...] = ()
+    code: int = 2
+    timeout: float = 20.0
+
+
+@dataclass
+class Verdict:
+    """A case's outcome and what was wrong with it (``problems`` empty: passed)."""
+
+    case: Case
+    outcome: Outcome
+    problems: list[str] = field(default_factory=list)
+    kind: str = "ok"  # ok | traceback | hang | wrong-code | silent | unclear | touched
+
+
+def run_case(world: World, case: Case) -> Verdict:
+    """Sets the case up, runs it and judges it (see the module docstring)."""
+    folder = world.root / CASES_FOLDER / case.name
+    if folder.exists():
+        shutil.rmtree(folder)
+    folder.mkdir(parents=True)
+    out = folder / "out"
+    if case.setup is not None:
+        case.setup(world, folder)
+    argv = [part.format(world=world.root, case=folder, out=out) for part in case.argv]
+    before = world_snapshot(world, folder)
+    outcome = run_cli(argv, case.timeout)
+    after = world_snapshot(world, folder)
+    verdict = Verdict(case, outcome)
+    text = outcome.stderr
+    if outcome.exception == "timeout" or outcome.seconds > case.timeout:
+        verdict.kind = "hang"
+        verdict.problems.append(f"took {outcome.seconds:.1f} s (limit {case.timeout:g} s)")
+    elif outcome.exception is not None or TRACEBACK in text:
+        verdict.kind = "traceback"
+        verdict.problems.append("traceback: " + (outcome.exception or text)[-2000:])
+    elif outcome.code != case.code:
+        verdict.kind = "silent" if outcome.code == 0 else "wrong-code"
+        verdict.problems.append(f"exit code {outcome.code}, expected {case.code}; stderr: {text[-500:]!r}")
+    else:
+        missing = [part.format(world=world.root, case=folder, out=out) for part in case.expect]
+        missing = [part for part in missing if part not in text + outcome.stdout]
+        if missing:
+            verdict.kind = "unclear"
+            verdict.problems.append(f"message lacks {missing}: {text[-600:]!r}")
+        if case.code == 2 and len(text) > 4000:
+            verdict.kind = "unclear"
+            verdict.problems.append(f"message of {len(text)} characters")
+    touched = changes(before, after)
+    if touched:
+        verdict.kind = "touched" if verdict.kind == "ok" else verdict.kind
+        verdict.problems.append(f"touched outside --out: {touched[:5]}")
+    return verdict
+
+
+# ------------------------------------------------------------------------------------------------ spoilers
+
+def copy_bop(world: World, folder: Path) -> Path:
+    """A private copy of the world's data set (``<case>/bop``)."""
+    target = folder / "bop"
+    shutil.copytree(world.bop, target, symlinks=True)
+    return target
+
+
+def put(path: Path, content) -> None:
+    """Writes ``content`` at ``path``: bytes/str as is, ``None`` deletes, ``"<dir>"`` makes a folder,
+    anything else as JSON."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+    if content is None:
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if isinstance(content, str) and content == "<dir>":
+        path.mkdir()
+    elif isinstance(content, bytes):
+        path.write_bytes(content)
+    elif isinstance(content, str):
+        path.write_text(content)
+    else:
+        path.write_text(json.dumps(content))
+
+
+def bop_file(relative: str, content) -> Callable[[World, Path], None]:
+    """Setup: the data set copy with ``relative`` replaced by ``content`` (see :func:`put`); a
+    callable ``content`` maps the file's JSON to the new content."""
+
+    def setup(world: World, folder: Path) -> None:
+        root = copy_bop(world, folder)
+        value = content(json.loads((root / relative).read_text())) if callable(content) else content
+        put(root / relative, value)
+
+    return setup
+
+
+def case_file(name: str, content) -> Callable[[World, Path], None]:
+    """Setup: ``<case>/<name>`` holds ``content`` (see :func:`put`)."""
+
+    def setup(world: World, folder: Path) -> None:
+        put(folder / name, content)
+
+    return setup
+
+
+def both(*setups) -> Callable[[World, Path], None]:
+    def setup(world: World, folder: Path) -> None:
+        for step in setups:
+            step(world, folder)
+
+    return setup
+
+
+def deep_json(depth: int = 100_000) -> str:
+    return "[" * depth + "]" * depth
+
+
+HUGE_NUMBER = "9" * 5_000_000
+NOT_UTF8 = b"\xff\xfe\x00bad \xc3\x28 bytes\n"
+
+
+# ------------------------------------------------------------------------------------------------ the table
+
+GENERATE = ("generate", "--meshes", "{world}/obj_000001.ply", "--out", "{out}", "--num-images", "1", "--width", "64",
+            "--height", "48", "--no-progress")
+EVALUATE_BOP = ("evaluate", "bop", "--dataset", "{case}/bop", "--results", "{world}/results.csv",
+                "--out", "{out}/scores.json", "--metrics", "mssd,mspd,add", "--no-progress")
+EVALUATE_WORLD_BOP = ("evaluate", "bop", "--dataset", "{world}/bop", "--results", "{world}/results.csv",
+                      "--out", "{out}/scores.json", "--metrics", "mssd,mspd,add", "--no-progress")
+EVALUATE_COCO = ("evaluate", "coco", "--gt", "{world}/coco_gt.json", "--results", "{world}/coco_results.json",
+                 "--out", "{out}/coco.json")
+EVALUATE_VOC = ("evaluate", "voc", "--annotations", "{world}/voc/annotations", "--detections",
+                "{world}/voc/detections", "--out", "{out}/voc.json")
+ESTIMATE = ("estimate", "--run", "{world}/runs/aae", "--dataset", "{world}/bop", "--split", "test", "--object-id", "1",
+            "--out", "{out}/results.csv")
+TRAIN_AAE = ("train", "aae", "--out", "{out}", "--mesh", "{world}/obj_000001.ply", "--no-progress")
+TRAIN_AAE_DATASET = ("train", "aae", "--out", "{out}", "--dataset", "{case}/bop", "--split", "test", "--no-progress")
+TRAIN_KEYPOINTNET = ("train", "keypointnet", "--out", "{out}", "--mesh", "{world}/obj_000001.ply", "--no-progress")
+TRAIN_EMOTION = ("train", "emotion", "--data", "{world}/fer.csv", "--out", "{out}", "--no-progress")
+DEMO = ("demo", "--out", "{out}")
+
+
+def replace_flag(argv: tuple[str, ...], flag: str, *values: str) -> tuple[str, ...]:
+    """``argv`` with ``flag``'s value(s) replaced (appended when absent; no values: removed)."""
+    parts = list(argv)
+    if flag in parts:
+        start = parts.index(flag)
+        stop = start + 1
+        while stop < len(parts) and not parts[stop].startswith("--"):
+            stop += 1
+        del parts[start:stop]
+    if values:
+        parts += [flag, *values]
+    return tuple(parts)
+
+
+def _flag_cases(prefix: str, base: tuple[str, ...], table: dict[str, list[tuple[tuple[str, ...], str]]],
+                setup=None) -> list[Case]:
+    """One case per ``(values, expected text)`` of each flag."""
+    found = []
+    for flag, rows in table.items():
+        for index, (values, expect) in enumerate(rows):
+            found.append(Case(f"{prefix}{flag.strip('-')}-{index}", replace_flag(base, flag, *values), setup,
+                              (expect,) if expect else (flag,)))
+    return found
+
+
+def generate_cases() -> list[Case]:
+    flags = {
+        "--num-images": [(("0",), ""), (("-3",), ""), (("abc",), ""), (("1.5",), "")],
+        "--width": [(("0",), ""), (("-64",), ""), (("100000000",), ""), (("x",), "")],
+        "--height": [(("0",), ""), (("1000000000",), "")],
+        "--seed": [(("-1",), ""), (("1e3",), "")],
+        "--split": [(("../..",), ""), (("a/b",), ""), ((".hidden",), ""), (("",), ""), (("..",), ""),
+                    (("a\\b",), ""), (("a\x00b",), "")],
+        "--mesh-scale": [(("0",), ""), (("-1",), ""), (("nan",), ""), (("inf",), ""), (("1e300",), "scale")],
+        "--intrinsics": [(("nan", "1", "1", "1"), ""), (("0", "100", "32", "24"), ""), (("1", "2"), ""),
+                         (("inf", "100", "32", "24"), "")],
+        "--objects-per-image": [(("3", "1"), ""), (("0", "1"), ""), (("1", "100000"), "")],
+        "--distance": [(("0", "1"), ""), (("2", "1"), ""), (("nan", "1"), ""), (("-1", "1"), ""),
+                       (("0.001", "0.002"), "--distance"), (("1", "1e300"), "")],
+        "--inplane-degrees": [(("200",), ""), (("nan",), ""), (("-1",), "")],
+        "--elevation-degrees": [(("-100", "0"), ""), (("10", "-10"), ""), (("nan", "0"), "")],
+        "--distractors": [(("-1",), ""), (("1000000",), "")],
+        "--occluder-probability": [(("2",), ""), (("nan",), ""), (("-0.5",), "")],
+        "--light-count": [(("-1", "2"), ""), (("2", "1"), ""), (("0", "100000"), "")],
+        "--color-jitter": [(("1",), ""), (("nan",), ""), (("-0.1",), "")],
+        "--blur-probability": [(("-0.1",), ""), (("inf",), "")],
+        "--noise-std": [(("-1",), ""), (("inf",), ""), (("nan",), "")],
+        "--depth-scale": [(("0",), ""), (("nan",), ""), (("-0.1",), ""), (("1e-9",), "depth")],
+        "--images-per-scene": [(("0",), ""), (("-1",), "")],
+        "--crop-size": [(("-1",), ""), (("100000",), "")],
+        "--workers": [(("0",), ""), (("-1",), "")],
+        "--rotation": [(("bogus",), "")],
+        "--rgb-format": [(("gif",), "")],
+        "--antialias": [(("always",), "")],
+        "--backend": [(("cloud",), "")],
+    }
+    found = _flag_cases("generate-", GENERATE, flags)
+    mesh = "{case}/obj_000002.ply"
+    mesh_cases = {
+        "missing": (None, "obj_000002.ply"),
+        "empty": (b"", "obj_000002.ply"),
+        "garbage": (b"ply\nformat binary_little_endian 1.0\nelement vertex 99\nend_header\n\x00\x01", "obj_000002.ply"),
+        "text": ("hello\n", "obj_000002.ply"),
+        "folder": ("<dir>", "obj_000002.ply"),
+        "not-utf8": (NOT_UTF8, "obj_000002.ply"),
+        "no-faces": ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                     "end_header\n0 0 0\n1 0 0\n0 1 0\n", "obj_000002.ply"),
+        "flat": ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                 "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n",
+                 "obj_000002.ply"),
+        "nan-vertex": ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                       "element face 1\nproperty list uchar int vertex_indices\nend_header\nnan 0 0\n1 0 0\n0 1 0\n"
+                       "3 0 1 2\n", "obj_000002.ply"),
+        "bad-face-index": ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                           "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                           "0 0 0\n0.05 0 0\n0 0.05 0\n3 0 1 99\n", "obj_000002.ply"),
+    }
+    found.append(Case("generate-out-symlink-inside", GENERATE,
+                      lambda world, folder: (folder.joinpath("out").mkdir(), folder.joinpath("elsewhere").mkdir(),
+                                             os.symlink(folder / "elsewhere", folder / "out" / "train")),
+                      ("symbolic link",)))
+    for name, (content, expect) in mesh_cases.items():
+        found.append(Case(f"generate-mesh-{name}", replace_flag(GENERATE, "--meshes", mesh),
+                          case_file("obj_000002.ply", content), (expect,)))
+    symmetries = {
+        "missing": (None, "symmetries"),
+        "folder": ("<dir>", "symmetries"),
+        "invalid-json": ("{", "sym.json"),
+        "list": ([1, 2], "sym.json"),
+        "unknown-object": ({"7": {}}, "sym.json"),
+        "bad-key": ({"one": {}}, "sym.json"),
+        "unknown-field": ({"1": {"colour": 3}}, "sym.json"),
+        "not-a-list": ({"1": {"symmetries_discrete": 5}}, "symmetries_discrete"),
+        "short-matrix": ({"1": {"symmetries_discrete": [[1, 0, 0, 0]]}}, "symmetries_discrete"),
+        "text-matrix": ({"1": {"symmetries_discrete": [["a"] * 16]}}, "symmetries_discrete"),
+        "not-rotation": ({"1": {"symmetries_discrete": [[2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]]}},
+                         "symmetries_discrete"),
+        "nan-matrix": ('{"1": {"symmetries_discrete": [[NaN, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]]}}',
+                       "symmetries_discrete"),
+        "continuous-no-axis": ({"1": {"symmetries_continuous": [{"offset": [0, 0, 0]}]}}, "symmetries_continuous"),
+        "continuous-zero-axis": ({"1": {"symmetries_continuous": [{"axis": [0, 0, 0], "offset": [0, 0, 0]}]}},
+                                 "symmetries_continuous"),
+        "continuous-string": ({"1": {"symmetries_continuous": "z"}}, "symmetries_continuous"),
+        "fields-not-object": ({"1": [1, 2]}, "sym.json"),
+        "deep": (deep_json(), "sym.json"),
+        "not-utf8": (NOT_UTF8, "sym.json"),
+        "huge-number": ('{"1": {"symmetries_discrete": [[' + HUGE_NUMBER + ']]}}', "sym.json"),
+    }
+    for name, (content, expect) in symmetries.items():
+        found.append(Case(f"generate-symmetries-{name}", GENERATE + ("--symmetries", "{case}/sym.json"),
+                          case_file("sym.json", content), (expect,)))
+    backgrounds = {
+        "missing": (None, "backgrounds"),
+        "a-file": ("text", "backgrounds"),
+        "empty": ("<dir>", "backgrounds"),
+    }
+    for name, (content, expect) in backgrounds.items():
+        found.append(Case(f"generate-backgrounds-{name}", GENERATE + ("--backgrounds", "{case}/bg"),
+                          case_file("bg", content), (expect,)))
+    found.append(Case("generate-backgrounds-corrupt-png", GENERATE + ("--backgrounds", "{case}/bg"),
+                      case_file("bg/a.png", b"\x89PNG\r\n\x1a\nbroken"), ("a.png",)))
+    out_cases = {
+        "is-a-file": (case_file("out", "x"), "{out}"),
+        "under-a-file": (case_file("out", "x"), "{out}"),
+        "dev-null": (None, "/dev/null"),
+        "state-garbage": (case_file("out/.paz6d-generate/config.json", "{not json"), "config.json"),
+        "state-list": (case_file("out/.paz6d-generate/config.json", "[]"), "config.json"),
+        "state-not-utf8": (case_file("out/.paz6d-generate/config.json", NOT_UTF8), "config.json"),
+        "state-folder": (case_file("out/.paz6d-generate/config.json", "<dir>"), "config.json"),
+        "state-other-settings": (case_file("out/.paz6d-generate/config.json", {"seed": 5}), "differ"),
+    }
+    for name, (setup, expect) in out_cases.items():
+        argv = GENERATE
+        if name == "under-a-file":
+            argv = replace_flag(GENERATE, "--out", "{case}/out/inner")
+        elif name == "dev-null":
+            argv = replace_flag(GENERATE, "--out", "/dev/null")
+        found.append(Case(f"generate-out-{name}", argv, setup, (expect,)))
+    return found
+
+
+def evaluate_bop_cases() -> list[Case]:
+    found = []
+    scene = "test/000000/"
+    R_bad = [2, 0, 0, 0, 1, 0, 0, 0, 1]
+    files = {
+        "camera-missing": ("camera.json", None, "camera.json"),
+        "camera-invalid": ("camera.json", "{", "camera.json"),
+        "camera-list": ("camera.json", [], "camera.json"),
+        "camera-width-text": ("camera.json", lambda d: {**d, "width": "abc"}, "width"),
+        "camera-width-negative": ("camera.json", lambda d: {**d, "width": -640}, "width"),
+        "camera-fx-null": ("camera.json", lambda d: {**d, "fx": None}, "fx"),
+        "camera-no-height": ("camera.json", lambda d: {k: v for k, v in d.items() if k != "height"}, "height"),
+        "camera-deep": ("camera.json", deep_json(), "camera.json"),
+        "camera-not-utf8": ("camera.json", NOT_UTF8, "camera.json"),
+        "camera-huge-number": ("camera.json", '{"width": ' + HUGE_NUMBER + "}", "camera.json"),
+        "camera-folder": ("camera.json", "<dir>", "camera.json"),
+        "models-info-missing": ("models/models_info.json", None, "models_info.json"),
+        "models-info-invalid": ("models/models_info.json", "[", "models_info.json"),
+        "models-info-list": ("models/models_info.json", [1], "models_info.json"),
+        "models-info-bad-key": ("models/models_info.json", lambda d: {"x": v for v in d.values()}, "models_info.json"),
+        "diameter-text": ("models/models_info.json", lambda d: {k: {**v, "diameter": "big"} for k, v in d.items()},
+                          "diameter"),
+        "diameter-negative": ("models/models_info.json", lambda d: {k: {**v, "diameter": -3} for k, v in d.items()},
+                              "diameter"),
+        "diameter-zero": ("models/models_info.json", lambda d: {k: {**v, "diameter": 0} for k, v in d.items()},
+                          "diameter"),
+        "diameter-missing": ("models/models_info.json", lambda d: {k: {} for k in d}, "diameter"),
+        "symmetry-malformed": ("models/models_info.json",
+                               lambda d: {k: {**v, "symmetries_discrete": [[1, 2]]} for k, v in d.items()},
+                               "symmetries_discrete"),
+        "symmetry-not-list": ("models/models_info.json",
+                              lambda d: {k: {**v, "symmetries_continuous": 3} for k, v in d.items()},
+                              "symmetries_continuous"),
+        "symmetry-zero-axis": ("models/models_info.json",
+                               lambda d: {k: {**v, "symmetries_continuous": [{"axis": [0, 0, 0], "offset": [0, 0, 0]}]}
+                                          for k, v in d.items()}, "axis"),
+        "models-info-entry-list": ("models/models_info.json", lambda d: {k: [] for k in d}, "models_info.json"),
+        "scene-gt-missing": (scene + "scene_gt.json", None, "scene_gt.json"),
+        "scene-gt-invalid": (scene + "scene_gt.json", "{]", "scene_gt.json"),
+        "scene-gt-entries-dict": (scene + "scene_gt.json", lambda d: {k: {} for k in d}, "scene_gt.json"),
+        "scene-gt-entry-list": (scene + "scene_gt.json", lambda d: {k: [[1]] for k in d}, "scene_gt.json"),
+        "scene-gt-no-R": (scene + "scene_gt.json",
+                          lambda d: {k: [{kk: vv for kk, vv in e.items() if kk != "cam_R_m2c"} for e in v]
+                                     for k, v in d.items()}, "cam_R_m2c"),
+        "scene-gt-R-not-rotation": (scene + "scene_gt.json",
+                                    lambda d: {k: [{**e, "cam_R_m2c": R_bad} for e in v] for k, v in d.items()},
+                                    "cam_R_m2c"),
+        "scene-gt-R-text": (scene + "scene_gt.json",
+                            lambda d: {k: [{**e, "cam_R_m2c": "identity"} for e in v] for k, v in d.items()},
+                            "cam_R_m2c"),
+        "scene-gt-t-short": (scene + "scene_gt.json",
+                             lambda d: {k: [{**e, "cam_t_m2c": [1, 2]} for e in v] for k, v in d.items()}, "cam_t_m2c"),
+        "scene-gt-obj-text": (scene + "scene_gt.json",
+                              lambda d: {k: [{**e, "obj_id": "one"} for e in v] for k, v in d.items()}, "obj_id"),
+        "scene-gt-obj-float": (scene + "scene_gt.json",
+                               lambda d: {k: [{**e, "obj_id": 1.5} for e in v] for k, v in d.items()}, "obj_id"),
+        "scene-gt-obj-null": (scene + "scene_gt.json",
+                              lambda d: {k: [{**e, "obj_id": None} for e in v] for k, v in d.items()}, "obj_id"),
+        "scene-gt-deep": (scene + "scene_gt.json", deep_json(), "scene_gt.json"),
+        "scene-gt-not-utf8": (scene + "scene_gt.json", NOT_UTF8, "scene_gt.json"),
+        "scene-gt-folder": (scene + "scene_gt.json", "<dir>", "scene_gt.json"),
+        "scene-gt-negative-key": (scene + "scene_gt.json", lambda d: {"-1": v for v in d.values()}, "scene_gt.json"),
+        "scene-camera-missing": (scene + "scene_camera.json", None, "scene_camera.json"),
+        "scene-camera-K-short": (scene + "scene_camera.json", lambda d: {k: {**v, "cam_K": [1, 2, 3]}
+                                                                         for k, v in d.items()}, "cam_K"),
+        "scene-camera-depth-scale": (scene + "scene_camera.json", lambda d: {k: {**v, "depth_scale": -1}
+                                                                             for k, v in d.items()}, "depth_scale"),
+        "scene-camera-depth-scale-text": (scene + "scene_camera.json", lambda d: {k: {**v, "depth_scale": "x"}
+                                                                                  for k, v in d.items()}, "depth_scale"),
+        "scene-camera-entry-list": (scene + "scene_camera.json", lambda d: {k: [] for k in d}, "scene_camera.json"),
+        "scene-camera-K-zero-focal": (scene + "scene_camera.json", lambda d: {k: {**v, "cam_K": [0] * 9}
+                                                                              for k, v in d.items()}, "cam_K"),
+        "scene-camera-one-image": (scene + "scene_camera.json", lambda d: dict(list(d.items())[:1]),
+                                   "scene_camera.json"),
+        "gt-info-missing": (scene + "scene_gt_info.json", None, "scene_gt_info.json"),
+        "gt-info-short": (scene + "scene_gt_info.json", lambda d: {k: v[:1] for k, v in d.items()},
+                          "scene_gt_info.json"),
+        "gt-info-visib-text": (scene + "scene_gt_info.json",
+                               lambda d: {k: [{**e, "visib_fract": "most"} for e in v] for k, v in d.items()},
+                               "visib_fract"),
+        "gt-info-visib-large": (scene + "scene_gt_info.json",
+                                lambda d: {k: [{**e, "visib_fract": 7} for e in v] for k, v in d.items()},
+                                "visib_fract"),
+        "gt-info-entries-dict": (scene + "scene_gt_info.json", lambda d: {k: {"a": 1} for k in d},
+                                 "scene_gt_info.json"),
+        "gt-info-entry-number": (scene + "scene_gt_info.json", lambda d: {k: [1, 2] for k in d},
+                                 "scene_gt_info.json"),
+        "targets-missing": ("test_targets_bop19.json", None, "test_targets_bop19.json"),
+        "targets-object": ("test_targets_bop19.json", {}, "test_targets_bop19.json"),
+        "targets-duplicated": ("test_targets_bop19.json", lambda d: d + d[:1], "repeats"),
+        "targets-negative": ("test_targets_bop19.json", lambda d: [{**d[0], "im_id": -1}] + d[1:], "im_id"),
+        "targets-zero-count": ("test_targets_bop19.json", lambda d: [{**d[0], "inst_count": 0}] + d[1:], "inst_count"),
+        "targets-float": ("test_targets_bop19.json", lambda d: [{**d[0], "obj_id": 1.0}] + d[1:], "obj_id"),
+        "targets-unknown-object": ("test_targets_bop19.json", lambda d: [{**d[0], "obj_id": 9}] + d[1:], "object 9"),
+        "targets-unknown-image": ("test_targets_bop19.json", lambda d: [{**d[0], "im_id": 77}] + d[1:], "image 77"),
+        "targets-unknown-scene": ("test_targets_bop19.json", lambda d: [{**d[0], "scene_id": 5}] + d[1:], "000005"),
+        "targets-empty": ("test_targets_bop19.json", [], "test_targets_bop19.json"),
+        "targets-entry-text": ("test_targets_bop19.json", ["a"], "test_targets_bop19.json"),
+        "targets-count-too-high": ("test_targets_bop19.json", lambda d: [{**d[0], "inst_count": 50}] + d[1:],
+                                   "inst_count"),
+        "targets-huge-id": ("test_targets_bop19.json", '[{"scene_id": ' + HUGE_NUMBER + "}]",
+                            "test_targets_bop19.json"),
+        "model-ply-garbage": ("models/obj_000001.ply", b"ply\ngarbage", "obj_000001.ply"),
+        "model-ply-missing": ("models/obj_000001.ply", None, "obj_000001.ply"),
+        "split-folder-missing": ("test", None, "test"),
+        "scene-folder-file": ("test/000000", "x", "000000"),
+    }
+    for name, (relative, content, expect) in files.items():
+        found.append(Case(f"evaluate-bop-{name}", EVALUATE_BOP, bop_file(relative, content), (expect,)))
+    header = "scene_id,im_id,obj_id,score,R,t,time\n"
+    identity, t = "1 0 0 0 1 0 0 0 1", "0 0 500"
+    rows = {
+        "missing": (None, "res.csv"),
+        "folder": ("<dir>", "res.csv"),
+        "empty": ("", "res.csv"),
+        "wrong-header": ("a,b,c\n", "header"),
+        "not-utf8": (NOT_UTF8, "res.csv"),
+        "not-utf8-row": (header.encode() + NOT_UTF8, "res.csv"),
+        "nul-byte": (header + "0,0,1,1,\x00,0,0\n", "res.csv"),
+        "few-fields": (header + "0,0,1\n", "res.csv:2"),
+        "many-fields": (header + f"0,0,1,1,{identity},{t},-1,9\n", "res.csv:2"),
+        "text-id": (header + f"zero,0,1,1,{identity},{t},-1\n", "scene_id"),
+        "negative-id": (header + f"0,-1,1,1,{identity},{t},-1\n", "im_id"),
+        "float-id": (header + f"0,0,1.0,1,{identity},{t},-1\n", "obj_id"),
+        "nan-score": (header + f"0,0,1,nan,{identity},{t},-1\n", "score"),
+        "inf-t": (header + f"0,0,1,1,{identity},0 0 inf,-1\n", "'t'"),
+        "short-R": (header + f"0,0,1,1,1 0 0,{t},-1\n", "'R'"),
+        "scaled-R": (header + f"0,0,1,1,2 0 0 0 2 0 0 0 2,{t},-1\n", "'R'"),
+        "reflection-R": (header + f"0,0,1,1,-1 0 0 0 1 0 0 0 1,{t},-1\n", "'R'"),
+        "text-R": (header + f"0,0,1,1,a b c d e f g h i,{t},-1\n", "'R'"),
+        "unknown-object": (header + f"0,0,9,1,{identity},{t},-1\n", "object id 9"),
+        "unknown-image": (header + f"0,99,1,1,{identity},{t},-1\n", "image 99"),
+        "unknown-scene": (header + f"4,0,1,1,{identity},{t},-1\n", "scene 4"),
+        "huge-number": (header + f"0,0,1,{HUGE_NUMBER},{identity},{t},-1\n", "res.csv"),
+        "huge-id": (header + f"0,{HUGE_NUMBER},1,1,{identity},{t},-1\n", "res.csv"),
+        "unterminated-quote": (header + '0,0,1,1,"1 0 0 0 1 0 0 0 1\n', "res.csv"),
+        "binary": (bytes(range(256)) * 10, "res.csv"),
+        "nan-time": (header + f"0,0,1,1,{identity},{t},nan\n", "time"),
+        "header-spaces-only": ("   \n", "header"),
+        "huge-field": (header + "0,0,1,1," + "1 " * 200_000 + f",{t},-1\n", "res.csv"),
+    }
+    base = replace_flag(EVALUATE_WORLD_BOP, "--results", "{case}/res.csv")
+    for name, (content, expect) in rows.items():
+        found.append(Case(f"evaluate-bop-results-{name}", base, case_file("res.csv", content), (expect,)))
+    found.append(Case("evaluate-bop-results-header-only", base, case_file("res.csv", header),
+                      ("no estimates",), code=0))
+    found.append(Case("evaluate-bop-results-all-skipped", base + ("--skip-invalid",),
+                      case_file("res.csv", header + f"0,0,9,1,{identity},{t},-1\n"), ("no estimates",), code=0))
+    flags = {
+        "--split": [(("../..",), ""), (("..",), ""), (("test/../..",), ""), (("/etc",), ""), (("nope",), "nope"),
+                    (("",), "")],
+        "--metrics": [(("vsd,bogus",), ""), ((",",), "")],
+        "--visib-gt-min": [(("2",), ""), (("nan",), ""), (("-0.5",), "")],
+        "--vsd-delta": [(("nan",), ""), (("-1",), ""), (("0",), ""), (("inf",), "")],
+        "--workers": [(("0",), ""), (("-2",), ""), (("x",), "")],
+        "--dataset": [(("{case}/none",), "none"), (("{world}/results.csv",), "results.csv")],
+        "--targets": [(("{case}/none.json",), "none.json"), (("{world}/bop",), "bop")],
+        "--out": [(("{world}/bop",), "bop"), (("/dev/null",), "/dev/null"), (("{world}/results.csv/x.json",), "results.csv")],
+        "--errors": [(("{world}/bop",), "bop")],
+        "--plots": [(("{world}/results.csv",), "results.csv")],
+    }
+    found += _flag_cases("evaluate-bop-flag-", EVALUATE_WORLD_BOP, flags)
+    found.append(Case("evaluate-bop-out-symlink", replace_flag(EVALUATE_WORLD_BOP, "--out", "{case}/link.json"),
+                      lambda world, folder: os.symlink(world.results, folder / "link.json"), ("link.json",)))
+    found.append(Case("evaluate-bop-out-fifo", replace_flag(EVALUATE_WORLD_BOP, "--out", "{case}/fifo"),
+                      lambda world, folder: os.mkfifo(folder / "fifo"), ("fifo",)))
+    found.append(Case("evaluate-bop-vsd-without-depth", replace_flag(EVALUATE_BOP, "--metrics", "vsd"),
+                      bop_file("test/000000/depth", None), ("depth",)))
+    return found
+
+
+def evaluate_coco_cases() -> list[Case]:
+    annotations = lambda world: json.loads(world.coco_gt.read_text())  # noqa: E731
+    found = []
+    gt_cases = {
+        "missing": (None, "gt.json"),
+        "invalid": ("{", "gt.json"),
+        "list": ([], "gt.json"),
+        "deep": (deep_json(), "gt.json"),
+        "not-utf8": (NOT_UTF8, "gt.json"),
+        "folder": ("<dir>", "gt.json"),
+        "images-not-list": ({"images": 3, "annotations": [], "categories": []}, "images"),
+        "image-no-id": ({"images": [{}], "annotations": [], "categories": []}, "images"),
+        "bbox-short": (lambda d: {**d, "annotations": [{**a, "bbox": [1, 2]} for a in d["annotations"]]}, "gt.json"),
+        "bbox-text": (lambda d: {**d, "annotations": [{**a, "bbox": "box"} for a in d["annotations"]]}, "gt.json"),
+        "annotation-no-image": (lambda d: {**d, "annotations": [{**a, "image_id": 999} for a in d["annotations"]]},
+                                "gt.json"),
+        "category-text-id": (lambda d: {**d, "categories": [{"id": "a", "name": "x"}]}, "categories"),
+        "huge-number": ('{"images": [{"id": ' + HUGE_NUMBER + '}], "annotations": [], "categories": []}', "gt.json"),
+    }
+    for name, (content, expect) in gt_cases.items():
+        def setup(world, folder, content=content):
+            put(folder / "gt.json", content(annotations(world)) if callable(content) else content)
+        # pycocotools drops annotations of unknown images and ignores unknown categories: same numbers here
+        code = 0 if name == "annotation-no-image" else 2
+        found.append(Case(f"evaluate-coco-gt-{name}", replace_flag(EVALUATE_COCO, "--gt", "{case}/gt.json"), setup,
+                          (expect,) if code else (), code=code))
+    result_cases = {
+        "missing": (None, "res.json"),
+        "object": ({}, "res.json"),
+        "entry-text": (["x"], "res.json"),
+        "bbox-short": ([{"image_id": 0, "category_id": 1, "bbox": [1], "score": 1}], "res.json"),
+        "score-nan": ('[{"image_id": 0, "category_id": 1, "bbox": [1, 2, 3, 4], "score": NaN}]', "res.json"),
+        "score-text": ([{"image_id": 0, "category_id": 1, "bbox": [1, 2, 3, 4], "score": "high"}], "res.json"),
+        "unknown-image": ([{"image_id": 77, "category_id": 1, "bbox": [1, 2, 3, 4], "score": 1}], "res.json"),
+        "unknown-category": ([{"image_id": 0, "category_id": 42, "bbox": [1, 2, 3, 4], "score": 1}], "res.json"),
+        "deep": (deep_json(), "res.json"),
+        "not-utf8": (NOT_UTF8, "res.json"),
+        "huge-box": ([{"image_id": 0, "category_id": 1, "bbox": [1e308, 1e308, 1e308, 1e308], "score": 1}],
+                     "res.json"),
+        "segm-without-segmentation": ([{"image_id": 0, "category_id": 1, "bbox": [1, 2, 3, 4], "score": 1}],
+                                      "segmentation"),
+    }
+    for name, (content, expect) in result_cases.items():
+        argv = replace_flag(EVALUATE_COCO, "--results", "{case}/res.json")
+        if name == "segm-without-segmentation":
+            argv += ("--iou-type", "segm")
+        code = 0 if name in ("huge-box", "unknown-category") else 2
+        found.append(Case(f"evaluate-coco-results-{name}", argv, case_file("res.json", content),
+                          (expect,) if code else (), code=code))
+    found += _flag_cases("evaluate-coco-flag-", EVALUATE_COCO, {
+        "--out": [(("{world}/bop",), "bop"), (("/dev/null",), "/dev/null")],
+        "--plots": [(("{world}/results.csv",), "results.csv")],
+        "--iou-type": [(("mask",), "")],
+    })
+    return found
+
+
+def evaluate_voc_cases() -> list[Case]:
+    found = []
+    cases = {
+        "annotations-missing": ("--annotations", "{case}/none", None, "none"),
+        "annotations-file": ("--annotations", "{world}/results.csv", None, "results.csv"),
+        "annotation-bad-line": ("--annotations", "{case}/ann", ("ann/a.txt", "box ten 10 30 30\n"), "a.txt"),
+        "annotation-short-line": ("--annotations", "{case}/ann", ("ann/a.txt", "box 10\n"), "a.txt"),
+        "annotation-bad-xml": ("--annotations", "{case}/ann", ("ann/a.xml", "<annotation><object>"), "a.xml"),
+        "annotation-xml-no-box": ("--annotations", "{case}/ann",
+                                  ("ann/a.xml", "<annotation><object><name>x</name></object></annotation>"), "a.xml"),
+        "annotation-not-utf8": ("--annotations", "{case}/ann", ("ann/a.txt", NOT_UTF8), "a.txt"),
+        "annotation-nan-box": ("--annotations", "{case}/ann", ("ann/a.txt", "box nan 10 30 30\n"), "a.txt"),
+        "annotation-xml-deep": ("--annotations", "{case}/ann", ("ann/a.xml", "<a>" * 100_000 + "</a>" * 100_000),
+                                "b.txt"),  # well-formed, so no ground truth for the detections of image b
+        "detections-missing": ("--detections", "{case}/none", None, "none"),
+        "detection-bad-score": ("--detections", "{case}/det", ("det/a.txt", "box high 1 2 3 4\n"), "a.txt"),
+        "detection-short": ("--detections", "{case}/det", ("det/a.txt", "box 0.5 1 2\n"), "a.txt"),
+        "detection-nan-score": ("--detections", "{case}/det", ("det/a.txt", "box nan 1 2 3 4\n"), "a.txt"),
+        "detection-not-utf8": ("--detections", "{case}/det", ("det/a.txt", NOT_UTF8), "a.txt"),
+        "detection-unknown-image": ("--detections", "{case}/det", ("det/zzz.txt", "box 0.5 1 2 3 4\n"), "zzz"),
+        "class-names-missing": ("--class-names", "{case}/names.txt", None, "names.txt"),
+        "class-names-not-utf8": ("--class-names", "{case}/names.txt", ("names.txt", NOT_UTF8), "names.txt"),
+    }
+    for name, (flag, value, file, expect) in cases.items():
+        setup = None if file is None else case_file(*file)
+        found.append(Case(f"evaluate-voc-{name}", replace_flag(EVALUATE_VOC, flag, value), setup, (expect,)))
+    found += _flag_cases("evaluate-voc-flag-", EVALUATE_VOC, {
+        "--iou": [(("0",), ""), (("2",), ""), (("nan",), "")],
+        "--out": [(("{world}/voc",), "voc")],
+        "--plots": [(("{world}/results.csv",), "results.csv")],
+    })
+    return found
+
+
+def estimate_cases() -> list[Case]:
+    found = _flag_cases("estimate-", ESTIMATE, {
+        "--run": [(("{case}/none",), "none"), (("{world}/results.csv",), "results.csv"), (("{world}/bop",), "bop")],
+        "--dataset": [(("{case}/none",), "none"), (("{world}/results.csv",), "results.csv")],
+        "--split": [(("../..",), ""), (("nope",), "nope"), (("",), "")],
+        "--object-id": [(("7",), "7"), (("-1",), ""), (("0",), "")],
+        "--min-visible": [(("2",), ""), (("nan",), ""), (("-1",), "")],
+        "--out": [(("{world}/bop",), "bop"), (("/dev/null",), "/dev/null")],
+        "--method": [(("keypoints",), "")],
+    })
+    run_files = {
+        "config-garbage": ("config.json", "{", "config.json"),
+        "config-list": ("config.json", [], "config.json"),
+        "config-missing-keys": ("config.json", {"config": {}}, "config.json"),
+        "codebook-truncated": ("codebook.npz", b"PK\x03\x04trunc", "codebook.npz"),
+        "codebook-empty": ("codebook.npz", b"", "codebook.npz"),
+        "object-truncated": ("object.npz", b"PK\x03\x04", "object.npz"),
+        "object-missing": ("object.npz", None, "object.npz"),
+        "model-garbage": ("model.keras", b"garbage", "model.keras"),
+        "model-folder": ("model.keras", "<dir>", "model.keras"),
+        "object-mismatch": ("config.json", lambda d: {**d, "mesh": "/data/models/obj_000005.ply"}, "5"),
+    }
+    for name, (relative, content, expect) in run_files.items():
+        def setup(world, folder, relative=relative, content=content):
+            run = folder / "run"
+            shutil.copytree(world.aae_run, run)
+            value = content(json.loads((run / relative).read_text())) if callable(content) else content
+            put(run / relative, value)
+        found.append(Case(f"estimate-run-{name}", replace_flag(ESTIMATE, "--run", "{case}/run"), setup, (expect,)))
+    found.append(Case("estimate-keypointnet-keypoints-garbage",
+                      replace_flag(replace_flag(ESTIMATE, "--run", "{case}/run"), "--method", "keypoints"),
+                      lambda world, folder: (shutil.copytree(world.keypointnet_run, folder / "run"),
+                                             put(folder / "run" / "keypoints.json", "{"))[-1], ("keypoints.json",)))
+    found.append(Case("estimate-dataset-no-scene-gt", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),
+                      bop_file("test/000000/scene_gt.json", None), ("scene_gt.json",)))
+    found.append(Case("estimate-dataset-bad-bbox", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),
+                      bop_file("test/000000/scene_gt_info.json",
+                               lambda d: {k: [{**e, "bbox_obj": [0, 0, -5, "x"]} for e in v] for k, v in d.items()}),
+                      ("bbox_obj",)))
+    return found
+
+
+def train_cases() -> list[Case]:
+    found = _flag_cases("train-aae-", TRAIN_AAE, {
+        "--mesh": [(("{case}/none.ply",), "none.ply"), (("{world}/bop",), "bop")],
+        "--steps": [(("0",), ""), (("-5",), "")],
+        "--workers": [(("-1",), "")],
+        "--mesh-scale": [(("nan",), ""), (("0",), "")],
+        "--pair-fraction": [(("2",), ""), (("nan",), ""), (("-0.5",), "")],
+        "--seed": [(("-1",), "")],
+        "--config": [(("huge",), "")],
+        "--out": [(("{world}/results.csv",), "results.csv"), (("/dev/null",), "/dev/null")],
+    })
+    found += _flag_cases("train-aae-dataset-", TRAIN_AAE_DATASET, {
+        "--split": [(("nope",), "nope"), (("../..",), ""), (("",), "")],
+        "--object-id": [(("9",), "9"), (("0",), "")],
+    }, setup=lambda world, folder: copy_bop(world, folder))
+    found.append(Case("train-aae-dataset-no-scene-gt", TRAIN_AAE_DATASET,
+                      bop_file("test/000000/scene_gt.json", None), ("scene_gt.json",)))
+    found.append(Case("train-aae-dataset-no-models", TRAIN_AAE_DATASET, bop_file("models", None), ("models",)))
+    found.append(Case("train-aae-dataset-scene-gt-garbage", TRAIN_AAE_DATASET,
+                      bop_file("test/000000/scene_gt.json", "{"), ("scene_gt.json",)))
+    found += _flag_cases("train-keypointnet-", TRAIN_KEYPOINTNET, {
+        "--mesh": [(("{case}/none.ply",), "none.ply")],
+        "--workers": [(("-1",), "")],
+        "--steps": [(("0",), "")],
+        "--mesh-scale": [(("inf",), "")],
+        "--seed": [(("-1",), "")],
+        "--out": [(("{world}/results.csv",), "results.csv")],
+    })
+    found += _flag_cases("train-emotion-", TRAIN_EMOTION, {
+        "--learning-rate": [(("nan",), ""), (("-1",), ""), (("inf",), ""), (("0",), "")],
+        "--epochs": [(("0",), "")],
+        "--batch-size": [(("0",), ""), (("-8",), "")],
+        "--val-fraction": [(("2",), ""), (("0",), ""), (("nan",), "")],
+        "--input-size": [(("0",), ""), (("100000",), "")],
+        "--checkpoint-every": [(("0",), "")],
+        "--validate-every": [(("-1",), "")],
+        "--data": [(("{case}/none.csv",), "none.csv")],
+        "--seed": [(("-1",), "")],
+        "--out": [(("{world}/results.csv",), "results.csv")],
+    })
+    fer = {
+        "empty": ("", "fer.csv"),
+        "header-only": ("emotion,pixels,Usage\n", "fer.csv"),
+        "wrong-header": ("a,b\n1,2\n", "fer.csv"),
+        "short-pixels": ("emotion,pixels,Usage\n0,1 2 3,Training\n", "fer.csv"),
+        "text-pixels": ("emotion,pixels,Usage\n0," + "x " * 2304 + ",Training\n", "fer.csv"),
+        "bad-label": ("emotion,pixels,Usage\n9," + "1 " * 2304 + ",Training\n", "fer.csv"),
+        "not-utf8": (NOT_UTF8, "fer.csv"),
+        "huge-field": ("emotion,pixels,Usage\n0," + "1" * 300_000 + ",Training\n", "fer.csv"),
+        "folder-empty": ("<dir>", "fer.csv"),
+    }
+    for name, (content, expect) in fer.items():
+        found.append(Case(f"train-emotion-data-{name}", replace_flag(TRAIN_EMOTION, "--data", "{case}/fer.csv"),
+                          case_file("fer.csv", content), (expect,)))
+    found += _flag_cases("demo-", DEMO, {
+        "--out": [(("{world}/results.csv",), "results.csv"), (("/dev/null",), "/dev/null")],
+        "--test-images": [(("0",), ""), (("-2",), "")],
+        "--steps": [(("0",), "")],
+        "--workers": [(("-1",), "")],
+    })
+    return found
+
+
+def all_cases() -> list[Case]:
+    """The table: every case, names unique."""
+    found = generate_cases() + evaluate_bop_cases() + evaluate_coco_cases() + evaluate_voc_cases() + \
+        estimate_cases() + train_cases()
+    names = [case.name for case in found]
+    duplicated = {name for name in names if names.count(name) > 1}
+    if duplicated:
+        raise AssertionError(f"duplicated case names: {sorted(duplicated)}")
+    return found
