@@ -146,45 +146,18 @@ def _decode_counts_flat(strings: Sequence[str | bytes], source: str,
         encoded = [s.encode("ascii") if isinstance(s, str) else bytes(s) for s in strings]
     except UnicodeEncodeError as error:
         raise ValueError(f"{source}: compressed RLE counts must be ASCII strings") from error
-    lengths = np.array([len(s) for s in encoded], dtype=np.int64)
-    string_ends = np.cumsum(lengths)
-    chars = np.frombuffer(b"".join(encoded), dtype=np.uint8).astype(np.int64) - _CHAR_OFFSET
-    bad = np.flatnonzero((chars < 0) | (chars > 63))
-    if len(bad):
-        raise ValueError(f"{where(bad[0])}: compressed RLE counts must use characters '0'..'o'")
-    more = (chars & 0x20) != 0
-    nonempty = lengths > 0
-    truncated = np.flatnonzero(more[string_ends[nonempty] - 1])
-    if len(truncated):
-        raise ValueError(f"{where(string_ends[nonempty][truncated[0]] - 1)}: compressed RLE string ends "
-                         "inside a value (truncated counts)")
-    value_last = np.flatnonzero(~more)  # last character of every value
-    value_first = np.concatenate([[0], value_last[:-1] + 1])
-    digits = value_last - value_first + 1
-    if len(digits) and digits.max() > _MAX_CHARS_PER_COUNT:
-        raise ValueError(f"{where(value_last[np.argmax(digits)])}: compressed RLE value longer than "
-                         f"{_MAX_CHARS_PER_COUNT} characters")
-    position = np.arange(len(chars)) - np.repeat(value_first, digits)
-    values = np.add.reduceat((chars & 0x1F) << (5 * position), value_first) if len(value_first) else \
-        np.zeros(0, dtype=np.int64)
-    signed = (chars[value_last] & 0x10) != 0
-    values = values - np.where(signed, np.left_shift(1, 5 * digits), 0)
-    # number of values in each string, then undo the "difference to two places before" coding
-    per_string = np.searchsorted(value_last, string_ends, side="left")
-    per_string = np.diff(np.concatenate([[0], per_string]))
-    string_first = np.cumsum(per_string) - per_string
-    index = np.arange(len(values)) - np.repeat(string_first, per_string)
-    # counts[i] = values[i] + counts[i - 2] for i > 2: running sums over the odd indices (from 1)
-    # and over the even indices from 2, restarted for every string; index 0 stands alone.
-    odd = (index % 2) == 1
-    counts = values.copy()
-    for chain in (odd, ~odd & (index > 0)):
-        running = np.cumsum(np.where(chain, values, 0))
-        restart = np.concatenate([[0], running])[string_first]
-        counts = np.where(chain, running - np.repeat(restart, per_string), counts)
-    negative = np.flatnonzero(counts < 0)
-    if len(negative):
-        raise ValueError(f"{where(value_last[negative[0]])}: compressed RLE decodes to negative run lengths")
+    string_ends = np.cumsum(np.array([len(s) for s in encoded], dtype=np.int64))
+    from evaluation import coco_kernels  # here: numba loads only when masks are decoded
+
+    chars = np.frombuffer(b"".join(encoded), dtype=np.uint8)
+    counts, per_string, error, at = coco_kernels.decode_rle_strings(chars, string_ends, _CHAR_OFFSET,
+                                                                    _MAX_CHARS_PER_COUNT)
+    messages = {coco_kernels.BAD_CHARACTER: "compressed RLE counts must use characters '0'..'o'",
+                coco_kernels.TRUNCATED: "compressed RLE string ends inside a value (truncated counts)",
+                coco_kernels.TOO_LONG: f"compressed RLE value longer than {_MAX_CHARS_PER_COUNT} characters",
+                coco_kernels.NEGATIVE: "compressed RLE decodes to negative run lengths"}
+    if error:
+        raise ValueError(f"{where(at)}: {messages[error]}")
     return counts, per_string
 
 
@@ -322,129 +295,30 @@ def decode_rle(rle: dict) -> np.ndarray:
 # Polygons
 # ----------------------------------------------------------------------------------------------
 
-def _polygon_boundary_toggles(coordinates: np.ndarray, vertex_counts: np.ndarray, heights: np.ndarray,
-                              widths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Column-boundary toggles of many polygons (rleFrPoly), unsorted, with repeats.
-
-    ``rleFrPoly`` walks every edge on the 5x grid one step at a time and keeps the steps whose
-    column changes across a pixel-column centre (grid column ``5 * x + 2``). Only those steps
-    matter, so they are enumerated directly (about a fifth of the walk); the row of each kept step
-    is computed with the same floating-point expression and truncation as the C code. The C
-    code's ``(xd + .5) / 5 - .5`` and ``ceil((yd + .5) / 5 - .5)`` are exact integer maps here:
-    a grid column ``5x + 2`` gives pixel ``x`` and a grid row ``v`` gives ``(v + 2) // 5``.
-
-    Args:
-        coordinates: (V, 2) float64 vertices of all parts, concatenated.
-        vertex_counts: (P,) vertices per part (>= 1).
-        heights, widths: (P,) image size of each part.
-
-    Returns:
-        part (B,) and flat pixel index ``x * H + y`` (B,) of every toggle, ``0 <= index <= H * W``.
-    """
-    # C casts double -> int by truncation toward zero, as numpy's astype does
-    scaled = (POLYGON_SCALE * coordinates + 0.5).astype(np.int64)
-    part_first = np.cumsum(vertex_counts) - vertex_counts
-    part = _segment_ids(vertex_counts)
-    following = np.arange(len(scaled)) + 1
-    wrap = following == np.repeat(part_first + vertex_counts, vertex_counts)
-    following[wrap] = np.repeat(part_first, vertex_counts)[wrap]
-    x_start, y_start = scaled[:, 0], scaled[:, 1]
-    x_end, y_end = scaled[following, 0], scaled[following, 1]
-    dx, dy = np.abs(x_end - x_start), np.abs(y_start - y_end)
-    along_x = dx >= dy
-    flip = (along_x & (x_start > x_end)) | (~along_x & (y_start > y_end))
-    xs = np.where(flip, x_end, x_start)
-    xe = np.where(flip, x_start, x_end)
-    ys = np.where(flip, y_end, y_start)
-    ye = np.where(flip, y_start, y_end)
-    last_column = 5 * (widths[part] - 1) + 2  # grid column of the last pixel centre
-
-    def crossed_columns(low: np.ndarray, high: np.ndarray, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Repeat counts and grid columns 5x+2 in [max(low, 2), min(high, limit)] per edge."""
-        first = np.maximum(low + np.mod(2 - low, 5), 2)
-        last = np.minimum(high, limit)
-        count = np.where(last >= first, (last - first) // 5 + 1, 0)
-        step = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-        return count, np.repeat(first, count) + 5 * step
-
-    # edges stepping along x: every step changes the column; step t -> t + 1 sits at column xs + t
-    flat = np.flatnonzero(along_x & (dx > 0))
-    count, column_flat = crossed_columns(xs[flat], xe[flat] - 1, last_column[flat])
-    t = (column_flat - np.repeat(xs[flat], count)).astype(np.float64)
-    row_start = np.repeat(ys[flat].astype(np.float64), count)
-    slope = np.repeat((ye[flat] - ys[flat]) / dx[flat], count)
-    row_before = (row_start + slope * t + 0.5).astype(np.int64)
-    row_after = (row_start + slope * (t + 1) + 0.5).astype(np.int64)
-    part_flat = np.repeat(part[flat], count)
-    row_flat = np.minimum(row_before, row_after)
-
-    # steep edges stepping along y: the column u(t) = (int)(xs + s * t + .5) is monotone in t;
-    # find the step where it crosses each column centre from an estimate corrected on a +-1 window
-    steep = np.flatnonzero(~along_x & (xe != xs))
-    x_steep = xs[steep].astype(np.float64)
-    slope_steep = (xe[steep] - xs[steep]) / dy[steep]
-    u_first = (x_steep + 0.5).astype(np.int64)
-    u_last = (x_steep + slope_steep * dy[steep] + 0.5).astype(np.int64)
-    count, column_steep = crossed_columns(np.minimum(u_first, u_last), np.maximum(u_first, u_last) - 1,
-                                          last_column[steep])
-    x_cross = np.repeat(x_steep, count)
-    slope = np.repeat(slope_steep, count)
-    rising = slope > 0
-    estimate = (column_steep + 0.5 - x_cross) / slope
-    estimate = np.where(rising, np.ceil(estimate), np.floor(estimate) + 1)
-    before = np.zeros(len(estimate), dtype=np.int64)
-    for offset in (-1.0, 0.0, 1.0):
-        u = (x_cross + slope * (estimate + offset) + 0.5).astype(np.int64)
-        before += np.where(rising, u < column_steep + 1, u > column_steep)
-    t_cross = estimate.astype(np.int64) - 1 + before
-    part_steep = np.repeat(part[steep], count)
-    row_steep = np.repeat(ys[steep], count) + t_cross - 1
-
-    # back to pixels: column 5x+2 -> x; row = ceil((v + .5) / 5 - .5) = (v + 2) // 5, clipped to [0, H]
-    part_of_toggle = np.concatenate([part_flat, part_steep])
-    height = heights[part_of_toggle]
-    x_pixel = (np.concatenate([column_flat, column_steep]) - 2) // 5
-    y_pixel = np.clip((np.concatenate([row_flat, row_steep]) + 2) // 5, 0, height)
-    return part_of_toggle, x_pixel * height + y_pixel
-
-
 def _parts_to_intervals(coordinates: np.ndarray, vertex_counts: np.ndarray, heights: np.ndarray,
                         widths: np.ndarray, part_owner: np.ndarray, n_masks: int) -> tuple:
-    """Rasterizes polygon parts and unites the parts of each mask.
+    """Rasterizes polygon parts (:func:`evaluation.coco_kernels.polygon_runs`, rleFrPoly's walk) and
+    unites the parts of each mask.
 
     Returns:
         (starts, ends, owner) runs sorted by owner then position.
     """
-    n_parts = len(vertex_counts)
-    if n_parts == 0:
+    if len(vertex_counts) == 0:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty, empty
-    area = heights * widths
-    stride = int(area.max()) + 1
-    part, flat = _polygon_boundary_toggles(coordinates, vertex_counts, heights, widths)
-    keys = (part * stride + flat)[flat < area[part]]  # a toggle at H*W changes nothing
-    # toggles at the same pixel cancel in pairs (rleFrPoly merges zero-length runs)
-    keys.sort()
-    if len(keys):
-        boundary = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1], [True]]))
-        toggles = keys[boundary[:-1][np.diff(boundary) % 2 == 1]]
-    else:
-        toggles = keys
-    # a part with an odd number of toggles is closed by the end of the image (rleFrPoly appends H*W)
-    part_of_toggle = toggles // stride
-    per_part = np.bincount(part_of_toggle, minlength=n_parts)
-    odd_parts = np.flatnonzero(per_part % 2 == 1)
-    toggles = np.insert(toggles, np.cumsum(per_part)[odd_parts], odd_parts * stride + area[odd_parts])
-    pairs = toggles.reshape(-1, 2)
-    part = pairs[:, 0] // stride
-    starts = pairs[:, 0] - part * stride
-    ends = pairs[:, 1] - part * stride
+    from evaluation import coco_kernels  # here: numba loads only when polygons are rasterized
+
+    # rleFrPoly's grid: C casts double -> int by truncation toward zero, as numpy's astype does
+    scaled = (POLYGON_SCALE * coordinates + 0.5).astype(np.int64)
+    part, starts, ends = coco_kernels.polygon_runs(
+        np.ascontiguousarray(scaled[:, 0]), np.ascontiguousarray(scaled[:, 1]), np.asarray(vertex_counts, np.int64),
+        np.asarray(heights, np.int64), np.asarray(widths, np.int64))
     owner = part_owner[part]  # parts are listed mask by mask, so runs stay grouped by owner
     shared = (np.bincount(part_owner, minlength=n_masks) > 1)[owner]
     if not np.any(shared):
         return starts, ends, owner
     # union of the parts of multi-part masks: sweep +1/-1 events per mask
-    mask_stride = stride + 1
+    mask_stride = int((heights * widths).max()) + 2  # above every position, end included
     event_keys = np.concatenate([starts[shared], ends[shared]]) + np.tile(owner[shared], 2) * mask_stride
     event_delta = np.repeat(np.array([1, -1], dtype=np.int64), np.count_nonzero(shared))
     order = np.argsort(event_keys, kind="stable")
