@@ -127,10 +127,15 @@ def test_data_set_errors_name_the_problem(generated, tmp_path):
     assert main(["train", "ssd", "--dataset", str(tmp_path / "empty"), "--out", str(tmp_path / "run")]) == 2
 
 
-def test_resuming_with_other_settings_is_refused(trained, generated):
+def test_resuming_continues_and_other_settings_are_refused(trained, generated):
     with pytest.raises(ValueError, match="holds a different run"):
         train_ssd(SSDTraining(dataset=generated, out=trained, steps=60, batch_size=4, seed=9, progress=False,
                               overrides=TINY))
+    summary = train_ssd(SSDTraining(dataset=generated, out=trained, steps=70, batch_size=4, progress=False,
+                                    overrides=TINY))
+    assert summary["steps"] == 70
+    with (trained / "log.csv").open() as handle:
+        assert [int(row["step"]) for row in csv.DictReader(handle)] == list(range(10, 71, 10))
 
 
 def test_bop_to_coco_boxes_equal_bbox_visib_on_lmo(shared_data):
