@@ -23,12 +23,11 @@ import numpy as np
 
 from data_gen.assets import Assets
 from data_gen.coco import encode_rle
-from data_gen.config import GenerationConfig
+from data_gen.config import STATE_FOLDER, GenerationConfig
 from paz6d.backend.files import json_bytes, load_json, write_json_atomically
 from paz6d.datasets.bop.targets import TARGETS_FILE, targets_from_gt, write_targets
 from paz6d.datasets.bop.writer import gt_entry, scene_camera_entry, write_camera, write_models
 
-STATE_FOLDER = ".paz6d-generate"
 
 
 def image_location(index: int, images_per_scene: int) -> tuple[int, int]:

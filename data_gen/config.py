@@ -9,6 +9,7 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 from paz6d.backend.paths import check_plain_name
 from paz6d.cli_options import option
@@ -20,6 +21,8 @@ ROTATION_MODES = ("so3", "view-sphere")
 #: upright on a textured table seen from above (paz6d.synthesis.tabletop).
 SCENE_STYLES = ("floating", "tabletop")
 RGB_FORMATS = ("png", "jpg")
+#: Folder inside a generated data set holding the run's settings and per-image records.
+STATE_FOLDER = ".paz6d-generate"
 BACKENDS = ("local", "ray")  # where images are rendered: local processes or Ray actors
 BACKGROUND_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 #: Largest image side (pixels): OpenGL render buffers of common drivers go no further.
@@ -30,6 +33,8 @@ MAX_PER_IMAGE = 100
 MAX_DISTANCE = 1e6
 #: Largest side of the per-object crops (pixels).
 MAX_CROP_SIZE = 2048
+#: Largest data set (images): far beyond any BOP set, small enough to list its images.
+MAX_IMAGES = 10_000_000
 #: BOP image ids have six digits.
 MAX_IMAGES_PER_SCENE = 1_000_000
 
@@ -122,7 +127,7 @@ class GenerationConfig:
             raise ValueError("meshes: expected at least one mesh file")
         object.__setattr__(self, "meshes", meshes)
         object.__setattr__(self, "out", Path(self.out))
-        _positive_int(self.num_images, "num_images")
+        _positive_int(self.num_images, "num_images", MAX_IMAGES)
         _positive_int(self.width, "width", MAX_IMAGE_SIDE)
         _positive_int(self.height, "height", MAX_IMAGE_SIDE)
         _positive_int(self.images_per_scene, "images_per_scene", MAX_IMAGES_PER_SCENE)
@@ -242,20 +247,19 @@ def capped_workers(workers: int, backend: str) -> tuple[int, str | None]:
     return cores, f"--workers {workers} capped at {cores}, the number of usable CPU cores"
 
 
-def _symbolic_links_inside(output: Path) -> list[Path]:
-    """Symbolic links anywhere below ``output`` (not followed)."""
-    found = []
+def _symbolic_links_inside(output: Path) -> Iterator[Path]:
+    """Symbolic links anywhere below ``output`` (not followed), as they are found."""
     for folder, folders, files in os.walk(output):
         for name in folders + files:
             if os.path.islink(os.path.join(folder, name)):
-                found.append(Path(folder) / name)
-    return found
+                yield Path(folder) / name
 
 
 def check_output_writable(output: Path) -> None:
-    """Raises ``ValueError`` unless ``output`` is (or can be made) a writable folder whose contents
-    are real files and folders: a symbolic link inside it could make ``paz6d generate`` write
-    outside the folder, so one is refused.
+    """Raises ``ValueError`` unless ``output`` is (or can be made) a writable folder that is new, empty
+    or an earlier ``paz6d generate`` output (holding :data:`STATE_FOLDER`), so nothing that is not
+    ours is overwritten, and whose contents are real files and folders: a symbolic link inside it
+    could make ``paz6d generate`` write outside the folder, so one is refused.
 
     Leaves nothing behind: creates and deletes a probe file in the folder, or in its nearest
     existing ancestor when the folder does not exist yet.
@@ -264,10 +268,13 @@ def check_output_writable(output: Path) -> None:
     if output.exists() and not output.is_dir():
         raise ValueError(f"out: {output} exists and is not a folder")
     if output.is_dir():
-        links = _symbolic_links_inside(output)
-        if links:
-            raise ValueError(f"out: {links[0]} is a symbolic link ({len(links)} inside {output}); paz6d generate "
-                             "writes only into real folders inside --out, so remove the links or use another --out")
+        if not (output / STATE_FOLDER).is_dir() and any(output.iterdir()):
+            raise ValueError(f"out: {output} is a folder with other contents, not the output of paz6d generate "
+                             f"(no {STATE_FOLDER}/); give a new or empty folder so nothing else is overwritten")
+        link = next(_symbolic_links_inside(output), None)
+        if link is not None:
+            raise ValueError(f"out: {link} is a symbolic link inside {output}; paz6d generate writes only into "
+                             "real folders inside --out, so remove the link or use another --out")
     existing = output
     while not existing.exists():
         existing = existing.parent

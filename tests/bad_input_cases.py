@@ -258,6 +258,7 @@ class Verdict:
     outcome: Outcome
     problems: list[str] = field(default_factory=list)
     kind: str = "ok"  # ok | traceback | hang | wrong-code | silent | unclear | touched
+    touched: list[str] = field(default_factory=list)  # paths changed outside the output folder
 
 
 def run_case(world: World, case: Case) -> Verdict:
@@ -271,7 +272,12 @@ def run_case(world: World, case: Case) -> Verdict:
         case.setup(world, folder)
     argv = [part.format(world=world.root, case=folder, out=out) for part in case.argv]
     before = world_snapshot(world, folder)
-    outcome = run_cli(argv, case.timeout)
+    previous = os.getcwd()
+    os.chdir(folder)  # relative paths in a case ("", "../..", "abc") land in its own folder
+    try:
+        outcome = run_cli(argv, case.timeout)
+    finally:
+        os.chdir(previous)
     after = world_snapshot(world, folder)
     verdict = Verdict(case, outcome)
     text = outcome.stderr
@@ -293,10 +299,10 @@ def run_case(world: World, case: Case) -> Verdict:
         if case.code == 2 and len(text) > 4000:
             verdict.kind = "unclear"
             verdict.problems.append(f"message of {len(text)} characters")
-    touched = changes(before, after)
-    if touched:
+    verdict.touched = changes(before, after)
+    if verdict.touched:
         verdict.kind = "touched" if verdict.kind == "ok" else verdict.kind
-        verdict.problems.append(f"touched outside --out: {touched[:5]}")
+        verdict.problems.append(f"touched outside --out: {verdict.touched[:5]}")
     return verdict
 
 
@@ -465,9 +471,12 @@ def generate_cases() -> list[Case]:
                            "0 0 0\n0.05 0 0\n0 0.05 0\n3 0 1 99\n", "obj_000002.ply"),
     }
     found.append(Case("generate-out-symlink-inside", GENERATE,
-                      lambda world, folder: (folder.joinpath("out").mkdir(), folder.joinpath("elsewhere").mkdir(),
+                      lambda world, folder: (folder.joinpath("out", ".paz6d-generate").mkdir(parents=True),
+                                             folder.joinpath("elsewhere").mkdir(),
                                              os.symlink(folder / "elsewhere", folder / "out" / "train")),
                       ("symbolic link",)))
+    found.append(Case("generate-out-foreign-folder", replace_flag(GENERATE, "--out", "{world}/voc"), None,
+                      ("not the output of paz6d generate",)))
     for name, (content, expect) in mesh_cases.items():
         found.append(Case(f"generate-mesh-{name}", replace_flag(GENERATE, "--meshes", mesh),
                           case_file("obj_000002.ply", content), (expect,)))

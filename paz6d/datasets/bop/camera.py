@@ -53,9 +53,9 @@ def load_scene_camera(path: str | Path, units: Units = "m") -> dict[int, SceneCa
         if not isinstance(entry, dict):
             raise ValueError(f"{where}: expected an object with cam_K (and depth_scale)")
         K = required_field(entry, "cam_K", where, 9).reshape(3, 3)
-        if K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise ValueError(f"{where}: field 'cam_K' must have positive focal lengths, got fx={K[0, 0]:g}, "
-                             f"fy={K[1, 1]:g}")
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or K[1, 0] != 0 or np.any(K[2] != [0, 0, 1]):
+            raise ValueError(f"{where}: field 'cam_K' must be [fx, s, cx, 0, fy, cy, 0, 0, 1] with fx, fy > 0, "
+                             f"got {K.ravel().tolist()}")
         depth_scale = None if entry.get("depth_scale") is None else \
             number_field(entry, "depth_scale", where, positive=True)
         T_world2cam = None
