@@ -23,7 +23,7 @@ import numpy as np
 
 from data_gen.assets import Assets
 from data_gen.coco import encode_rle
-from data_gen.config import STATE_FOLDER, GenerationConfig
+from data_gen.config import CONTENTS_KEY, STATE_FOLDER, GenerationConfig
 from paz6d.backend.files import json_bytes, load_json, write_json_atomically
 from paz6d.datasets.bop.targets import TARGETS_FILE, targets_from_gt, write_targets
 from paz6d.datasets.bop.writer import gt_entry, scene_camera_entry, write_camera, write_models
@@ -74,13 +74,24 @@ def write_state(config: GenerationConfig) -> None:
         if not isinstance(previous, dict):
             raise ValueError(f"out: {path}: the state file of a previous run is not a JSON object; "
                              "use another --out")
-        if previous != fingerprint:
-            keys = set(previous) | set(fingerprint)
-            changed = sorted(key for key in keys if previous.get(key) != fingerprint.get(key))
+        # A state written before input digests were recorded is compared as it was, by paths.
+        before, now = _comparable(previous), _comparable(
+            fingerprint if CONTENTS_KEY in previous else {k: v for k, v in fingerprint.items() if k != CONTENTS_KEY})
+        if before != now:
+            changed = sorted(key for key in set(before) | set(now) if before.get(key) != now.get(key))
             raise ValueError(f"out: {config.out} holds a data set generated with other settings "
                              f"({', '.join(changed)} differ); use another --out or the same settings to resume")
-        return
-    write_json_atomically(path, fingerprint)
+        if previous == fingerprint:
+            return
+    write_json_atomically(path, fingerprint)  # new, or the same inputs at new paths (a moved folder)
+
+
+def _comparable(fingerprint: dict) -> dict:
+    """What must match for a run to resume: with input digests (data sets made since they were
+    recorded) the inputs' contents, not their paths."""
+    if CONTENTS_KEY not in fingerprint:
+        return fingerprint
+    return {key: value for key, value in fingerprint.items() if key not in ("meshes", "backgrounds", "symmetries")}
 
 
 def _shard_record(config: GenerationConfig, index: int) -> dict | None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -21,6 +22,8 @@ ROTATION_MODES = ("so3", "view-sphere")
 #: upright on a textured table seen from above (paz6d.synthesis.tabletop).
 SCENE_STYLES = ("floating", "tabletop")
 RGB_FORMATS = ("png", "jpg")
+#: Key of the input digests in a run's fingerprint (see :meth:`GenerationConfig.input_contents`).
+CONTENTS_KEY = "input_contents"
 #: Folder inside a generated data set holding the run's settings and per-image records.
 STATE_FOLDER = ".paz6d-generate"
 BACKENDS = ("local", "ray")  # where images are rendered: local processes or Ray actors
@@ -37,6 +40,13 @@ MAX_CROP_SIZE = 2048
 MAX_IMAGES = 10_000_000
 #: BOP image ids have six digits.
 MAX_IMAGES_PER_SCENE = 1_000_000
+
+
+def _file_digest(path: Path, name: str) -> str:
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError as error:
+        raise ValueError(f"{name}: cannot read {path} ({error.strerror or error})") from error
 
 
 def _positive_int(value, name: str, maximum: int | None = None) -> int:
@@ -207,7 +217,21 @@ class GenerationConfig:
         data["meshes"] = [str(path.resolve()) for path in self.meshes]
         for name in ("backgrounds", "symmetries"):
             data[name] = None if data[name] is None else str(Path(data[name]).resolve())
+        data[CONTENTS_KEY] = self.input_contents()
         return json.loads(json.dumps(data))
+
+    def input_contents(self) -> dict:
+        """Digests of the input files (SHA-256 of each mesh and of the symmetries file; names and sizes
+        of the background images): a resumed run compares these, not the paths, so a data set whose
+        inputs moved with it (the demo keeps its mesh inside its output) still resumes."""
+        backgrounds = None
+        if self.backgrounds is not None:
+            listing = hashlib.sha256()
+            for path in list_backgrounds(self.backgrounds):
+                listing.update(f"{path.relative_to(self.backgrounds)}\0{path.stat().st_size}\n".encode())
+            backgrounds = listing.hexdigest()
+        return {"meshes": [_file_digest(path, "meshes") for path in self.meshes], "backgrounds": backgrounds,
+                "symmetries": None if self.symmetries is None else _file_digest(self.symmetries, "symmetries")}
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 
 import bad_input_cases as cases
 
@@ -229,3 +230,21 @@ def test_evaluate_bop_does_not_read_outside_the_data_set(world, tmp_path):
     outcome = cases.run_cli(["evaluate", "bop", "--dataset", str(world.bop), "--split", "../cases/outside-split",
                              "--results", str(world.results), "--out", str(tmp_path / "s.json")])
     assert outcome.code == 2 and "--split: expected a plain folder name" in outcome.stderr
+
+
+def test_a_moved_data_set_resumes_when_its_inputs_moved_with_it(world, tmp_path):
+    from data_gen.config import GenerationConfig
+    from data_gen.generator import generate
+
+    first = tmp_path / "first"
+    first.mkdir()
+    shutil.copy(world.mesh, first / "obj_000001.ply")
+    settings = dict(num_images=1, width=64, height=48, seed=3, objects_per_image=(1, 1))
+    generate(GenerationConfig(meshes=(first / "obj_000001.ply",), out=first / "set", **settings), show_progress=False)
+    moved = tmp_path / "moved"
+    first.rename(moved)
+    config = GenerationConfig(meshes=(moved / "obj_000001.ply",), out=moved / "set", **settings)
+    assert generate(config, show_progress=False).images_rendered == 0
+    trimesh.creation.box((0.05, 0.04, 0.031)).export(moved / "obj_000001.ply")  # another object, same path
+    with pytest.raises(ValueError, match="input_contents differ"):
+        generate(config, show_progress=False)
