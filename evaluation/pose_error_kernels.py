@@ -1,5 +1,6 @@
 """numba kernels of the pose errors: the KD-tree of :class:`evaluation.point_tree.PointTree` (build and
-seeded search, for ADI) and the MSSD maximum over points / minimum over symmetries.
+seeded search, for ADI), the MSSD and MSPD maxima over points / minima over symmetries, and the
+means of ADD and of the 2D projection error (one pass over the points per estimate).
 
 Tree layout (arrays indexed by node, root 0): ``start``/``end`` index the points of the node in
 tree order, ``left``/``right`` are the children (-1 for a leaf), ``low``/``high`` the tight
@@ -141,4 +142,78 @@ def min_max_distances(A, b, points):
                     break
             best = min(best, largest)
         result[e] = np.sqrt(best)
+    return result
+
+
+@numba.njit(cache=True, inline="always")
+def _pixel(M, m, e, x, y, z):
+    """Pixel ``(u, v)`` of the point ``M[e] (x, y, z) + m[e]`` (homogeneous, divided by its z as BOP
+    does: a point on the camera plane gives inf or NaN)."""
+    hx = M[e, 0, 0] * x + M[e, 0, 1] * y + M[e, 0, 2] * z + m[e, 0]
+    hy = M[e, 1, 0] * x + M[e, 1, 1] * y + M[e, 1, 2] * z + m[e, 1]
+    hz = M[e, 2, 0] * x + M[e, 2, 1] * y + M[e, 2, 2] * z + m[e, 2]
+    return hx / hz, hy / hz
+
+
+@numba.njit(cache=True)
+def mean_distances(A, b, points):
+    """``(E,)``: mean over ``points`` of ``|A[e] x + b[e]|`` (ADD with ``A = R_est - R_gt``,
+    ``b = t_est - t_gt``)."""
+    estimates, count = A.shape[0], points.shape[0]
+    result = np.empty(estimates)
+    for e in range(estimates):
+        total = 0.0
+        for n in range(count):
+            x = A[e, 0, 0] * points[n, 0] + A[e, 0, 1] * points[n, 1] + A[e, 0, 2] * points[n, 2] + b[e, 0]
+            y = A[e, 1, 0] * points[n, 0] + A[e, 1, 1] * points[n, 1] + A[e, 1, 2] * points[n, 2] + b[e, 1]
+            z = A[e, 2, 0] * points[n, 0] + A[e, 2, 1] * points[n, 1] + A[e, 2, 2] * points[n, 2] + b[e, 2]
+            total += np.sqrt(x * x + y * y + z * z)
+        result[e] = total / count
+    return result
+
+
+@numba.njit(cache=True, error_model="numpy")
+def mean_pixel_distances(M_est, m_est, M_gt, m_gt, points):
+    """``(E,)``: mean over ``points`` of the pixel distance between ``(M_est, m_est)`` and
+    ``(M_gt, m_gt)`` (``K R`` and ``K t`` of the two poses): the 2D projection error; NaN where a
+    point lies on a camera plane."""
+    estimates, count = M_est.shape[0], points.shape[0]
+    result = np.empty(estimates)
+    for e in range(estimates):
+        total = 0.0
+        for n in range(count):
+            u_est, v_est = _pixel(M_est, m_est, e, points[n, 0], points[n, 1], points[n, 2])
+            u_gt, v_gt = _pixel(M_gt, m_gt, e, points[n, 0], points[n, 1], points[n, 2])
+            total += np.sqrt((u_est - u_gt) ** 2 + (v_est - v_gt) ** 2)
+        result[e] = total / count
+    return result
+
+
+@numba.njit(cache=True, error_model="numpy")
+def min_max_pixel_distances(M_est, m_est, M_sym, m_sym, points):
+    """``(E,)``: min over symmetries ``s`` of the max over ``points`` of the pixel distance between
+    ``(M_est[e], m_est[e])`` and ``(M_sym[e, s], m_sym[e, s])`` (MSPD); a symmetry with a point on a
+    camera plane counts as infinite, and one is abandoned once its running maximum reaches the best."""
+    estimates, symmetries, count = M_sym.shape[0], M_sym.shape[1], points.shape[0]
+    result = np.empty(estimates)
+    for e in range(estimates):
+        best = np.inf
+        for s in range(symmetries):
+            largest = 0.0
+            for n in range(count):
+                u_est, v_est = _pixel(M_est, m_est, e, points[n, 0], points[n, 1], points[n, 2])
+                hx = M_sym[e, s, 0, 0] * points[n, 0] + M_sym[e, s, 0, 1] * points[n, 1] + \
+                    M_sym[e, s, 0, 2] * points[n, 2] + m_sym[e, s, 0]
+                hy = M_sym[e, s, 1, 0] * points[n, 0] + M_sym[e, s, 1, 1] * points[n, 1] + \
+                    M_sym[e, s, 1, 2] * points[n, 2] + m_sym[e, s, 1]
+                hz = M_sym[e, s, 2, 0] * points[n, 0] + M_sym[e, s, 2, 1] * points[n, 1] + \
+                    M_sym[e, s, 2, 2] * points[n, 2] + m_sym[e, s, 2]
+                distance = np.sqrt((u_est - hx / hz) ** 2 + (v_est - hy / hz) ** 2)
+                if distance != distance:  # NaN: a point on a camera plane
+                    distance = np.inf
+                largest = max(largest, distance)
+                if largest >= best:
+                    break
+            best = min(best, largest)
+        result[e] = best
     return result

@@ -30,8 +30,6 @@ from paz6d.backend.checks import as_array, as_camera_matrix, as_points, as_rotat
 # computed with the matrices as given, as BOP does.
 from paz6d.datasets.bop.results import ROTATION_TOLERANCE
 
-#: Largest number of 3D points transformed at once (bounds the memory of the batched errors).
-CHUNK_POINTS = 1 << 21
 #: BOP's default discretization of continuous symmetries: the vertex farthest from the axis moves
 #: at most this fraction of the diameter between consecutive samples (ceil(pi / 0.01) = 315 steps).
 MAX_SYMMETRY_STEP = 0.01
@@ -76,33 +74,18 @@ def _camera_batch(K, count: int) -> np.ndarray:
     return K
 
 
-def _chunks(count: int, points_per_item: int):
-    """Slices of ``range(count)`` holding at most :data:`CHUNK_POINTS` points each."""
-    step = max(1, CHUNK_POINTS // max(points_per_item, 1))
-    for start in range(0, count, step):
-        yield slice(start, min(start + step, count))
-
-
 def _transform(R: np.ndarray, t: np.ndarray, points: np.ndarray) -> np.ndarray:
     """``R (..., 3, 3) @ points (N, 3) + t (..., 3)`` -> ``(..., N, 3)`` (batched matmul)."""
     return points @ np.swapaxes(R, -1, -2) + t[..., None, :]
 
 
-def _norm(vectors: np.ndarray) -> np.ndarray:
-    """Euclidean norm over the last axis (much faster than ``np.linalg.norm`` for short vectors)."""
-    return np.sqrt(np.einsum("...i,...i->...", vectors, vectors))
-
-
-def _project(R: np.ndarray, t: np.ndarray, points: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Pixels ``(E, ..., N, 2)`` of ``points`` ``(N, 3)`` posed by ``R`` ``(E, ..., 3, 3)``,
-    ``t`` ``(E, ..., 3)`` and seen by ``K`` ``(E, 3, 3)``: ``K (R x + t)`` as one transform.
-
-    Divides by z as BOP does (no clipping); a point exactly on the camera plane gives inf/NaN.
-    """
-    K = K.reshape(K.shape[:1] + (1,) * (R.ndim - 3) + (3, 3))
-    homogeneous = _transform(K @ R, np.einsum("...ij,...j->...i", K, t), points)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return homogeneous[..., :2] / homogeneous[..., 2:3]
+def _image_transforms(K: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``K R`` ``(E, ..., 3, 3)`` and ``K t`` ``(E, ..., 3)`` of poses ``T`` ``(E, ..., 4, 4)`` seen by
+    ``K`` ``(E, 3, 3)``: a point ``x`` projects to ``(K R x + K t)`` divided by its last coordinate,
+    as BOP divides (no clipping; a point exactly on the camera plane gives inf/NaN)."""
+    K = K.reshape(K.shape[:1] + (1,) * (T.ndim - 3) + (3, 3))
+    return (np.ascontiguousarray(K @ T[..., :3, :3]),
+            np.ascontiguousarray(np.einsum("...ij,...j->...i", K, T[..., :3, 3])))
 
 
 def _finite_or_inf(errors: np.ndarray) -> np.ndarray:
@@ -122,10 +105,9 @@ def add_error(T_est, T_gt, points) -> np.ndarray:
     points = as_points(points, "points")
     A = T_est[:, :3, :3] - T_gt[:, :3, :3]
     b = T_est[:, :3, 3] - T_gt[:, :3, 3]
-    errors = np.empty(len(T_est))
-    for part in _chunks(len(T_est), len(points)):
-        errors[part] = _norm(_transform(A[part], b[part], points)).mean(axis=-1)
-    return errors
+    from evaluation.pose_error_kernels import mean_distances
+
+    return mean_distances(np.ascontiguousarray(A), np.ascontiguousarray(b), np.ascontiguousarray(points))
 
 
 def adi_error(T_est, T_gt, points, tree: PointTree | None = None, workers: int = 1) -> np.ndarray:
@@ -195,11 +177,10 @@ def projection_error(T_est, T_gt, points, K) -> np.ndarray:
     T_est, T_gt = _pose_batch(T_est, T_gt)
     points = as_points(points, "points")
     K = _camera_batch(K, len(T_est))
-    errors = np.empty(len(T_est))
-    for part in _chunks(len(T_est), 2 * len(points)):
-        pixels_est = _project(T_est[part, :3, :3], T_est[part, :3, 3], points, K[part])
-        pixels_gt = _project(T_gt[part, :3, :3], T_gt[part, :3, 3], points, K[part])
-        errors[part] = _norm(pixels_est - pixels_gt).mean(axis=-1)
+    from evaluation.pose_error_kernels import mean_pixel_distances
+
+    errors = mean_pixel_distances(*_image_transforms(K, T_est), *_image_transforms(K, T_gt),
+                                  np.ascontiguousarray(points))
     return _finite_or_inf(errors)
 
 
@@ -287,14 +268,10 @@ def mspd_error(T_est, T_gt, points, K, symmetries) -> np.ndarray:
     points = as_points(points, "points")
     K = _camera_batch(K, len(T_est))
     T_sym = _symmetric_gt(T_gt, symmetries)
-    count = T_sym.shape[1]
-    errors = np.empty(len(T_est))
-    for part in _chunks(len(T_est), (count + 1) * len(points)):
-        pixels_est = _project(T_est[part, :3, :3], T_est[part, :3, 3], points, K[part])
-        pixels_gt = _project(T_sym[part, :, :3, :3], T_sym[part, :, :3, 3], points, K[part])
-        distances = _norm(pixels_est[:, None] - pixels_gt)
-        errors[part] = _finite_or_inf(distances.max(axis=-1)).min(axis=-1)
-    return errors
+    from evaluation.pose_error_kernels import min_max_pixel_distances
+
+    return min_max_pixel_distances(*_image_transforms(K, T_est), *_image_transforms(K, T_sym),
+                                   np.ascontiguousarray(points))
 
 
 def distance_image(depth: np.ndarray, K) -> np.ndarray:

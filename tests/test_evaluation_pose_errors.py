@@ -75,19 +75,21 @@ def test_adi_of_a_non_orthonormal_estimate_uses_its_own_posed_points():
     np.testing.assert_allclose(pose_errors.adi_error(T_est, T_gt, points), expected, rtol=1e-12)
 
 
-def test_chunked_batches_equal_one_estimate_at_a_time(monkeypatch):
+def test_batched_errors_equal_one_estimate_at_a_time():
     points = random_points(3, 500)
     T_est, T_gt = random_poses(4, 9), random_poses(5, 9)
     K = np.array([[600.0, 0.0, 320.0], [0.0, 610.0, 240.0], [0.0, 0.0, 1.0]])
     symmetries = pose_errors.symmetry_transformations(discrete=[np.diag([-1.0, -1.0, 1.0, 1.0])])
-    whole = [pose_errors.add_error(T_est, T_gt, points), pose_errors.adi_error(T_est, T_gt, points),
-             pose_errors.mssd_error(T_est, T_gt, points, symmetries),
-             pose_errors.mspd_error(T_est, T_gt, points, K, symmetries)]
-    monkeypatch.setattr(pose_errors, "CHUNK_POINTS", 700)  # forces one estimate per chunk
-    chunked = [pose_errors.add_error(T_est, T_gt, points), pose_errors.adi_error(T_est, T_gt, points),
-               pose_errors.mssd_error(T_est, T_gt, points, symmetries),
-               pose_errors.mspd_error(T_est, T_gt, points, K, symmetries)]
-    for a, b in zip(whole, chunked):
+
+    def errors(T_a, T_b):
+        return [pose_errors.add_error(T_a, T_b, points), pose_errors.adi_error(T_a, T_b, points),
+                pose_errors.mssd_error(T_a, T_b, points, symmetries),
+                pose_errors.mspd_error(T_a, T_b, points, K, symmetries),
+                pose_errors.projection_error(T_a, T_b, points, K)]
+
+    whole = errors(T_est, T_gt)
+    single = [np.concatenate(values) for values in zip(*(errors(T_est[i], T_gt[i]) for i in range(len(T_est))))]
+    for a, b in zip(whole, single):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
 
 
