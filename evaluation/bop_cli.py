@@ -17,8 +17,10 @@ import math
 import sys
 from pathlib import Path
 
+from paz6d.backend.files import write_csv_atomically, write_json_atomically
 from paz6d.backend.paths import check_output_file, check_output_folder, check_plain_name
 from paz6d.cli_errors import shorten
+from paz6d.datasets.bop.results import read_pose_results
 
 METRIC_NAMES = ("vsd", "mssd", "mspd", "add")
 SKIPPED_ROWS_IN_JSON = 100
@@ -114,7 +116,6 @@ def write_errors_csv(evaluation, results, path: Path) -> Path:
     """Writes ERRORS.csv atomically: one row per evaluated estimate paired with a GT instance."""
     from evaluation.bop import ERROR_COLUMNS
 
-    from paz6d.backend.files import write_csv_atomically
 
     rows = ([row["scene_id"], row["im_id"], row["obj_id"], repr(float(results.scores[row["estimate"]]))]
             + ["" if row[name] is None else repr(row[name]) for name in ERROR_COLUMNS]
@@ -155,8 +156,6 @@ def run(args: argparse.Namespace) -> int:
     """
     from evaluation import bop
     from evaluation.bop_data import load_evaluation_data
-    from paz6d.backend.files import write_json_atomically
-    from paz6d.datasets.bop.results import read_pose_results
 
     check_arguments(args)
     data = load_evaluation_data(args.dataset, args.split, args.targets)

@@ -5,8 +5,8 @@ Examples:
     paz6d evaluate voc --annotations Annotations/ --detections results/ --iou 0.5 --method 11point \
         --out voc.json --plots plots/
 
-The JSON is written atomically (temporary file, then ``os.replace``). The heavy modules are
-imported in :func:`run`, so building the parser stays cheap.
+The JSON is written atomically (temporary file, then ``os.replace``). The scoring modules are numpy
+only; matplotlib loads when plots are drawn, so building the parser stays cheap.
 """
 
 from __future__ import annotations
@@ -16,7 +16,10 @@ import importlib
 import importlib.util
 from pathlib import Path
 
+from evaluation import coco, detection_plots, voc
+
 from paz6d.backend.files import finite_or_none, write_json_atomically
+from paz6d.backend.paths import check_output_file, check_output_folder
 
 _BOP_MODULE = "evaluation.bop_cli"
 
@@ -74,7 +77,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_coco(args: argparse.Namespace) -> int:
-    from evaluation import coco
 
     evaluation = coco.evaluate_files(args.gt, args.results, args.iou_type)
     per_class = evaluation.per_category_ap()
@@ -89,7 +91,6 @@ def _run_coco(args: argparse.Namespace) -> int:
                        "per_class_ap": per_class}, indent=2)
     print(f"wrote {args.out}")
     if args.plots is not None:
-        from evaluation import detection_plots
 
         for path in detection_plots.plot_coco(evaluation, args.plots):
             print(f"wrote {path}")
@@ -97,7 +98,6 @@ def _run_coco(args: argparse.Namespace) -> int:
 
 
 def _run_voc(args: argparse.Namespace) -> int:
-    from evaluation import voc
 
     names = voc.read_class_names(args.class_names) if args.class_names is not None else None
     evaluation = voc.evaluate_directories(args.annotations, args.detections, args.iou, args.method, args.box_format,
@@ -119,7 +119,6 @@ def _run_voc(args: argparse.Namespace) -> int:
                        "plus_one": args.plus_one, "per_class": per_class, "mAP": mean}, indent=2)
     print(f"wrote {args.out}")
     if args.plots is not None:
-        from evaluation import detection_plots
 
         for path in detection_plots.plot_voc(evaluation, args.plots):
             print(f"wrote {path}")
@@ -132,6 +131,10 @@ def run(args: argparse.Namespace) -> int:
     Raises:
         ValueError: for malformed input files, naming the file (and line or entry).
     """
+    if args.evaluate_command in ("coco", "voc"):  # bop checks its own flags first
+        check_output_file(args.out, "--out")
+        if args.plots is not None:
+            check_output_folder(args.plots, "--plots")
     if args.evaluate_command == "coco":
         return _run_coco(args)
     if args.evaluate_command == "voc":

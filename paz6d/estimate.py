@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.paths import check_output_file, check_plain_name
+from paz6d.aae.codebook import Codebook
+from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION
 
@@ -72,7 +74,7 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
     """
     from tqdm.auto import tqdm
 
-    from paz6d.datasets.bop import BOPDataset  # here: the image reader loads OpenCV, which `--help` does not need
+    from paz6d.datasets.bop.reader import BOPDataset  # here: the image reader loads OpenCV, which `--help` does not need
 
     if box not in BOXES:
         raise ValueError(f"box: expected one of {sorted(BOXES)}, got {box!r}")
@@ -125,13 +127,11 @@ def run_object_id(run_dir: Path, method: str) -> int | None:
     """
     if method == "aae":
         from paz6d.aae import run_dir as aae_run_dir
-        from paz6d.aae.codebook import Codebook
 
         mesh = aae_run_dir.read_config(run_dir)["mesh"]
         aae_run_dir.read_object(run_dir)
         Codebook.load(aae_run_dir.codebook_path(run_dir))
     else:
-        from paz6d.keypointnet import run_dir as keypointnet_run_dir
 
         mesh = keypointnet_run_dir.read_config(run_dir).get("mesh_path")
         keypointnet_run_dir.read_keypoints(run_dir)

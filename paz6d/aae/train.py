@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.aae import run_dir as run_files
+from paz6d.aae.codebook import fibonacci_sphere, look_at_rotations
 from paz6d.aae.config import QUICK, AAEConfig
 from paz6d.backend.files import read_cache, save_npz_atomically
 
@@ -59,7 +60,6 @@ def _object_geometry(run_dir: Path, mesh_path: Path, mesh_scale: float, seed: in
 
 def _views(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, geometry, workers: int,
            platform: str | None, progress: bool) -> dict:
-    from paz6d.aae.codebook import fibonacci_sphere, look_at_rotations
     from paz6d.aae.views import render_views
 
     path = run_files.views_path(run_dir)

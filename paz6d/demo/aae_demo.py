@@ -23,6 +23,7 @@ import numpy as np
 
 from paz6d.aae import run_dir as aae_run_dir
 from paz6d.datasets.bop.units import MM_PER_M
+from paz6d.datasets.bop.models import load_models_info
 from paz6d.demo.report import AUC_MAX_THRESHOLD, number, pose_rows, print_rows, score_poses, write_report
 
 TRAIN_SEED = 0
@@ -37,7 +38,7 @@ def _stage(message: str) -> None:
 
 def _test_targets(dataset_root: Path) -> list[dict]:
     """Every annotated instance with visible fraction >= 0.1: image, camera, GT pose and GT box."""
-    from paz6d.datasets.bop import BOPDataset
+    from paz6d.datasets.bop.reader import BOPDataset
 
     targets = []
     for sample in BOPDataset(dataset_root, split="test"):
@@ -201,7 +202,6 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     timings["estimation_seconds"] = time.perf_counter() - tick
 
     _stage("5/5 scoring and plots")
-    from paz6d.datasets.bop import load_models_info
 
     points = aae_run_dir.read_object(out / "model")["vertices"]
     diameter = load_models_info(out / "mesh" / "models_info.json")[OBJECT_ID].diameter

@@ -23,6 +23,7 @@ import numpy as np
 from paz6d.backend.files import finite_or_none, new_figure, save_figure_atomically
 from paz6d.demo.report import number, pose_rows, print_rows, score_poses, write_report
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
+from paz6d.keypointnet.train import KeypointTraining, train_keypointnet
 
 TEST_SEED_OFFSET = 1_000_003  # test images never share a seed with training/validation views
 
@@ -131,7 +132,6 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
     import_tensorflow()
     from paz6d.backend.mesh import diameter, load_mesh
     from paz6d.keypointnet.views import ViewSampling, render_test_images
-    from paz6d.keypointnet.train import KeypointTraining, train_keypointnet
 
     started = time.perf_counter()
     out_dir = Path(out_dir)

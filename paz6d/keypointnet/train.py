@@ -31,9 +31,12 @@ import numpy as np
 
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.backend.paths import check_output_folder, check_plain_name
+from paz6d.backend.farthest_points import farthest_point_sampling
+from paz6d.backend.transform import apply, compose, invert
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.keypointnet import run_dir as run_files
+from paz6d.processors.predict import predict_in_batches
 
 CONFIGS: dict[str, dict] = {
     # Demo budget (`paz6d demo --keypoints` under 15 minutes on 2 CPU cores): see docs/keypointnet.md.
@@ -277,7 +280,6 @@ def fixed_crops(views, seed: int, count: int | None = None):
 def predict_crops(model, images: np.ndarray, batch_size: int = 32) -> dict[str, np.ndarray]:
     """Runs the model over ``(V, S, S, 3)`` crops in batches; numpy outputs."""
     from paz6d.keypointnet.model import inference_function
-    from paz6d.processors.predict import predict_in_batches
 
     return predict_in_batches(inference_function(model), images, batch_size)
 
@@ -290,7 +292,6 @@ def cross_view_errors(uv, depth, K, T_model2cam) -> np.ndarray:
     two distances are averaged).
     """
     from paz6d.backend.camera import project_points, unproject
-    from paz6d.backend.transform import apply, compose, invert
 
     pairs = len(uv) // 2
     errors = np.zeros((pairs, uv.shape[1]))
@@ -403,7 +404,6 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
 
 def supervised_keypoints(mesh, count: int, seed: int) -> np.ndarray:
     """``(count, 3)`` farthest-point samples (metres) of 5000 points drawn on the mesh surface."""
-    from paz6d.backend.farthest_points import farthest_point_sampling
     from paz6d.backend.mesh import sample_points
 
     surface = sample_points(mesh, 5000, seed)
