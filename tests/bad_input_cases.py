@@ -762,6 +762,10 @@ def evaluate_coco_cases() -> list[Case]:
         "--plots": [(("{world}/results.csv",), "results.csv")],
         "--iou-type": [(("mask",), "")],
     })
+    found.append(Case("evaluate-coco-out-under-file", replace_flag(EVALUATE_COCO, "--out", "{world}/results.csv/x.json"),
+                      None, ("results.csv",)))
+    found.append(Case("evaluate-coco-out-fifo", replace_flag(EVALUATE_COCO, "--out", "{case}/fifo"),
+                      lambda world, folder: os.mkfifo(folder / "fifo"), ("fifo",)))
     return found
 
 
@@ -796,6 +800,8 @@ def evaluate_voc_cases() -> list[Case]:
         "--out": [(("{world}/voc",), "voc")],
         "--plots": [(("{world}/results.csv",), "results.csv")],
     })
+    found.append(Case("evaluate-voc-out-symlink", replace_flag(EVALUATE_VOC, "--out", "{case}/link.json"),
+                      lambda world, folder: os.symlink(world.results, folder / "link.json"), ("link.json",)))
     return found
 
 
@@ -856,6 +862,13 @@ def train_cases() -> list[Case]:
         "--split": [(("nope",), "nope"), (("../..",), ""), (("",), "")],
         "--object-id": [(("9",), "9"), (("0",), "")],
     }, setup=lambda world, folder: copy_bop(world, folder))
+    for name, base in (("aae", TRAIN_AAE), ("keypointnet", TRAIN_KEYPOINTNET)):
+        found.append(Case(f"train-{name}-mesh-garbage", replace_flag(base, "--mesh", "{case}/bad.ply"),
+                          case_file("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 2\nend_header\n1 2\n"),
+                          ("bad.ply",)))
+        found.append(Case(f"train-{name}-out-foreign-run", replace_flag(base, "--out", "{case}/run"),
+                          lambda world, folder, other=("keypointnet" if name == "aae" else "aae"):
+                          shutil.copytree(getattr(world, f"{other}_run"), folder / "run"), ("config.json",)))
     found.append(Case("train-aae-dataset-no-scene-gt", TRAIN_AAE_DATASET,
                       bop_file("test/000000/scene_gt.json", None), ("scene_gt.json",)))
     found.append(Case("train-aae-dataset-no-models", TRAIN_AAE_DATASET, bop_file("models", None), ("models",)))
