@@ -295,3 +295,18 @@ def test_pipeline_steps_can_be_replaced_and_the_camera_given_per_call(toy_run):
         estimator(image, box)
     estimator.insert("pose_from_codebook", lookup)
     assert estimator(image, box) == unrefined
+
+
+def test_boxes_far_larger_than_the_image_are_rejected_at_once(toy_run):
+    import time
+
+    from paz6d.aae.pipeline import ImplicitPose6D
+
+    root, _, _ = toy_run
+    estimator = ImplicitPose6D(root / "run", np.array([[300.0, 0, 79.5], [0, 300.0, 59.5], [0, 0, 1]]))
+    image = np.zeros((120, 160, 3), np.uint8)
+    for box in ((-1e9, -1e9, 1e9, 1e9), (-1e5, -1e5, 1e5, 1e5)):
+        started = time.perf_counter()
+        with pytest.raises(ValueError, match="larger than 4 times the 160x120 image"):
+            estimator(image, box)
+        assert time.perf_counter() - started < 1.0  # was > 10 minutes (blur and resampling grew with the box)
