@@ -65,7 +65,7 @@ def bare_loop(config: GenerationConfig, producer: ImageProducer, count: int) -> 
     for sampled in scenes:
         for node in nodes:
             node.mesh.is_visible = False
-        for mesh_index, pose in zip(sampled.object_indices, sampled.poses):
+        for mesh_index, pose in zip(sampled.object_indices, sampled.T_model2cam):
             nodes[mesh_index].mesh.is_visible = True
             scene.set_pose(nodes[mesh_index], flip @ pose)
         renderer.render(scene)

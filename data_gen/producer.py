@@ -42,7 +42,7 @@ class RenderedImage:
     masks: np.ndarray
     visible_masks: np.ndarray
     object_ids: list[int]
-    poses: np.ndarray
+    T_model2cam: np.ndarray
 
 
 def degradation(config: GenerationConfig) -> SequentialProcessor:
@@ -83,8 +83,8 @@ class ImageProducer:
         lighting = random_lighting(generator, "scene", config.light_count, float(np.mean(assets.distance)))
         tints = np.concatenate([random_tints(generator, len(scene.object_indices), config.color_jitter),
                                 random_colors(generator, len(scene.clutter_indices))])
-        objects = [(assets.meshes[i], pose) for i, pose in zip(scene.object_indices, scene.poses)]
-        objects += [(assets.distractors[i], pose) for i, pose in zip(scene.clutter_indices, scene.clutter_poses)]
+        objects = [(assets.meshes[i], pose) for i, pose in zip(scene.object_indices, scene.T_model2cam)]
+        objects += [(assets.distractors[i], pose) for i, pose in zip(scene.clutter_indices, scene.clutter_T_model2cam)]
         if scene.support is not None:
             objects.append(scene.support)
             tints = np.concatenate([tints, np.ones((1, 3))])
@@ -94,7 +94,7 @@ class ImageProducer:
         share_generator(self.degrade, generator)
         rgb = self.degrade(alpha_blend(out.rgb, out.alpha, background))
         return RenderedImage(index, rgb, depth_png_from_lengths(out.depth, config.depth_scale, units="m"), out.masks,
-                             out.visible_masks, [assets.object_ids[i] for i in scene.object_indices], scene.poses)
+                             out.visible_masks, [assets.object_ids[i] for i in scene.object_indices], scene.T_model2cam)
 
     def encode(self, image: RenderedImage) -> dict[str, bytes]:
         """Every file of the image as ``{path relative to the output folder: bytes}``; the shard,
@@ -116,12 +116,12 @@ class ImageProducer:
                 files[paths[f"crop_rgb/{instance}"]] = image_bytes(crop_square(image.rgb, window, config.crop_size))
                 files[paths[f"crop_mask/{instance}"]] = image_bytes(
                     crop_square(full.astype(np.uint8) * 255, window, config.crop_size) > 127)
-                pose = image.poses[instance]
+                pose = image.T_model2cam[instance]
                 crops.append({"inst_id": instance, "obj_id": image.object_ids[instance], "window": list(window),
                               "cam_K": crop_intrinsics(self.K, window, config.crop_size).ravel().tolist(),
                               **pose_entry(pose, units="m"), "visib_fract": info["visib_fract"]})
         files[bop_writer.shard_relative_path(config, image.index)] = bop_writer.image_shard(
-            config, image.index, self.K, image.object_ids, image.poses, infos, image.visible_masks, crops)
+            config, image.index, self.K, image.object_ids, image.T_model2cam, infos, image.visible_masks, crops)
         return files
 
 

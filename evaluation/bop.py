@@ -367,13 +367,13 @@ def report_pairing(pairs: EvaluationPairs) -> np.ndarray:
 
 def _pose_arrays(data: BopEvaluationData, results: PoseResults, pairs: EvaluationPairs, gt_keys: np.ndarray,
                  rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    T_est = results.poses[pairs.estimate[rows]]
+    T_est = results.T_model2cam[pairs.estimate[rows]]
     T_gt = np.empty((len(rows), 4, 4))
     K = np.empty((len(rows), 3, 3))
     for out, gt in enumerate(pairs.gt[rows]):
         scene_id, im_id, index = gt_keys[gt]
         image = data.images[(int(scene_id), int(im_id))]
-        T_gt[out] = image.poses[index]
+        T_gt[out] = image.T_model2cam[index]
         K[out] = image.K
     return T_est, T_gt, K
 
@@ -450,9 +450,9 @@ def _vsd_errors(data: BopEvaluationData, results: PoseResults, pairs: Evaluation
                 estimate, gt = int(pairs.estimate[row]), int(pairs.gt[row])
                 obj_id = int(gt_obj_ids[gt])
                 if estimate not in est_depths:
-                    est_depths[estimate] = _render_depth_mm(renderer, data, obj_id, results.poses[estimate], image.K)
+                    est_depths[estimate] = _render_depth_mm(renderer, data, obj_id, results.T_model2cam[estimate], image.K)
                 if gt not in gt_depths:
-                    gt_depths[gt] = _render_depth_mm(renderer, data, obj_id, image.poses[gt_keys[gt, 2]], image.K)
+                    gt_depths[gt] = _render_depth_mm(renderer, data, obj_id, image.T_model2cam[gt_keys[gt, 2]], image.K)
                 errors[row] = pose_errors.vsd_error(depth_test, est_depths[estimate], gt_depths[gt], image.K,
                                                     settings.vsd_delta, taus, data.diameters[obj_id])
     finally:

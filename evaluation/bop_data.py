@@ -34,7 +34,7 @@ class ImageGroundTruth:
         K: ``(3, 3)`` intrinsics (px).
         depth_scale: millimetres per depth-image unit (``None`` when not given).
         obj_ids: ``(G,)`` object id of each instance (``scene_gt.json`` order).
-        poses: ``(G, 4, 4)`` ``T_model2cam`` with translations in millimetres.
+        T_model2cam: ``(G, 4, 4)`` poses with translations in millimetres.
         visib_fract: ``(G,)`` visible fraction of each instance (``scene_gt_info.json``).
     """
 
@@ -43,7 +43,7 @@ class ImageGroundTruth:
     K: np.ndarray
     depth_scale: float | None
     obj_ids: np.ndarray
-    poses: np.ndarray
+    T_model2cam: np.ndarray
     visib_fract: np.ndarray
 
 

@@ -166,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
                     depth_test[row:row + 30, col:col + 40] = 0.0
             record = {name: [] for name in ("estimate_ids", "obj_ids", "diameters", "R_est", "t_est", "R_gt", "t_gt",
                                             "depth_est", "depth_gt")}
-            for obj_id, T_gt in zip(image.obj_ids, image.poses):
+            for obj_id, T_gt in zip(image.obj_ids, image.T_model2cam):
                 depth_gt = render_mm(int(obj_id), T_gt, image.K)
                 for _ in range(args.estimates_per_instance):
                     T_est = perturbed(T_gt, generator)

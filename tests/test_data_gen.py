@@ -73,7 +73,7 @@ def test_poses_round_trip_through_the_bop_reader(generated):
     for index, sample in enumerate(samples):
         scene = sample_scene(image_generator(config.seed, index), assets, config)
         assert [o.obj_id for o in sample.objects] == [assets.object_ids[i] for i in scene.object_indices]
-        for obj, T in zip(sample.objects, scene.poses):
+        for obj, T in zip(sample.objects, scene.T_model2cam):
             np.testing.assert_allclose(obj.T_model2cam, T, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(sample.K, np.asarray(config.K))
         assert sample.image.shape == (72, 96, 3) and sample.depth.dtype == np.float32
@@ -239,7 +239,7 @@ def test_sampled_objects_stay_in_frame_and_apart(lmo_meshes, tmp_path):
         scene = sample_scene(image_generator(3, index), assets, config)
         assert 1 <= len(scene.object_indices) <= 3
         centres = []
-        for mesh_index, T in zip(scene.object_indices, scene.poses):
+        for mesh_index, T in zip(scene.object_indices, scene.T_model2cam):
             pixels = transform_and_project(assets.meshes[mesh_index].vertices, T, K)
             assert pixels.min(axis=0).min() >= -0.5 and pixels[:, 0].max() <= 119.5 and pixels[:, 1].max() <= 89.5
             centre = T[:3, :3] @ assets.centres[mesh_index] + T[:3, 3]

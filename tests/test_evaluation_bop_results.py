@@ -35,7 +35,7 @@ def test_round_trip_keeps_every_value(tmp_path):
     np.testing.assert_array_equal(results.scores, scores)
     np.testing.assert_array_equal(results.obj_ids, [5, 6, 5, 1, 12])
     np.testing.assert_array_equal(results.line_numbers, [2, 3, 4, 5, 6])
-    np.testing.assert_array_equal(results.poses[:, :3, 3], translations)
+    np.testing.assert_array_equal(results.T_model2cam[:, :3, 3], translations)
 
 
 def test_metres_are_written_as_millimetres_and_read_back(tmp_path):

@@ -73,7 +73,7 @@ def test_objects_stand_upright_on_the_table_inside_the_image():
         eye = invert(T_table2cam)[:3, 3]  # looking at a point within 0.1 m of the table origin
         elevation = np.degrees(np.arcsin(eye[2] / np.linalg.norm(eye)))
         assert len(scene.object_indices) >= 1
-        for index, T in zip(scene.object_indices, scene.poses):
+        for index, T in zip(scene.object_indices, scene.T_model2cam):
             T_model2table = invert(T_table2cam) @ T
             np.testing.assert_allclose(T_model2table[:3, 2], [0, 0, 1], atol=1e-9)  # upright
             lowest = apply(T_model2table, assets.outlines[index])[:, 2].min()

@@ -16,18 +16,18 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from paz6d.aae.model import crop_object
-from paz6d.aae.views import render_poses
+from paz6d.aae.views import render_at_transforms
 from paz6d.backend.square_crop import crop_intrinsics, square_window
 from paz6d.datasets.bop import BOPDataset
 
 
 @dataclass(frozen=True)
 class CropPairs:
-    """``inputs`` and ``targets``: ``(N, S, S, 3)`` uint8 crops; ``poses``: ``(N, 4, 4)`` ``T_model2cam``."""
+    """``inputs`` and ``targets``: ``(N, S, S, 3)`` uint8 crops; ``T_model2cam``: ``(N, 4, 4)`` poses."""
 
     inputs: np.ndarray
     targets: np.ndarray
-    poses: np.ndarray
+    T_model2cam: np.ndarray
 
     def __len__(self) -> int:
         return len(self.inputs)
@@ -64,6 +64,6 @@ def dataset_pairs(root: str | Path, obj_id: int, mesh_path: str | Path, mesh_sca
                   progress: bool = True) -> CropPairs:
     """Input crops from the data set and clean targets rendered through the same crop windows."""
     inputs, Ks, poses = dataset_crops(root, obj_id, crop_size, padding, split, progress=progress)
-    targets, _ = render_poses(mesh_path, mesh_scale, Ks, poses, crop_size, workers, platform, progress=progress,
+    targets, _ = render_at_transforms(mesh_path, mesh_scale, Ks, poses, crop_size, workers, platform, progress=progress,
                               description="render targets")
     return CropPairs(inputs, targets, poses)

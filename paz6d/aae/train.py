@@ -112,7 +112,7 @@ def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Pat
         return CropPairs(cached["inputs"], cached["targets"], cached["poses"])
     pairs = dataset_pairs(dataset, obj_id, mesh_path, mesh_scale, config.crop_size, config.padding, split, workers,
                           platform, progress)
-    save_npz_atomically(path, inputs=pairs.inputs, targets=pairs.targets, poses=pairs.poses)
+    save_npz_atomically(path, inputs=pairs.inputs, targets=pairs.targets, poses=pairs.T_model2cam)
     return pairs
 
 

@@ -106,26 +106,26 @@ class _ObjectRenderer:
 
 def _render_chunk(state: _ObjectRenderer, task: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Worker task: renders the object at each ``(K, pose)`` of ``task``."""
-    Ks, poses = task
+    Ks, T_model2cam = task
     size = state.renderer.width
-    rgb = np.empty((len(poses), size, size, 3), np.uint8)
-    alpha = np.empty((len(poses), size, size), np.uint8)
-    for index, (K, T) in enumerate(zip(Ks, poses)):
+    rgb = np.empty((len(T_model2cam), size, size, 3), np.uint8)
+    alpha = np.empty((len(T_model2cam), size, size), np.uint8)
+    for index, (K, T) in enumerate(zip(Ks, T_model2cam)):
         output = state.renderer.render(K, [(state.mesh, T)], masks=False)
         rgb[index], alpha[index] = output.rgb, output.alpha
     return rgb, alpha
 
 
-def render_poses(mesh_path: str | Path, mesh_scale: float, Ks, poses, size: int, workers: int = 2,
-                 platform: str | None = None, chunk: int = 32, progress: bool = True,
-                 description: str = "render") -> tuple[np.ndarray, np.ndarray]:
-    """Renders the object alone (black background, default lighting) once per ``(K, pose)``.
+def render_at_transforms(mesh_path: str | Path, mesh_scale: float, Ks, T_model2cam, size: int, workers: int = 2,
+                         platform: str | None = None, chunk: int = 32, progress: bool = True,
+                         description: str = "render") -> tuple[np.ndarray, np.ndarray]:
+    """Renders the object alone (black background, default lighting) once per ``(K, T_model2cam)``.
 
     Args:
         mesh_path: mesh file (PLY/OBJ/GLB...).
         mesh_scale: factor to metres (0.001 for BOP millimetre meshes).
         Ks: ``(N, 3, 3)`` intrinsics of ``size × size`` images.
-        poses: ``(N, 4, 4)`` ``T_model2cam`` (metres).
+        T_model2cam: ``(N, 4, 4)`` object poses (metres).
         size: image side in pixels.
         workers: rendering processes (:func:`paz6d.synthesis.workers.run_in_workers`); 0 renders in
             this process, after loading TensorFlow through the RTLD_LOCAL guard so that the two can share it.
@@ -135,16 +135,16 @@ def render_poses(mesh_path: str | Path, mesh_scale: float, Ks, poses, size: int,
     Returns:
         ``rgb (N, size, size, 3)`` uint8 on black and ``alpha (N, size, size)`` uint8 coverage (255 = object).
     """
-    poses = as_array(poses, "poses", (4, 4)).reshape(-1, 4, 4)
-    Ks = np.broadcast_to(as_array(Ks, "Ks", (3, 3)), (len(poses), 3, 3))
+    T_model2cam = as_array(T_model2cam, "T_model2cam", (4, 4)).reshape(-1, 4, 4)
+    Ks = np.broadcast_to(as_array(Ks, "Ks", (3, 3)), (len(T_model2cam), 3, 3))
     if int(workers) < 0:
         raise ValueError(f"workers: expected 0 (this process) or more rendering processes, got {workers}")
     if int(workers) == 0:
         from paz6d.backend.tensorflow_guard import import_tensorflow
 
         import_tensorflow()
-    tasks = [(Ks[start:start + chunk], poses[start:start + chunk]) for start in range(0, len(poses), chunk)]
-    with progress_bar(len(poses), description, "view", progress) as bar:
+    tasks = [(Ks[start:start + chunk], T_model2cam[start:start + chunk]) for start in range(0, len(T_model2cam), chunk)]
+    with progress_bar(len(T_model2cam), description, "view", progress) as bar:
         results = run_in_workers(_ObjectRenderer, (str(Path(mesh_path).resolve()), float(mesh_scale), size, platform),
                                  _render_chunk, tasks, int(workers), bar, task_size=lambda task: len(task[1]))
     return np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results])
@@ -152,10 +152,10 @@ def render_poses(mesh_path: str | Path, mesh_scale: float, Ks, poses, size: int,
 
 def render_views(mesh_path: str | Path, mesh_scale: float, rotations, geometry: ViewGeometry, workers: int = 2,
                  platform: str | None = None, progress: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Renders the object at each rotation ``(V, 3, 3)`` on the optical axis (see :func:`render_poses`)."""
+    """Renders the object at each rotation ``(V, 3, 3)`` on the optical axis (see :func:`render_at_transforms`)."""
     rotations = as_array(rotations, "rotations", (3, 3)).reshape(-1, 3, 3)
-    poses = np.tile(np.eye(4), (len(rotations), 1, 1))
-    poses[:, :3, :3] = rotations
-    poses[:, 2, 3] = geometry.distance
-    return render_poses(mesh_path, mesh_scale, geometry.K, poses, geometry.render_size, workers, platform,
-                        progress=progress, description="render views")
+    T_model2cam = np.tile(np.eye(4), (len(rotations), 1, 1))
+    T_model2cam[:, :3, :3] = rotations
+    T_model2cam[:, 2, 3] = geometry.distance
+    return render_at_transforms(mesh_path, mesh_scale, geometry.K, T_model2cam, geometry.render_size, workers, platform,
+                                progress=progress, description="render views")

@@ -54,17 +54,17 @@ class Scene:
 
     Attributes:
         object_indices: index into ``assets.meshes`` of each annotated object.
-        poses: ``(N, 4, 4)`` ``T_model2cam`` of the annotated objects (metres, OpenCV).
+        T_model2cam: ``(N, 4, 4)`` poses of the annotated objects (metres, OpenCV).
         clutter_indices: index into ``assets.distractors`` of each distractor/occluder.
-        clutter_poses: ``(C, 4, 4)`` their poses.
+        clutter_T_model2cam: ``(C, 4, 4)`` their poses (metres, OpenCV).
         support: ``(mesh, T_model2cam)`` of a surface the objects rest on (a tabletop scene's table,
             :mod:`paz6d.synthesis.tabletop`), rendered untinted and unannotated; ``None`` for floating scenes.
     """
 
     object_indices: list[int]
-    poses: np.ndarray
+    T_model2cam: np.ndarray
     clutter_indices: list[int]
-    clutter_poses: np.ndarray
+    clutter_T_model2cam: np.ndarray
     support: tuple | None = None
 
 

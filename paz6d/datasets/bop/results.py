@@ -65,7 +65,7 @@ class PoseResults:
         return len(self.scores)
 
     @property
-    def poses(self) -> np.ndarray:
+    def T_model2cam(self) -> np.ndarray:
         """``(E, 4, 4)`` ``T_model2cam`` with translations in :attr:`units`."""
         T = np.tile(np.eye(4), (len(self), 1, 1))
         T[:, :3, :3] = self.rotations
