@@ -27,7 +27,7 @@ def _random_run(folder: Path, settings: dict) -> Path:
     """A run directory with a randomly initialised KeypointNet of ``settings`` and a random 3D keypoint set."""
     from paz6d.keypointnet.model import build_keypointnet, save_keypointnet
     from paz6d.keypointnet import run_dir as run_files
-    from paz6d.keypointnet.train import resolve_precision
+    from paz6d.keypointnet.config import resolve_precision
 
     model = build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
                               settings["downsample"], tuple(settings["dilations"]),
@@ -45,7 +45,7 @@ def measure(name: str, repeats: int, batch: int) -> dict:
     from paz6d.backend.tensorflow_guard import import_keras
     from paz6d.keypointnet.pipeline import KeypointPose6D
     from paz6d.keypointnet.views import DEFAULT_CAMERA
-    from paz6d.keypointnet.train import CONFIGS
+    from paz6d.keypointnet.config import CONFIGS
 
     keras = import_keras()
     keras.utils.set_random_seed(0)

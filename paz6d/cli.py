@@ -17,7 +17,7 @@ from paz6d.cli_errors import EXPECTED_ERRORS, report
 COMMANDS = {
     "generate": ("data_gen.cli", "render a synthetic BOP-format data set from meshes"),
     "train": ({"aae": ("paz6d.aae.command", "Augmented Autoencoder (implicit 6D pose)"),
-               "keypointnet": ("paz6d.keypointnet.train", "KeypointNet keypoint discovery"),
+               "keypointnet": ("paz6d.keypointnet.command", "KeypointNet keypoint discovery"),
                "emotion": ("paz6d.faces.emotion_command", "mini-Xception emotion classifier"),
                "ssd": ("paz6d.ssd.train", "SSD single-shot object detector")},
               "train a model"),

@@ -127,7 +127,7 @@ def _command_configs() -> dict[tuple[str, ...], list[tuple[type, tuple[str, ...]
     from paz6d.aae.config import AAETraining
     from paz6d.demo.command import DemoOptions
     from paz6d.faces.emotion_config import EmotionTraining
-    from paz6d.keypointnet.train import KeypointTraining
+    from paz6d.keypointnet.config import KeypointTraining
 
     return {("generate",): [(GenerationConfig, ()), (GenerationRun, ())], ("train", "aae"): [(AAETraining, ())],
             ("train", "keypointnet"): [(KeypointTraining, ("overrides",))],

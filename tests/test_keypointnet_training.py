@@ -113,7 +113,8 @@ def _losses(run_dir) -> list[float]:
 @pytest.mark.parametrize("mode", ["supervised", "discovery"])
 def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path, tmp_path):
     from paz6d.keypointnet.pipeline import KeypointPose6D
-    from paz6d.keypointnet.train import KeypointTraining, train_keypointnet
+    from paz6d.keypointnet.config import KeypointTraining
+    from paz6d.keypointnet.train import train_keypointnet
 
     job = KeypointTraining(tmp_path / mode, mesh_path, mesh_scale=1e-3, mode=mode, seed=0, workers=0, steps=40,
                            progress=False, overrides=TINY)
@@ -167,7 +168,8 @@ def test_lifting_crops_are_cut_as_at_inference_with_matching_intrinsics():
 
 
 def test_a_run_directory_refuses_a_different_run(mesh_path, tmp_path):
-    from paz6d.keypointnet.train import KeypointTraining, _prepare_run_dir
+    from paz6d.keypointnet.config import KeypointTraining
+    from paz6d.keypointnet.train import _prepare_run_dir
 
     job = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="supervised", overrides=TINY)
     _prepare_run_dir(job, job.settings(), 0.1, kv.ViewSampling(input_size=32))
@@ -206,7 +208,7 @@ def test_cross_view_errors_are_zero_for_geometrically_consistent_keypoints():
 
 def test_cli_arguments_and_clear_errors(tmp_path, capsys):
     from paz6d.cli import main
-    from paz6d.keypointnet.train import configure
+    from paz6d.keypointnet.command import configure
 
     parser = argparse.ArgumentParser()
     configure(parser)
@@ -269,7 +271,7 @@ def test_bop_object_views_crop_around_visible_instances(mesh_path, tmp_path):
 
 def test_precision_setting_resolves_auto_from_the_cpu(monkeypatch):
     from paz6d.keypointnet import model as kp
-    from paz6d.keypointnet.train import resolve_precision
+    from paz6d.keypointnet.config import resolve_precision
 
     assert resolve_precision("float32") == "float32" and resolve_precision("bfloat16") == "bfloat16"
     monkeypatch.setattr(kp, "native_bfloat16", lambda: True)

@@ -11,7 +11,6 @@ import csv
 import io
 import json
 import os
-import stat
 import tempfile
 import zipfile
 from contextlib import contextmanager

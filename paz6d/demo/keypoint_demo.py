@@ -23,7 +23,8 @@ import numpy as np
 from paz6d.backend.files import finite_or_none, new_figure, save_figure_atomically
 from paz6d.demo.report import number, pose_rows, print_rows, score_poses, write_report
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
-from paz6d.keypointnet.train import KeypointTraining, train_keypointnet
+from paz6d.keypointnet.config import KeypointTraining
+from paz6d.keypointnet.train import train_keypointnet
 
 TEST_SEED_OFFSET = 1_000_003  # test images never share a seed with training/validation views
 

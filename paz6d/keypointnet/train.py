@@ -1,4 +1,5 @@
-"""``paz6d train keypointnet``: KeypointNet keypoints for one object, trained with the shared Trainer.
+"""KeypointNet training: keypoints for one object, trained with the shared Trainer (the command
+``paz6d train keypointnet`` is :mod:`paz6d.keypointnet.command`, its settings :mod:`paz6d.keypointnet.config`).
 
 Two modes share the data, the network, the PnP pipeline and the evaluation:
 
@@ -16,149 +17,24 @@ The run directory (its files and formats: :mod:`paz6d.keypointnet.run_dir`) is w
 images, cut as at inference, from which the 3D keypoints are lifted) and the training metrics
 (keypoint consistency on held-out views). Re-running the same command resumes.
 
-This module is cheap to import: TensorFlow and the renderer are loaded inside :func:`run`.
+TensorFlow and the renderer are loaded inside :func:`train_keypointnet`.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
-from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
-from paz6d.backend.paths import check_output_folder, check_plain_name
 from paz6d.backend.farthest_points import farthest_point_sampling
+from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.backend.transform import apply, compose, invert
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
-from paz6d.datasets.bop.units import MM_PER_M
 from paz6d.keypointnet import run_dir as run_files
+from paz6d.keypointnet.config import (DISCOVERY_WEIGHTS, LIFTINGS, MAX_LIFTING_ERROR, SEPARATION_DELTA,
+                                      SEPARATION_DELTA_IMAGE, SUPERVISED_WEIGHTS, KeypointTraining,
+                                      resolve_precision)
 from paz6d.processors.predict import predict_in_batches
-
-CONFIGS: dict[str, dict] = {
-    # Demo budget (`paz6d demo --keypoints` under 15 minutes on 2 CPU cores): see docs/keypointnet.md.
-    "quick": {"num_keypoints": 16, "input_size": 128, "filters": 48, "downsample": 4, "context_stride": 8,
-              "dilations": (1, 2, 4, 1, 2, 4), "precision": "auto", "views": 4000, "validation_views": 100,
-              "lift_views": 300, "steps": 5000, "pairs": 8, "learning_rate": 5e-3, "ema_momentum": 0.998,
-              "checkpoint_every": 500, "sample_every": 500, "lifting": "triangulate"},
-    # Paper-sized network and schedule, for a GPU or a long CPU run.
-    "full": {"num_keypoints": 10, "input_size": 128, "filters": 64, "downsample": 2,
-             "dilations": (1, 1, 2, 4, 8, 16, 1, 2, 4, 8, 16, 1), "precision": "float32", "views": 20000,
-             "validation_views": 200, "lift_views": 1000, "steps": 60000, "pairs": 16, "learning_rate": 1e-3,
-             "ema_momentum": 0.999, "checkpoint_every": 2000, "sample_every": 2000, "lifting": "triangulate"},
-}
-MODES = ("discovery", "supervised")
-PRECISIONS = ("float32", "bfloat16")  # compute dtype of the network body (see build_keypointnet)
-LIFTINGS = ("triangulate", "median")
-#: A lifted keypoint is usable when its median re-projection error over the lifting views is below
-#: this fraction of the crop side.
-MAX_LIFTING_ERROR = 0.1
-#: Discovery loss weights (coordinates normalised to [-1, 1] as in the paper, 3D in object diameters).
-#: The separation hinge keeps keypoints ``separation_delta`` object diameters apart; with a weaker
-#: hinge (0.1 diameter, weight 1) every keypoint collapsed onto the object centre, which satisfies
-#: the consistency loss trivially.
-#: The network also escaped a 3D-only hinge by spreading keypoints along the viewing ray (depth) while
-#: their 2D positions stayed together, so the same hinge is applied to the 2D keypoints as well
-#: (``separation_image``, coordinates in [-1, 1]).
-DISCOVERY_WEIGHTS = {"consistency": 1.0, "pose": 0.2, "separation": 5.0, "separation_image": 5.0,
-                     "silhouette": 1.0, "variance": 0.1}
-SEPARATION_DELTA = 0.25  # object diameters
-SEPARATION_DELTA_IMAGE = 0.25  # [-1, 1] image units: 1/8 of the crop side
-#: Supervised loss weights (heatmap cross-entropy, coordinates in [-1, 1] units, depth code).
-SUPERVISED_WEIGHTS = {"heatmap": 1.0, "coordinates": 2.0, "depth": 1.0}
-
-
-@dataclass
-class KeypointTraining:
-    """One ``paz6d train keypointnet`` run (each field but ``overrides`` is a flag, see
-    :mod:`paz6d.cli_options`; ``config.json`` in the run directory records it).
-
-    With ``dataset``, :func:`run` cuts the views from the data set's images and fills in ``mesh``.
-    """
-
-    out: Path = option(help="run directory (re-run the command to resume)")
-    mesh: Path | None = option(None, "object mesh (PLY/OBJ/GLB); views are rendered on the fly", one_of="source")
-    dataset: Path | None = option(None, "BOP data set folder: views are cut from its images", one_of="source")
-    object_id: int | None = option(None, "with --dataset: BOP object id (default: the first)")
-    split: str | None = option(None, "with --dataset: split folder (default: train_pbr, else train)")
-    mesh_scale: float | None = option(None, "mesh file units to metres (default: 1 with --mesh, 0.001 with "
-                                            "--dataset, whose meshes are BOP millimetres)")
-    config: str = option("quick", "model and schedule size", choices=tuple(sorted(CONFIGS)))
-    mode: str = option("supervised", "discovery (the paper's, unsupervised) or supervised (farthest-point "
-                                     "keypoints)", choices=MODES)
-    seed: int = option(0, "seed of every random choice")
-    workers: int = option(2, "rendering worker processes (0: render in this process)")
-    steps: int | None = option(None, "training steps (default: the config's)")
-    progress: bool = option(True, "progress bars")
-    overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
-
-    def __post_init__(self):
-        if (self.mesh is None) == (self.dataset is None):
-            raise ValueError("mesh: expected exactly one of mesh and dataset")
-        if self.mesh_scale is None:
-            self.mesh_scale = 1.0 if self.dataset is None else 1.0 / MM_PER_M
-        if not np.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
-            raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
-        if self.seed < 0:
-            raise ValueError(f"seed: expected a non-negative integer, got {self.seed}")
-        if self.workers < 0:
-            raise ValueError(f"workers: expected 0 (render in this process) or a number of processes, "
-                             f"got {self.workers}")
-        if self.object_id is not None and self.object_id < 1:
-            raise ValueError(f"object_id: expected a BOP object id (a positive integer), got {self.object_id}")
-        if self.split is not None:
-            check_plain_name(self.split, "split")
-        self.settings()  # checks config, mode and steps
-
-    def settings(self) -> dict:
-        """The config's settings with ``overrides`` and ``steps`` applied."""
-        if self.config not in CONFIGS:
-            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
-        if self.mode not in MODES:
-            raise ValueError(f"mode: expected one of {MODES}, got {self.mode!r}")
-        settings = {**CONFIGS[self.config], **self.overrides}
-        if self.steps is not None:
-            if self.steps <= 0:
-                raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
-            settings["steps"] = int(self.steps)
-        return settings
-
-
-def resolve_precision(precision: str) -> str:
-    """``"float32"`` or ``"bfloat16"`` for a ``precision`` setting; ``"auto"`` is bfloat16 on CPUs that
-    compute it natively (:func:`paz6d.keypointnet.model.native_bfloat16`) when TensorFlow sees no GPU."""
-    if precision == "auto":
-        from paz6d.keypointnet.model import native_bfloat16, tf
-
-        return "bfloat16" if native_bfloat16() and not tf.config.list_physical_devices("GPU") else "float32"
-    if precision not in PRECISIONS:
-        raise ValueError(f"precision: expected 'auto' or one of {PRECISIONS}, got {precision!r}")
-    return precision
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    """Adds the ``paz6d train keypointnet`` flags (the fields of :class:`KeypointTraining`)."""
-    add_config_arguments(parser, KeypointTraining, exclude=("overrides",))
-
-
-def run(args: argparse.Namespace) -> int:
-    """Entry point of ``paz6d train keypointnet``."""
-    job = config_from_args(KeypointTraining, args, exclude=("overrides",))
-    with flags_in_errors(KeypointTraining):
-        check_output_folder(job.out, "out")
-        views = None
-        if job.dataset is not None:
-            from paz6d.keypointnet.dataset import bop_object_views
-
-            views, mesh, scale = bop_object_views(job.dataset, job.object_id, job.split,
-                                                  job.settings()["input_size"], job.mesh_scale)
-            job = replace(job, mesh=mesh, mesh_scale=scale, dataset=None)
-        summary = train_keypointnet(job, views=views)
-    print(json.dumps(summary, indent=2))
-    return 0
 
 
 # ------------------------------------------------------------------------------- run directory

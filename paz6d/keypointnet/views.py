@@ -313,7 +313,6 @@ def augmented_view(views: ViewSet, index: int, rng: np.random.Generator,
                    augmentation: Augmentation = Augmentation()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One augmented crop: ``image (S, S, 3) uint8``, ``mask (S, S) bool`` and its ``K (3, 3)``."""
     rgb, alpha, mask, K = _jitter_crop(views, index, rng, augmentation)
-    size = rgb.shape[0]
     if augmentation.background:
         share_generator(BACKGROUND, rng)
         picture = BACKGROUND(rgb, alpha)

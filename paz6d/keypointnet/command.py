@@ -1,0 +1,38 @@
+"""``paz6d train keypointnet``: flags from :class:`~paz6d.keypointnet.config.KeypointTraining` and the command.
+
+Light on purpose: building the parser imports only this module and the settings; the trainer
+(:mod:`paz6d.keypointnet.train`) loads the renderers and TensorFlow only when it trains.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import replace
+
+from paz6d.backend.paths import check_output_folder
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.keypointnet.config import KeypointTraining
+from paz6d.keypointnet.train import train_keypointnet
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Adds the ``paz6d train keypointnet`` flags (the fields of :class:`KeypointTraining`)."""
+    add_config_arguments(parser, KeypointTraining, exclude=("overrides",))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point of ``paz6d train keypointnet``."""
+    job = config_from_args(KeypointTraining, args, exclude=("overrides",))
+    with flags_in_errors(KeypointTraining):
+        check_output_folder(job.out, "out")
+        views = None
+        if job.dataset is not None:
+            from paz6d.keypointnet.dataset import bop_object_views
+
+            views, mesh, scale = bop_object_views(job.dataset, job.object_id, job.split,
+                                                  job.settings()["input_size"], job.mesh_scale)
+            job = replace(job, mesh=mesh, mesh_scale=scale, dataset=None)
+        summary = train_keypointnet(job, views=views)
+    print(json.dumps(summary, indent=2))
+    return 0
