@@ -19,12 +19,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
+
+from timing import run_process
 
 SHARED_COCO = Path(__file__).resolve().parents[2] / "shared" / "data" / "coco"
 GROUND_TRUTH = "instances_val2014_100.json"
@@ -66,19 +65,6 @@ def replicate(source: Path, folder: Path, copies: int) -> tuple[Path, dict[str, 
     return truth_path, result_paths
 
 
-def run(command: list[str]) -> tuple[float, float, str]:
-    """Runs ``command``; returns (wall seconds, CPU seconds of the child, stdout)."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    result = subprocess.run(command, capture_output=True, text=True)
-    wall = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if result.returncode != 0:
-        raise RuntimeError(f"{' '.join(command)} failed:\n{result.stderr[-2000:]}")
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return wall, cpu, result.stdout
-
-
 def paz6d_command() -> list[str]:
     script = Path(sys.executable).with_name("paz6d")
     return [str(script)] if script.exists() else [sys.executable, "-m", "paz6d"]
@@ -108,8 +94,8 @@ def main(argv: list[str] | None = None) -> int:
             theirs_command = [sys.executable, "-c", PYCOCOTOOLS, str(truth), str(result_path), iou_type]
             ours, theirs = [], []
             for _ in range(args.repeats):
-                theirs.append(run(theirs_command))
-                ours.append(run(ours_command))
+                theirs.append(run_process(theirs_command))
+                ours.append(run_process(ours_command))
             reference = json.loads(theirs[0][2].splitlines()[-1])
             stats = json.loads(out.read_text())["stats"]
             identical = stats == reference

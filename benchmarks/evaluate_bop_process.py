@@ -26,11 +26,8 @@ import argparse
 import csv
 import json
 import os
-import resource
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from paz6d.datasets.bop.models import load_model  # noqa: E402
+from timing import run_process  # noqa: E402
 
 LMO = ROOT.parent / "shared" / "data" / "bop_lmo"
 RESULTS = "results/results_lmo-test.csv"
@@ -94,18 +92,6 @@ def toolkit_inputs(data: Path, path: Path) -> list[tuple[int, int, int]]:
     return keys
 
 
-def run(command: list[str]) -> tuple[float, float, str]:
-    """(wall seconds, CPU seconds of the child, stdout) of ``command``, which must succeed."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    result = subprocess.run(command, capture_output=True, text=True)
-    wall = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if result.returncode != 0:
-        raise RuntimeError(f"{' '.join(command[:3])} ... failed:\n{result.stderr[-2000:]}")
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), result.stdout
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--toolkit", type=Path, required=True, help="bop_toolkit checkout (has bop_toolkit_lib/)")
@@ -127,11 +113,11 @@ def main(argv: list[str] | None = None) -> int:
         ours_command = [*paz6d, "evaluate", "bop", "--dataset", str(args.data), "--split", "test", "--results",
                         str(args.data / RESULTS), "--metrics", "mssd,mspd,add", "--out", str(folder / "out.json"),
                         "--errors", str(folder / "errors.csv"), "--no-progress", "--workers", str(args.workers)]
-        run(ours_command)  # warm-up: bytecode and numba caches, as on any run after the first
+        run_process(ours_command)  # warm-up: bytecode and numba caches, as on any run after the first
         theirs, ours = [], []
         for _ in range(args.repeats):
-            theirs.append(json.loads(run(theirs_command)[2].splitlines()[-1]))
-            ours.append(run(ours_command)[:2])
+            theirs.append(json.loads(run_process(theirs_command)[2].splitlines()[-1]))
+            ours.append(run_process(ours_command)[:2])
         with open(folder / "errors.csv", newline="") as file:
             paz6d_mssd = {(int(r["scene_id"]), int(r["im_id"]), int(r["obj_id"])): float(r["mssd"])
                           for r in csv.DictReader(file)}
