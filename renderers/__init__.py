@@ -8,28 +8,11 @@ pyrender or OpenGL; that happens when the first :class:`Renderer` is created.
 
 from __future__ import annotations
 
-import importlib
+from paz6d.backend.lazy_exports import lazy_exports
 
-_EXPORTS = {
+__getattr__, __dir__, __all__ = lazy_exports(__name__, {
     "lights": ("DEFAULT_LIGHTS", "Light", "Lighting"),
     "platform": ("PlatformUnavailableError", "select_platform"),
     "antialias": ("ANTIALIAS_MODES",),
     "renderer": ("Renderer", "RenderOutput"),
-}
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
-
-__all__ = sorted(_MODULE_OF)
-
-
-def __getattr__(name: str):
-    """The exported ``name``, imported from its module on first use (``renderers.platform`` alone,
-    e.g. for the list of platforms, loads neither numpy nor OpenCV)."""
-    if name not in _MODULE_OF:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{_MODULE_OF[name]}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+})

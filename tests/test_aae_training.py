@@ -259,7 +259,7 @@ def test_estimate_command_writes_bop_results_that_evaluate_scores(toy_run, tmp_p
     assert 0.0 <= report["AR_MSSD"] <= 1.0 and 0.0 <= report["ADD(-S)_recall"] <= 1.0
     assert main(["estimate", "--run", str(root / "run"), "--dataset", str(dataset), "--object-id", "7",
                  "--out", str(tmp_path / "none.csv")]) == 2
-    assert "no instance of object 7" in capsys.readouterr().err
+    assert "was trained on object 1, not 7" in capsys.readouterr().err  # checked before any image is read
     assert not (tmp_path / "none.csv").exists()
 
 

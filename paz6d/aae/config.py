@@ -7,13 +7,11 @@ No heavy imports, so that the command line builds fast; the training itself is :
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-from paz6d.backend.paths import check_plain_name
 from paz6d.cli_options import option
-from paz6d.datasets.bop.units import MM_PER_M
+from paz6d.training.source import checked_mesh_scale
 from renderers.platform import PLATFORMS
 
 
@@ -165,26 +163,15 @@ class AAETraining:
     progress: bool = option(True, "progress bars")
 
     def __post_init__(self):
-        if (self.mesh is None) == (self.dataset is None):
-            raise ValueError("mesh: expected exactly one of mesh and dataset")
+        scale = checked_mesh_scale(self.mesh, self.dataset, self.mesh_scale, self.seed, self.workers,
+                                   self.object_id, self.split)
+        object.__setattr__(self, "mesh_scale", scale)
         if self.config not in CONFIGS:
             raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
         if self.steps is not None and self.steps <= 0:
             raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
-        if self.mesh_scale is None:
-            object.__setattr__(self, "mesh_scale", 1.0 if self.dataset is None else 1.0 / MM_PER_M)
-        if not math.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
-            raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
         if not 0.0 <= self.pair_fraction <= 1.0:
             raise ValueError(f"pair_fraction: expected a fraction in [0, 1], got {self.pair_fraction}")
-        if self.seed < 0:
-            raise ValueError(f"seed: expected a non-negative integer, got {self.seed}")
-        if self.workers < 0:
-            raise ValueError(f"workers: expected 0 (render in this process) or a number of processes, "
-                             f"got {self.workers}")
-        if self.object_id is not None and self.object_id < 1:
-            raise ValueError(f"object_id: expected a BOP object id (a positive integer), got {self.object_id}")
-        check_plain_name(self.split, "split")
 
     @property
     def model_config(self) -> AAEConfig:

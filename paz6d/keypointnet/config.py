@@ -3,13 +3,11 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from paz6d.backend.paths import check_plain_name
 from paz6d.cli_options import option
-from paz6d.datasets.bop.units import MM_PER_M
+from paz6d.training.source import checked_mesh_scale
 
 CONFIGS: dict[str, dict] = {
     # Demo budget (`paz6d demo --keypoints` under 15 minutes on 2 CPU cores): see docs/keypointnet.md.
@@ -69,21 +67,8 @@ class KeypointTraining:
     overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
 
     def __post_init__(self):
-        if (self.mesh is None) == (self.dataset is None):
-            raise ValueError("mesh: expected exactly one of mesh and dataset")
-        if self.mesh_scale is None:
-            self.mesh_scale = 1.0 if self.dataset is None else 1.0 / MM_PER_M
-        if not math.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
-            raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
-        if self.seed < 0:
-            raise ValueError(f"seed: expected a non-negative integer, got {self.seed}")
-        if self.workers < 0:
-            raise ValueError(f"workers: expected 0 (render in this process) or a number of processes, "
-                             f"got {self.workers}")
-        if self.object_id is not None and self.object_id < 1:
-            raise ValueError(f"object_id: expected a BOP object id (a positive integer), got {self.object_id}")
-        if self.split is not None:
-            check_plain_name(self.split, "split")
+        self.mesh_scale = checked_mesh_scale(self.mesh, self.dataset, self.mesh_scale, self.seed, self.workers,
+                                             self.object_id, self.split)
         self.settings()  # checks config, mode and steps
 
     def settings(self) -> dict:

@@ -31,9 +31,9 @@ first use, so that reading ``units`` or ``results`` never loads the mesh reader 
 
 from __future__ import annotations
 
-import importlib
+from paz6d.backend.lazy_exports import lazy_exports
 
-_EXPORTS = {
+__getattr__, __dir__, __all__ = lazy_exports(__name__, {
     "camera": ("SceneCamera", "load_camera", "load_scene_camera"),
     "models": ("ModelInfo", "load_model", "load_models_info", "model_path"),
     "reader": ("BOPDataset", "BOPObject", "BOPSample", "BOPScene"),
@@ -41,20 +41,4 @@ _EXPORTS = {
     "scene": ("GroundTruthPose", "load_scene_gt", "load_scene_gt_info"),
     "targets": ("Target", "read_targets", "write_targets"),
     "units": ("MM_PER_M",),
-}
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
-
-__all__ = sorted(_MODULE_OF)
-
-
-def __getattr__(name: str):
-    """The exported ``name``, imported from its module on first use."""
-    if name not in _MODULE_OF:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{_MODULE_OF[name]}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+})
