@@ -12,7 +12,7 @@ import argparse
 import importlib
 import sys
 
-from paz6d.cli_errors import EXPECTED_ERRORS, report
+from paz6d.cli_errors import EXPECTED_ERRORS, report, shorten
 
 COMMANDS = {
     "generate": ("data_gen.cli", "render a synthetic BOP-format data set from meshes"),
@@ -48,6 +48,11 @@ class CommandParser(argparse.ArgumentParser):
         self.load_command()
         return super().parse_known_args(args, namespace)
 
+    def error(self, message: str):
+        """argparse's usage error (exit code 2), with a value quoted in it shortened (a flag given a
+        5 MB value is not echoed whole)."""
+        super().error(shorten(message))
+
 
 def _subparsers(parser: argparse.ArgumentParser, dest: str) -> argparse._SubParsersAction:
     return parser.add_subparsers(dest=dest, required=True, parser_class=CommandParser)
@@ -56,7 +61,7 @@ def _subparsers(parser: argparse.ArgumentParser, dest: str) -> argparse._SubPars
 def build_parser(load_commands: bool = False) -> argparse.ArgumentParser:
     """The ``paz6d`` parser; each command's flags are added when it is parsed, or now with
     ``load_commands`` (to inspect every command's flags)."""
-    parser = argparse.ArgumentParser(prog="paz6d", description="paz6d: 6D object pose and perception toolkit")
+    parser = CommandParser(prog="paz6d", description="paz6d: 6D object pose and perception toolkit")
     subparsers = _subparsers(parser, "command")
     commands = []
     for name, (target, help_text) in COMMANDS.items():
