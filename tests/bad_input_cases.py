@@ -703,6 +703,12 @@ def evaluate_bop_cases() -> list[Case]:
                       lambda world, folder: os.symlink(world.results, folder / "link.json"), ("link.json",)))
     found.append(Case("evaluate-bop-out-fifo", replace_flag(EVALUATE_WORLD_BOP, "--out", "{case}/fifo"),
                       lambda world, folder: os.mkfifo(folder / "fifo"), ("fifo",)))
+    found.append(Case("evaluate-bop-vsd-depth-garbage", replace_flag(EVALUATE_BOP, "--metrics", "vsd"),
+                      bop_file("test/000000/depth/000000.png", b"garbage"), ("000000.png",)))
+    found.append(Case("evaluate-bop-vsd-depth-wrong-size", replace_flag(EVALUATE_BOP, "--metrics", "vsd"),
+                      bop_file("test/000000/depth/000000.png",
+                               bytes(__import__("cv2").imencode(".png", np.zeros((5, 7), np.uint16))[1])),
+                      ("000000.png",)))
     found.append(Case("evaluate-bop-vsd-without-depth", replace_flag(EVALUATE_BOP, "--metrics", "vsd"),
                       bop_file("test/000000/depth", None), ("depth",)))
     return found
@@ -840,6 +846,10 @@ def estimate_cases() -> list[Case]:
                                              put(folder / "run" / "keypoints.json", "{"))[-1], ("keypoints.json",)))
     found.append(Case("estimate-dataset-no-scene-gt", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),
                       bop_file("test/000000/scene_gt.json", None), ("scene_gt.json",)))
+    found.append(Case("estimate-dataset-rgb-garbage", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),
+                      bop_file("test/000000/rgb/000000.png", b"\x89PNG\r\n\x1a\nbroken"), ("000000.png",)))
+    found.append(Case("estimate-dataset-rgb-folder", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),
+                      bop_file("test/000000/rgb/000000.png", "<dir>"), ("model.keras",)))  # no image: skipped
     found.append(Case("estimate-dataset-bad-bbox", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),
                       bop_file("test/000000/scene_gt_info.json",
                                lambda d: {k: [{**e, "bbox_obj": [0, 0, -5, "x"]} for e in v] for k, v in d.items()}),
