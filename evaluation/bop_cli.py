@@ -86,8 +86,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="GT instances that count: -1 (default, as the BOP toolkit's eval_bop19_pose.py) = "
                              "the inst_count most visible of each target; a fraction such as 0.1 = every "
                              "instance of a target object at least that visible")
-    parser.add_argument("--vsd-delta", type=_positive_millimetres, default=15.0, help="VSD visibility tolerance in mm (default 15)")
-    parser.add_argument("--workers", type=_workers, default=1, help="threads for the ADD-S search (-1 = all cores; results do not depend on it)")
+    parser.add_argument("--vsd-delta", type=_positive_millimetres, default=15.0,
+                        help="VSD visibility tolerance in mm (default 15)")
+    parser.add_argument("--workers", type=_workers, default=1,
+                        help="threads for the ADD-S search (-1 = all cores; results do not depend on it)")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
                         help="progress bars (default: --progress)")
 

@@ -604,8 +604,9 @@ def evaluate_bop_cases() -> list[Case]:
                                                                          for k, v in d.items()}, "cam_K"),
         "scene-camera-depth-scale": (scene + "scene_camera.json", lambda d: {k: {**v, "depth_scale": -1}
                                                                              for k, v in d.items()}, "depth_scale"),
-        "scene-camera-depth-scale-text": (scene + "scene_camera.json", lambda d: {k: {**v, "depth_scale": "x"}
-                                                                                  for k, v in d.items()}, "depth_scale"),
+        "scene-camera-depth-scale-text": (scene + "scene_camera.json",
+                                          lambda d: {k: {**v, "depth_scale": "x"} for k, v in d.items()},
+                                          "depth_scale"),
         "scene-camera-entry-list": (scene + "scene_camera.json", lambda d: {k: [] for k in d}, "scene_camera.json"),
         "scene-camera-K-zero-focal": (scene + "scene_camera.json", lambda d: {k: {**v, "cam_K": [0] * 9}
                                                                               for k, v in d.items()}, "cam_K"),
@@ -694,7 +695,8 @@ def evaluate_bop_cases() -> list[Case]:
         "--workers": [(("0",), ""), (("-2",), ""), (("x",), "")],
         "--dataset": [(("{case}/none",), "none"), (("{world}/results.csv",), "results.csv")],
         "--targets": [(("{case}/none.json",), "none.json"), (("{world}/bop",), "bop")],
-        "--out": [(("{world}/bop",), "bop"), (("/dev/null",), "/dev/null"), (("{world}/results.csv/x.json",), "results.csv")],
+        "--out": [(("{world}/bop",), "bop"), (("/dev/null",), "/dev/null"),
+                  (("{world}/results.csv/x.json",), "results.csv")],
         "--errors": [(("{world}/bop",), "bop")],
         "--plots": [(("{world}/results.csv",), "results.csv")],
     }
@@ -768,8 +770,8 @@ def evaluate_coco_cases() -> list[Case]:
         "--plots": [(("{world}/results.csv",), "results.csv")],
         "--iou-type": [(("mask",), "")],
     })
-    found.append(Case("evaluate-coco-out-under-file", replace_flag(EVALUATE_COCO, "--out", "{world}/results.csv/x.json"),
-                      None, ("results.csv",)))
+    found.append(Case("evaluate-coco-out-under-file",
+                      replace_flag(EVALUATE_COCO, "--out", "{world}/results.csv/x.json"), None, ("results.csv",)))
     found.append(Case("evaluate-coco-out-fifo", replace_flag(EVALUATE_COCO, "--out", "{case}/fifo"),
                       lambda world, folder: os.mkfifo(folder / "fifo"), ("fifo",)))
     return found

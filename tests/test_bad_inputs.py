@@ -149,7 +149,8 @@ def test_readers_name_file_and_field(tmp_path):
     with pytest.raises(ValueError, match="targets.json: target 1 repeats target 0"):
         read_targets(path)
     path = tmp_path / "results.csv"
-    path.write_bytes(b"scene_id,im_id,obj_id,score,R,t,time\n0,0,1," + b"9" * 5_000_000 + b",1 0 0 0 1 0 0 0 1,0 0 1,-1\n")
+    path.write_bytes(b"scene_id,im_id,obj_id,score,R,t,time\n0,0,1," + b"9" * 5_000_000
+                     + b",1 0 0 0 1 0 0 0 1,0 0 1,-1\n")
     with pytest.raises(ValueError, match="results.csv:2") as error:
         read_pose_results(path)
     assert len(str(error.value)) < 500  # the 5 MB value is not echoed
