@@ -18,12 +18,14 @@ two-image BOP data set, a results CSV, COCO and VOC files, run directories) and 
 * ``flag``: one flag of ``generate``, ``evaluate bop|coco|voc`` or ``estimate`` set to a hostile value
   (negative, zero, NaN, inf, 1e308, text, empty, ``../..``, a device, a folder, a file);
 * ``path``: an output path that is a folder, a symbolic link, a FIFO, a device, under a file, or an
-  output folder holding a symbolic link.
+  output folder holding a symbolic link;
+* ``run``: an AAE or KeypointNet run directory with one file's JSON values or bytes mutated, given to
+  ``paz6d estimate``.
 
 A case passes when the exit code is 0 or 2, no traceback is printed, it ends within ``--timeout``
 seconds, nothing outside its output is touched, an error (exit 2) is one ``paz6d ...: error:`` or
-argparse line naming a file or flag, and a success (exit 0) is sound: scores within [0, 1] (a recall
-above 1 is a silent wrong result). Exit status 1 when any case fails.
+argparse line naming a file or flag, and a success (exit 0) is sound: BOP recalls, COCO stats and VOC
+mAP within [0, 1] (a recall above 1 is a silent wrong result). Exit status 1 when any case fails.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import copy
 import json
 import os
 import random
+import shutil
 import sys
 import tempfile
 import time
@@ -253,8 +256,34 @@ def path_case(world: cases.World, rng: random.Random, number: int):
                       OUTPUT_SETUPS[name])
 
 
-KINDS = {"json": json_case, "bytes": bytes_case, "csv": csv_case, "flag": flag_case, "path": path_case}
-WEIGHTS = {"json": 0.35, "bytes": 0.1, "csv": 0.25, "flag": 0.22, "path": 0.08}
+RUN_FILES = {"aae": ["config.json", "codebook.npz", "object.npz"], "keypointnet": ["config.json", "keypoints.json",
+                                                                                 "object.json"]}
+
+
+def run_case(world: cases.World, rng: random.Random, number: int):
+    """A run directory with one file mutated (JSON values or bytes), given to ``paz6d estimate``."""
+    method = rng.choice(sorted(RUN_FILES))
+    name = rng.choice(RUN_FILES[method])
+    source = getattr(world, f"{method}_run")
+    if name.endswith(".json") and rng.random() < 0.7:
+        data, what = mutate_json(json.loads((source / name).read_text()), rng)
+        content = _dumps(data).encode()
+    else:
+        content, what = mutate_bytes((source / name).read_bytes(), rng)
+
+    def setup(w, folder):
+        shutil.copytree(source, folder / "run")
+        cases.put(folder / "run" / name, content)
+
+    argv = cases.replace_flag(cases.ESTIMATE, "--run", "{case}/run")
+    if method == "keypointnet":
+        argv = cases.replace_flag(argv, "--method", "keypoints")
+    return cases.Case(f"fuzz-{number}-run-{method}-{name}-{what}", argv, setup)
+
+
+KINDS = {"json": json_case, "bytes": bytes_case, "csv": csv_case, "flag": flag_case, "path": path_case,
+         "run": run_case}
+WEIGHTS = {"json": 0.32, "bytes": 0.08, "csv": 0.22, "flag": 0.2, "path": 0.08, "run": 0.1}
 
 
 # ------------------------------------------------------------------------------------------------ judging
@@ -268,6 +297,16 @@ def _sound_success(case: cases.Case, folder: Path) -> str | None:
             value = summary.get(key)
             if value is not None and not 0.0 <= value <= 1.0:
                 return f"{key} = {value} outside [0, 1]"
+    coco = folder / "out" / "coco.json"
+    if case.argv[:2] == ("evaluate", "coco") and coco.is_file():
+        stats = json.loads(coco.read_text())["stats"]
+        if any(not (value == -1 or 0.0 <= value <= 1.0) for value in stats):
+            return f"COCO stats {stats} outside [0, 1] (or -1)"
+    voc = folder / "out" / "voc.json"
+    if case.argv[:2] == ("evaluate", "voc") and voc.is_file():
+        value = json.loads(voc.read_text())["mAP"]
+        if value is not None and not 0.0 <= value <= 1.0:
+            return f"VOC mAP {value} outside [0, 1]"
     return None
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from paz6d.aae.codebook import Codebook
 from paz6d.aae.model import load_model
+from paz6d.backend.checks import integer_field, number_field
 from paz6d.backend.files import load_json, load_npz, save_npz_atomically, write_json_atomically
 
 CONFIG_FILE = "config.json"
@@ -121,6 +122,9 @@ def read_config(run_dir: str | Path) -> dict[str, Any]:
         missing = ["config (an object)"]
     if missing:
         raise ValueError(f"{path}: missing key(s) {missing} of an AAE run configuration")
+    integer_field(data["config"], "crop_size", f"{path}: config", minimum=1)
+    number_field(data["config"], "padding", f"{path}: config", positive=True)
+    number_field(data, "mesh_scale", str(path), positive=True)
     return data
 
 

@@ -6,6 +6,8 @@ message naming the argument and the expected shape when the input is bad.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 UNIT_NORM_TOLERANCE = 1e-6
@@ -126,3 +128,56 @@ def as_camera_matrix(value, name: str = "K") -> np.ndarray:
     if matrix[0, 0] <= 0 or matrix[1, 1] <= 0 or not np.allclose(matrix[2], [0, 0, 1]):
         raise ValueError(f"{name}: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {matrix.tolist()}")
     return matrix
+
+
+# ------------------------------------------------------------------ fields of parsed JSON files
+
+def required_field(entry, name: str, where: str, size: int | None = None):
+    """``entry[name]``; with ``size``, as a flat float64 array of ``size`` finite numbers.
+
+    Raises:
+        ValueError: ``"<where>: missing field 'name'"`` or a wrong count / non-numeric value.
+    """
+    if not isinstance(entry, dict) or name not in entry:
+        raise ValueError(f"{where}: missing field {name!r}")
+    value = entry[name]
+    if size is not None:
+        try:
+            array = np.asarray(value, dtype=np.float64).ravel()
+        except (TypeError, ValueError, OverflowError) as error:
+            raise ValueError(f"{where}: field {name!r} is not numeric, got {short_repr(value)}") from error
+        if array.size != size or not np.all(np.isfinite(array)):
+            found = f"{array.size} numbers" if array.size != size else "NaN or infinite values"
+            raise ValueError(f"{where}: field {name!r} must hold {size} finite numbers, got {found}")
+        return array
+    return value
+
+
+def integer_field(entry, name: str, where: str, minimum: int = 0) -> int:
+    """``entry[name]`` as an ``int`` ``>= minimum`` (a JSON integer, not ``1.5``, ``"1"`` or ``true``).
+
+    Raises:
+        ValueError: ``"<where>: missing field 'name'"`` or naming the field and the value found.
+    """
+    value = required_field(entry, name, where)
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{where}: field {name!r} must be an integer >= {minimum}, got {short_repr(value)}")
+    return value
+
+
+def number_field(entry, name: str, where: str, minimum: float | None = None, maximum: float | None = None,
+                 positive: bool = False) -> float:
+    """``entry[name]`` as a finite ``float`` (within ``[minimum, maximum]``; ``> 0`` with ``positive``).
+
+    Raises:
+        ValueError: naming ``where``, the field and the value found.
+    """
+    value = required_field(entry, name, where)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or \
+            (minimum is not None and value < minimum) or (maximum is not None and value > maximum) or \
+            (positive and value <= 0):
+        expected = "a positive number" if positive else "a finite number"
+        if minimum is not None or maximum is not None:
+            expected += f" in [{'-inf' if minimum is None else minimum}, {'inf' if maximum is None else maximum}]"
+        raise ValueError(f"{where}: field {name!r} must be {expected}, got {short_repr(value)}")
+    return float(value)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from paz6d.backend.checks import as_array
+from paz6d.backend.checks import as_array, integer_field, number_field
 from paz6d.backend.files import load_json, write_json_atomically
 
 CONFIG_FILE = "config.json"
@@ -56,6 +56,13 @@ def _read_json(path: Path, fields: tuple[str, ...]) -> dict:
     return data
 
 
+def _numeric_array(value, path: Path, name: str) -> np.ndarray:
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{path}: {name}: expected a list of numeric rows") from None
+
+
 def model_path(run_dir: str | Path) -> Path:
     """Where the network is (or will be) saved."""
     return Path(run_dir) / MODEL_FILE
@@ -82,7 +89,12 @@ def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
 
 def read_config(run_dir: str | Path) -> dict[str, Any]:
     """``config.json``, checked for ``input_size``, ``margin`` and ``downsample``."""
-    return _read_json(config_path(run_dir), PIPELINE_CONFIG_KEYS)
+    path = config_path(run_dir)
+    data = _read_json(path, PIPELINE_CONFIG_KEYS)
+    for name in ("input_size", "downsample"):
+        integer_field(data, name, str(path), minimum=1)
+    number_field(data, "margin", str(path), positive=True)
+    return data
 
 
 def write_keypoints(run_dir: str | Path, points_model, usable, method: str, error=None, targets=None) -> Path:
@@ -108,12 +120,12 @@ def read_keypoints(run_dir: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """``points_model (N, 3)`` metres and ``usable (N,)`` flags from a run's ``keypoints.json``."""
     path = Path(run_dir) / KEYPOINTS_FILE
     data = _read_json(path, ("points_model", "usable"))
-    points = np.asarray(data["points_model"], dtype=np.float64)
+    points = _numeric_array(data["points_model"], path, "points_model")
     if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
         raise ValueError(f"{path}: points_model: expected finite (N, 3) metres, got shape {points.shape}")
-    usable = np.asarray(data["usable"], dtype=bool)
-    if usable.shape != (len(points),):
-        raise ValueError(f"{path}: usable: expected {len(points)} flags, got shape {usable.shape}")
+    usable = np.asarray(data["usable"])
+    if usable.shape != (len(points),) or usable.dtype != bool:
+        raise ValueError(f"{path}: usable: expected {len(points)} true/false flags, got shape {usable.shape}")
     return points, usable
 
 
@@ -128,10 +140,10 @@ def read_object(run_dir: str | Path) -> dict:
     """``{"diameter": float, "hull_points": (M, 3)}`` (metres) from a run's ``object.json``."""
     path = Path(run_dir) / OBJECT_FILE
     data = _read_json(path, ("diameter", "hull_points"))
-    hull = np.asarray(data["hull_points"], dtype=np.float64)
+    hull = _numeric_array(data["hull_points"], path, "hull_points")
     if hull.ndim != 2 or hull.shape[1] != 3 or len(hull) < 4 or not np.all(np.isfinite(hull)):
         raise ValueError(f"{path}: hull_points: expected finite (M >= 4, 3) metres, got shape {hull.shape}")
-    return {"diameter": float(data["diameter"]), "hull_points": hull}
+    return {"diameter": number_field(data, "diameter", str(path), positive=True), "hull_points": hull}
 
 
 def read_model(run_dir: str | Path):
