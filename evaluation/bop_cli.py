@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 from paz6d.backend.files import write_csv_atomically, write_json_atomically
-from paz6d.backend.paths import check_output_file, check_output_folder, check_plain_name
+from paz6d.backend.paths import check_output_file, check_output_folder, check_outputs_apart, check_plain_name
 from paz6d.cli_errors import shorten
 from paz6d.datasets.bop.results import read_pose_results
 
@@ -58,6 +58,8 @@ def _workers(text: str) -> int:
 def check_arguments(args: argparse.Namespace) -> None:
     """Checks names and output paths before any file is read (bad ones raise ``ValueError`` naming the flag)."""
     check_plain_name(args.split, "--split")
+    check_outputs_apart({"--out": args.out, "--errors": args.errors},
+                        {"--results": args.results, "--targets": args.targets})
     check_output_file(args.out, "--out")
     if args.errors is not None:
         check_output_file(args.errors, "--errors")

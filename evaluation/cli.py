@@ -19,7 +19,7 @@ from pathlib import Path
 from evaluation import coco, detection_plots, voc
 
 from paz6d.backend.files import finite_or_none, write_json_atomically
-from paz6d.backend.paths import check_output_file, check_output_folder
+from paz6d.backend.paths import check_output_file, check_output_folder, check_outputs_apart
 
 _BOP_MODULE = "evaluation.bop_cli"
 
@@ -132,6 +132,9 @@ def run(args: argparse.Namespace) -> int:
         ValueError: for malformed input files, naming the file (and line or entry).
     """
     if args.evaluate_command in ("coco", "voc"):  # bop checks its own flags first
+        inputs = {"--gt": args.gt, "--results": args.results} if args.evaluate_command == "coco" else \
+            {"--class-names": args.class_names}
+        check_outputs_apart({"--out": args.out}, inputs)
         check_output_file(args.out, "--out")
         if args.plots is not None:
             check_output_folder(args.plots, "--plots")

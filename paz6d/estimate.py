@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.paths import check_output_file, check_plain_name
+from paz6d.backend.paths import check_output_file, check_outputs_apart, check_plain_name
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
@@ -149,6 +149,7 @@ def check_arguments(args: argparse.Namespace) -> None:
         raise ValueError(f"--object-id: expected a BOP object id (a positive integer), got {args.object_id}")
     if not 0.0 <= args.min_visible <= 1.0:
         raise ValueError(f"--min-visible: expected a visible fraction in [0, 1], got {args.min_visible}")
+    check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out}, {})
     check_output_file(args.out, "--out")
     if args.targets_out is not None:
         check_output_file(args.targets_out, "--targets-out")

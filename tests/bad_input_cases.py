@@ -701,6 +701,14 @@ def evaluate_bop_cases() -> list[Case]:
         "--plots": [(("{world}/results.csv",), "results.csv")],
     }
     found += _flag_cases("evaluate-bop-flag-", EVALUATE_WORLD_BOP, flags)
+    found.append(Case("evaluate-bop-out-is-results", replace_flag(EVALUATE_WORLD_BOP, "--out", "{world}/results.csv"),
+                      None, ("is also --results",)))
+    found.append(Case("evaluate-bop-errors-is-out", EVALUATE_WORLD_BOP + ("--errors", "{out}/scores.json"), None,
+                      ("--errors", "is also --out")))
+    found.append(Case("evaluate-bop-out-is-targets",
+                      replace_flag(EVALUATE_WORLD_BOP, "--out", "{case}/t.json") + ("--targets", "{case}/t.json"),
+                      lambda world, folder: shutil.copy(world.bop / "test_targets_bop19.json", folder / "t.json"),
+                      ("is also --targets",)))
     found.append(Case("evaluate-bop-out-symlink", replace_flag(EVALUATE_WORLD_BOP, "--out", "{case}/link.json"),
                       lambda world, folder: os.symlink(world.results, folder / "link.json"), ("link.json",)))
     found.append(Case("evaluate-bop-out-fifo", replace_flag(EVALUATE_WORLD_BOP, "--out", "{case}/fifo"),
@@ -770,6 +778,8 @@ def evaluate_coco_cases() -> list[Case]:
         "--plots": [(("{world}/results.csv",), "results.csv")],
         "--iou-type": [(("mask",), "")],
     })
+    found.append(Case("evaluate-coco-out-is-gt", replace_flag(EVALUATE_COCO, "--out", "{world}/coco_gt.json"), None,
+                      ("is also --gt",)))
     found.append(Case("evaluate-coco-out-under-file",
                       replace_flag(EVALUATE_COCO, "--out", "{world}/results.csv/x.json"), None, ("results.csv",)))
     found.append(Case("evaluate-coco-out-fifo", replace_flag(EVALUATE_COCO, "--out", "{case}/fifo"),
@@ -848,6 +858,8 @@ def estimate_cases() -> list[Case]:
                                              put(folder / "run" / "keypoints.json", "{"))[-1], ("keypoints.json",)))
     found.append(Case("estimate-dataset-no-scene-gt", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),
                       bop_file("test/000000/scene_gt.json", None), ("scene_gt.json",)))
+    found.append(Case("estimate-targets-out-is-out", ESTIMATE + ("--targets-out", "{out}/results.csv"), None,
+                      ("--targets-out", "is also --out")))
     found.append(Case("estimate-dataset-rgb-garbage", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),
                       bop_file("test/000000/rgb/000000.png", b"\x89PNG\r\n\x1a\nbroken"), ("000000.png",)))
     found.append(Case("estimate-dataset-rgb-folder", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),

@@ -76,3 +76,21 @@ def check_output_folder(path: str | Path, name: str) -> Path:
     if not existing.is_dir():
         raise ValueError(f"{name}: {path}: its parent {existing} is not a folder")
     return path
+
+
+def check_outputs_apart(outputs: dict[str, str | Path | None], inputs: dict[str, str | Path | None]) -> None:
+    """Refuses an output path that is also an input or another output (``{flag: path}``; ``None``
+    entries are ignored), so a mistyped flag cannot overwrite what the command reads or writes.
+
+    Raises:
+        ValueError: ``"--out: x.json is also --results; ..."``.
+    """
+    seen: dict[str, str] = {}
+    for name, path in {**inputs, **outputs}.items():
+        if path is None:
+            continue
+        key = os.path.realpath(path)
+        if key in seen and name in outputs:
+            raise ValueError(f"{name}: {path} is also {seen[key]}; give each output its own path, apart from "
+                             "the inputs")
+        seen.setdefault(key, name)
