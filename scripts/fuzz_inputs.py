@@ -17,8 +17,8 @@ two-image BOP data set, a results CSV, COCO and VOC files, run directories) and 
   bytes, broken quotes or huge fields;
 * ``flag``: one flag of ``generate``, ``evaluate bop|coco|voc`` or ``estimate`` set to a hostile value
   (negative, zero, NaN, inf, 1e308, text, empty, ``../..``, a device, a folder, a file);
-* ``path``: an output path that is a folder, a symbolic link, a FIFO, a device, under a file, or an
-  output folder holding a symbolic link;
+* ``path``: an output path that is a folder, a symbolic link, a FIFO, a device, under a file, one of
+  the command's inputs, or an output folder holding a symbolic link;
 * ``run``: an AAE or KeypointNet run directory with one file's JSON values or bytes mutated, given to
   ``paz6d estimate``.
 
@@ -241,7 +241,13 @@ OUTPUT_SETUPS = _output_setups()
 
 
 def path_case(world: cases.World, rng: random.Random, number: int):
-    name = rng.choice(sorted(OUTPUT_SETUPS) + ["generate-link", "device"])
+    name = rng.choice(sorted(OUTPUT_SETUPS) + ["generate-link", "device", "input"])
+    if name == "input":  # an output path that is also an input: refused before anything is written
+        base, flag, value = rng.choice([(cases.EVALUATE_WORLD_BOP, "--out", "{world}/results.csv"),
+                                        (cases.EVALUATE_WORLD_BOP, "--errors", "{world}/results.csv"),
+                                        (cases.EVALUATE_COCO, "--out", "{world}/coco_gt.json"),
+                                        (cases.EVALUATE_COCO, "--out", "{world}/coco_results.json")])
+        return cases.Case(f"fuzz-{number}-path-{flag}-is-an-input", cases.replace_flag(base, flag, value))
     if name == "generate-link":
         def setup(w, case):
             (case / "out" / "test").mkdir(parents=True)
@@ -311,12 +317,15 @@ def _sound_success(case: cases.Case, folder: Path) -> str | None:
 
 
 def _output_paths(case: cases.Case, world: cases.World, folder: Path) -> list[Path]:
-    """The paths the case's output flags name (relative ones from the case's folder, where it runs)."""
+    """The paths the case's output flags name (relative ones from the case's folder, where it runs),
+    except the world's input files."""
     found = [folder / "out"]
     for index, part in enumerate(case.argv[:-1]):
         if part in OUTPUT_FLAGS:
             value = case.argv[index + 1].format(world=world.root, case=folder, out=folder / "out")
-            found.append(Path(os.path.normpath(folder / value)))
+            path = Path(os.path.normpath(folder / value))
+            if not (path.is_file() and world.root / cases.CASES_FOLDER not in path.parents):
+                found.append(path)  # a file of the world is an input: changing it counts as touching it
     return found
 
 
