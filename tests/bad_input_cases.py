@@ -8,7 +8,8 @@ the same world). A case passes when ``paz6d.cli.main(argv)`` (in-process)
 * prints a message naming the file or flag (``expect``: substrings of stderr),
 * prints no traceback and raises nothing but ``SystemExit``,
 * finishes within its time limit (a hang is a failure), and
-* touches no file outside the case's own output folder (the world is snapshotted before and after).
+* touches no file outside the case's own output folder (the world is snapshotted before and after;
+  each case runs in its own folder, so relative paths land there).
 """
 
 from __future__ import annotations
@@ -352,14 +353,6 @@ def case_file(name: str, content) -> Callable[[World, Path], None]:
 
     def setup(world: World, folder: Path) -> None:
         put(folder / name, content)
-
-    return setup
-
-
-def both(*setups) -> Callable[[World, Path], None]:
-    def setup(world: World, folder: Path) -> None:
-        for step in setups:
-            step(world, folder)
 
     return setup
 
