@@ -36,7 +36,7 @@ def test_corrupt_and_missing_model_files_raise_value_error(tmp_path):
         aae.load_model(tmp_path / "missing.keras")
     garbage = tmp_path / "garbage.keras"
     garbage.write_bytes(b"this is not a zip archive")
-    with pytest.raises(ValueError, match="not a .keras model archive"):
+    with pytest.raises(ValueError, match="not a readable .keras model archive"):
         aae.load_model(garbage)
     truncated = tmp_path / "truncated.keras"
     data = aae.save_model(aae.build_autoencoder(**TINY), tmp_path / "good.keras").read_bytes()

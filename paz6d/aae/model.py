@@ -15,7 +15,6 @@ layers are used, so loading never executes arbitrary code. TensorFlow is importe
 
 from __future__ import annotations
 
-import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -23,7 +22,7 @@ import numpy as np
 
 from paz6d.backend.square_crop import crop_square, square_window
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.backend.tensorflow_guard import import_keras
+from paz6d.backend.tensorflow_guard import import_keras, load_keras_model
 
 ENCODER_NAME = "encoder"
 DECODER_NAME = "decoder"
@@ -169,16 +168,7 @@ def load_model(path: str | Path):
     Raises:
         ValueError: the file is missing, not a ``.keras`` archive, or not a model Keras can rebuild.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: model file not found")
-    if not zipfile.is_zipfile(path):
-        raise ValueError(f"{path}: not a .keras model archive (corrupt or wrong file)")
-    keras = import_keras()
-    try:
-        return keras.models.load_model(path, compile=False, safe_mode=True)
-    except Exception as error:  # keras raises many types for broken archives
-        raise ValueError(f"{path}: could not load the .keras model ({type(error).__name__}: {error})") from error
+    return load_keras_model(path)
 
 
 def crop_object(image: np.ndarray, box, size: int, padding: float = 1.2) -> np.ndarray:

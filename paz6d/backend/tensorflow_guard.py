@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import os
 import sys
+import zipfile
+from pathlib import Path
 from types import ModuleType
 
 _FLAGS_MODULE = "tensorflow.python.pywrap_dlopen_global_flags"
@@ -33,3 +35,22 @@ def import_keras() -> ModuleType:
     import keras
 
     return keras
+
+
+def load_keras_model(path: str | Path, error: type[ValueError] = ValueError):
+    """Loads a native ``.keras`` model in safe mode (no Lambda layers, no pickled code), uncompiled.
+
+    Raises:
+        error: (a ``ValueError`` subclass) the file is missing, not a ``.keras`` archive, or not a model
+            Keras can rebuild; the message names the file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path}: file not found")
+    if not zipfile.is_zipfile(path):
+        raise error(f"{path}: not a readable .keras model archive (corrupt or wrong file)")
+    keras = import_keras()
+    try:
+        return keras.saving.load_model(path, safe_mode=True, compile=False)
+    except Exception as cause:  # Keras raises many types for damaged archives
+        raise error(f"{path}: not a readable .keras model ({type(cause).__name__}: {cause})") from cause

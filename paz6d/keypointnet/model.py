@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow
+from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow, load_keras_model
 
 tf = import_tensorflow()
 keras = import_keras()
@@ -196,12 +196,7 @@ def load_keypointnet(path: str | Path):
         KeypointNetError: missing, corrupt or non-KeypointNet file (message names the file).
     """
     path = Path(path)
-    if not path.is_file():
-        raise KeypointNetError(f"{path}: KeypointNet model file not found")
-    try:
-        model = keras.saving.load_model(path, safe_mode=True, compile=False)
-    except Exception as error:  # Keras raises several types for damaged archives
-        raise KeypointNetError(f"{path}: not a readable .keras model ({type(error).__name__}: {error})") from error
+    model = load_keras_model(path, KeypointNetError)
     names = set(model.output.keys()) if isinstance(model.output, dict) else set()
     if names != set(OUTPUT_NAMES):
         raise KeypointNetError(f"{path}: expected a KeypointNet with outputs {OUTPUT_NAMES}, got {sorted(names)}")

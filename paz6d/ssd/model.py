@@ -28,7 +28,7 @@ import numpy as np
 from paz6d.backend.boxes import prior_boxes
 from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.image import normalize
-from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow
+from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow, load_keras_model
 
 tf = import_tensorflow()
 keras = import_keras()
@@ -283,12 +283,7 @@ def load_ssd(path: str | Path, spec: PriorSpec, num_classes: int):
         SSDModelError: missing, unreadable or mismatching file (message names the file).
     """
     path = Path(path)
-    if not path.is_file():
-        raise SSDModelError(f"{path}: model file not found")
-    try:
-        model = keras.saving.load_model(path, safe_mode=True, compile=False)
-    except Exception as error:  # Keras raises several types for damaged archives
-        raise SSDModelError(f"{path}: not a readable .keras model ({type(error).__name__}: {error})") from error
+    model = load_keras_model(path, SSDModelError)
     expected = (None, len(priors_for(spec)), 4 + int(num_classes))
     if tuple(model.output_shape) != expected or tuple(model.input_shape[1:]) != (spec.input_size, spec.input_size, 3):
         raise SSDModelError(f"{path}: expected an SSD with input {(spec.input_size,) * 2 + (3,)} and output "
