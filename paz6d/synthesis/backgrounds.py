@@ -114,18 +114,24 @@ def _shapes(generator: np.random.Generator, width: int, height: int) -> np.ndarr
     return np.clip(background + noise, 0, 255).astype(np.uint8)
 
 
-def crop_background(generator: np.random.Generator, image: np.ndarray, width: int, height: int) -> np.ndarray:
+def crop_background(generator: np.random.Generator, image: np.ndarray, width: int, height: int,
+                    scale: tuple[float, float] = (0.5, 1.0), max_downscale: float = np.inf,
+                    interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
     """``(height, width, 3)`` uint8: a random crop of ``image`` (uint8 RGB) with the output's aspect
-    ratio, 50-100 % of the largest such window, mirrored half of the time, resized (linear)."""
+    ratio, mirrored half of the time, resized with ``interpolation``.
+
+    The crop is ``scale`` (a uniform draw from the range) times the largest such window, and at most
+    ``max_downscale`` times the output size (so small outputs do not shrink a whole photograph).
+    """
     source_height, source_width = image.shape[:2]
-    scale = generator.uniform(0.5, 1.0) * min(source_width / width, source_height / height)
-    crop_width, crop_height = max(1, int(round(width * scale))), max(1, int(round(height * scale)))
+    factor = generator.uniform(*scale) * min(source_width / width, source_height / height, max_downscale)
+    crop_width, crop_height = max(1, int(round(width * factor))), max(1, int(round(height * factor)))
     x = int(generator.integers(0, source_width - crop_width + 1))
     y = int(generator.integers(0, source_height - crop_height + 1))
     crop = image[y:y + crop_height, x:x + crop_width]
     if generator.random() < 0.5:
         crop = crop[:, ::-1]
-    return cv2.resize(np.ascontiguousarray(crop), (width, height), interpolation=cv2.INTER_LINEAR)
+    return cv2.resize(np.ascontiguousarray(crop), (width, height), interpolation=interpolation)
 
 
 def background_image(generator: np.random.Generator, files: list[Path], width: int, height: int,

@@ -22,6 +22,7 @@ import numpy as np
 
 from paz6d.backend.files import write_bytes_atomically
 from paz6d.backend.image import encode_image
+from paz6d.synthesis.backgrounds import crop_background
 
 #: scikit-image sample images bundled with the wheel (``skimage.data.<name>()`` needs no download).
 SAMPLE_NAMES = ("astronaut", "brick", "camera", "cell", "chelsea", "checkerboard", "clock", "coffee", "coins",
@@ -45,17 +46,10 @@ def sample_photographs() -> list[np.ndarray]:
 
 
 def _random_crop(generator: np.random.Generator, photograph: np.ndarray, width: int, height: int) -> np.ndarray:
-    """A random crop of ``photograph`` resized to ``(height, width, 3)``, mirrored half of the time."""
-    source_height, source_width = photograph.shape[:2]
-    scale = generator.uniform(0.2, 1.0) * min(source_width / width, source_height / height, 4.0)
-    crop_width = int(np.clip(round(width * scale), 1, source_width))
-    crop_height = int(np.clip(round(height * scale), 1, source_height))
-    x = int(generator.integers(0, source_width - crop_width + 1))
-    y = int(generator.integers(0, source_height - crop_height + 1))
-    crop = photograph[y:y + crop_height, x:x + crop_width]
-    if generator.random() < 0.5:
-        crop = crop[:, ::-1]
-    return cv2.resize(np.ascontiguousarray(crop), (width, height), interpolation=cv2.INTER_AREA)
+    """A crop of 20-100 % of the largest window (at most 4x the output size), mirrored half of the
+    time, area-resized to ``(height, width, 3)``."""
+    return crop_background(generator, photograph, width, height, scale=(0.2, 1.0), max_downscale=4.0,
+                           interpolation=cv2.INTER_AREA)
 
 
 def photo_collage(generator: np.random.Generator, photographs: list[np.ndarray], width: int, height: int,
