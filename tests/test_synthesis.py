@@ -257,7 +257,7 @@ RANDOM_PROCESSORS = [
     lambda: augment.RandomGaussianBlur((0,), 0.7, (0.4, 1.2)),
     lambda: augment.RandomImageNoise(6.0, probability=0.8, quantized=True),
     lambda: augment.RandomContrastBrightnessNoise(),
-    lambda: augment.RandomFlipLeftRight(), lambda: augment.RandomCrop(),
+    lambda: augment.RandomFlipLeftRight(),
     lambda: occluders.PolygonOccluders(probability=0.9, padding=1.2),
 ]
 

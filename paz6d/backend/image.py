@@ -313,30 +313,6 @@ def random_image_noise(image, seed=None, max_std: float = 10.0) -> np.ndarray:
     return add_gaussian_noise(image, generator.uniform(0.0, max_std), generator)
 
 
-def random_crop_box(image_size: tuple[int, int], seed=None, scale: tuple[float, float] = (0.3, 1.0),
-                    aspect_ratio: tuple[float, float] = (0.5, 2.0)) -> np.ndarray:
-    """Draws an integer ``xyxy`` crop box inside an image of ``image_size = (width, height)``.
-
-    The crop's area fraction is uniform in ``scale`` and its aspect ratio (width/height) is
-    log-uniform in ``aspect_ratio``; sides are clamped to the image.
-    """
-    width, height = (int(value) for value in image_size)
-    if width <= 0 or height <= 0:
-        raise ValueError(f"image_size: expected positive (width, height), got {image_size}")
-    _check_range(*scale, "scale")
-    _check_range(*aspect_ratio, "aspect_ratio")
-    if scale[0] <= 0 or scale[1] > 1 or aspect_ratio[0] <= 0:
-        raise ValueError(f"scale/aspect_ratio: expected 0 < scale <= 1 and aspect_ratio > 0, got {scale}, {aspect_ratio}")
-    generator = _generator(seed)
-    fraction = generator.uniform(*scale)
-    ratio = np.exp(generator.uniform(np.log(aspect_ratio[0]), np.log(aspect_ratio[1])))
-    crop_width = int(np.clip(round(np.sqrt(fraction * width * height * ratio)), 1, width))
-    crop_height = int(np.clip(round(np.sqrt(fraction * width * height / ratio)), 1, height))
-    x_min = int(generator.integers(0, width - crop_width + 1))
-    y_min = int(generator.integers(0, height - crop_height + 1))
-    return np.array([x_min, y_min, x_min + crop_width, y_min + crop_height], dtype=np.float64)
-
-
 def alpha_blend(foreground, alpha, background) -> np.ndarray:
     """Composites ``foreground`` over ``background``: ``alpha * fg + (1 - alpha) * bg``.
 

@@ -1,6 +1,6 @@
 """Augmentation as random processors: photometric (brightness, contrast, saturation, hue, blur,
-noise), geometric (flip, crop) and compositing over background images. Images are ``uint8`` RGB
-``(H, W, 3)``.
+noise), mirroring and compositing over background images. Images are ``uint8`` RGB
+``(H, W, 3)``; augmentations of images with boxes (SSD) are in :mod:`paz6d.synthesis.box_augment`.
 
 Every class is a :class:`~paz6d.abstract.processor.RandomProcessor` (its own ``generator``; a
 :class:`~paz6d.abstract.sequence.BatchDispatcher` reseeds it per sample), so augmentations compose
@@ -26,7 +26,6 @@ import cv2
 import numpy as np
 
 from paz6d.abstract.processor import RandomProcessor, random_processors
-from paz6d.backend import boxes as boxes_backend
 from paz6d.backend import image as image_backend
 from paz6d.synthesis.backgrounds import BACKGROUND_STYLES, crop_background, procedural_background
 
@@ -36,14 +35,6 @@ def share_generator(processor: Callable, generator: np.random.Generator) -> None
     order), e.g. the generator of the sample being made."""
     for target in random_processors(processor):
         target.generator = generator
-
-
-def _as_box_rows(boxes) -> np.ndarray:
-    """``(N, 4 + k)`` float copy: ``xyxy`` pixels first, then any extra columns (class id, ...)."""
-    rows = np.array(boxes, dtype=np.float64)
-    if rows.ndim != 2 or rows.shape[1] < 4:
-        raise ValueError(f"boxes: expected shape (N, 4 + k) with xyxy first, got {rows.shape}")
-    return rows
 
 
 class RandomBrightness(RandomProcessor):
@@ -155,50 +146,14 @@ class RandomImageNoise(RandomProcessor):
 
 
 class RandomFlipLeftRight(RandomProcessor):
-    """Mirrors the image (and ``xyxy`` boxes ``(N, 4 + k)`` if given) with ``probability``."""
+    """Mirrors the image left-right with ``probability`` (images with boxes: :class:`~paz6d.synthesis.box_augment.RandomFlip`)."""
 
     def __init__(self, probability: float = 0.5, seed=None, name: str | None = None):
         super().__init__(seed, name)
         self.probability = probability
 
-    def call(self, image: np.ndarray, boxes=None):
-        flip = self.generator.random() < self.probability
-        if flip:
-            image = image_backend.flip_left_right(image)
-        if boxes is None:
-            return image
-        boxes = _as_box_rows(boxes)
-        if flip:
-            boxes[:, :4] = boxes_backend.flip_left_right(boxes[:, :4], image.shape[1])
-        return image, boxes
-
-
-class RandomCrop(RandomProcessor):
-    """Crops a random window (area fraction in ``scale``, aspect ratio in ``aspect_ratio``).
-
-    Called as ``(image)`` it returns the crop; called as ``(image, boxes)`` with ``boxes``
-    ``(N, 4 + k)`` (``xyxy`` pixels first, extra columns such as class ids kept) it returns
-    ``(crop, boxes_in_crop)``: boxes whose centre falls inside the window, shifted and clipped
-    to it (the SSD rule).
-    """
-
-    def __init__(self, scale: tuple[float, float] = (0.3, 1.0), aspect_ratio: tuple[float, float] = (0.5, 2.0),
-                 seed=None, name: str | None = None):
-        super().__init__(seed, name)
-        self.scale, self.aspect_ratio = tuple(scale), tuple(aspect_ratio)
-
-    def call(self, image: np.ndarray, boxes=None):
-        height, width = np.asarray(image).shape[:2]
-        window = image_backend.random_crop_box((width, height), self.generator, self.scale, self.aspect_ratio)
-        cropped = image_backend.crop(image, window)
-        if boxes is None:
-            return cropped
-        boxes = _as_box_rows(boxes)
-        centers = 0.5 * (boxes[:, :2] + boxes[:, 2:4])
-        inside = np.all((centers >= window[:2]) & (centers < window[2:]), axis=1)
-        kept = boxes[inside]
-        kept[:, :4] = boxes_backend.clip(kept[:, :4] - np.tile(window[:2], 2), (cropped.shape[1], cropped.shape[0]))
-        return cropped, kept
+    def call(self, image: np.ndarray) -> np.ndarray:
+        return image_backend.flip_left_right(image) if self.generator.random() < self.probability else image
 
 
 class BlendBackground(RandomProcessor):
