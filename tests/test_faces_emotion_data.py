@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from paz6d.datasets.fer2013 import FER2013_CLASSES, load_fer2013_csv, load_image_folder
-from paz6d.processors.affine import RandomAffine, similarity_matrix
+from paz6d.synthesis.augment import RandomAffine, similarity_matrix
 from paz6d.faces.emotion_train import (_split_per_class, build_augmentation, confusion_matrix, load_emotion_data,
                                     save_confusion_matrix_plot)
 

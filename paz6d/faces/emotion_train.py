@@ -31,9 +31,8 @@ from paz6d.backend.files import (save_figure_atomically, save_keras_model_atomic
                                  write_text_atomically)
 from paz6d.datasets.fer2013 import FER2013_CLASSES, load_fer2013_csv, load_image_folder
 from paz6d.faces.emotion_config import EmotionTraining
-from paz6d.processors.affine import RandomAffine
 from paz6d.processors.image import ConvertColorSpace
-from paz6d.synthesis.augment import RandomBrightness, RandomContrast, RandomFlipLeftRight
+from paz6d.synthesis.augment import RandomAffine, RandomBrightness, RandomContrast, RandomFlipLeftRight
 
 VALIDATION_LOG = "validation.csv"
 
