@@ -77,7 +77,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_coco(args: argparse.Namespace) -> int:
-
     evaluation = coco.evaluate_files(args.gt, args.results, args.iou_type)
     per_class = evaluation.per_category_ap()
     print(f"COCO {args.iou_type} evaluation of {args.results} against {args.gt}")
@@ -91,14 +90,12 @@ def _run_coco(args: argparse.Namespace) -> int:
                        "per_class_ap": per_class}, indent=2)
     print(f"wrote {args.out}")
     if args.plots is not None:
-
         for path in detection_plots.plot_coco(evaluation, args.plots):
             print(f"wrote {path}")
     return 0
 
 
 def _run_voc(args: argparse.Namespace) -> int:
-
     names = voc.read_class_names(args.class_names) if args.class_names is not None else None
     evaluation = voc.evaluate_directories(args.annotations, args.detections, args.iou, args.method, args.box_format,
                                           args.plus_one, names, args.layout)
@@ -119,7 +116,6 @@ def _run_voc(args: argparse.Namespace) -> int:
                        "plus_one": args.plus_one, "per_class": per_class, "mAP": mean}, indent=2)
     print(f"wrote {args.out}")
     if args.plots is not None:
-
         for path in detection_plots.plot_voc(evaluation, args.plots):
             print(f"wrote {path}")
     return 0
