@@ -132,7 +132,6 @@ def run_object_id(run_dir: Path, method: str) -> int | None:
         aae_run_dir.read_object(run_dir)
         Codebook.load(aae_run_dir.codebook_path(run_dir))
     else:
-
         mesh = keypointnet_run_dir.read_config(run_dir).get("mesh_path")
         keypointnet_run_dir.read_keypoints(run_dir)
     match = _OBJECT_MESH.match(Path(str(mesh)).stem) if mesh else None
