@@ -24,7 +24,7 @@ def _random_run(folder: Path, config: str) -> Path:
     """A run directory holding a randomly initialised network of ``config`` for 8 classes."""
     from paz6d.ssd import run_dir as run_files
     from paz6d.ssd.model import build_ssd, save_ssd
-    from paz6d.ssd.train import CONFIGS
+    from paz6d.ssd.config import CONFIGS
 
     settings = CONFIGS[config]
     model, spec = build_ssd(9, settings["architecture"], settings["input_size"], settings["width"])

@@ -19,7 +19,7 @@ COMMANDS = {
     "train": ({"aae": ("paz6d.aae.command", "Augmented Autoencoder (implicit 6D pose)"),
                "keypointnet": ("paz6d.keypointnet.command", "KeypointNet keypoint discovery"),
                "emotion": ("paz6d.faces.emotion_command", "mini-Xception emotion classifier"),
-               "ssd": ("paz6d.ssd.train", "SSD single-shot object detector")},
+               "ssd": ("paz6d.ssd.command", "SSD single-shot object detector")},
               "train a model"),
     "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
     "detect": ("paz6d.ssd.detect", "run a trained SSD over a BOP split or an image folder -> COCO detections JSON"),

@@ -19,7 +19,8 @@ from paz6d.datasets.bop.coco_ground_truth import bop_split_to_coco, coco_image_i
 from paz6d.run_dirs import method_of
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.dataset import load_detection_set
-from paz6d.ssd.train import SSDTraining, train_ssd
+from paz6d.ssd.config import SSDTraining
+from paz6d.ssd.train import train_ssd
 
 TINY = {"input_size": 128, "width": 0.25, "learning_rate": 5e-3, "warmup_steps": 0, "expand_probability": 0.0,
         "checkpoint_every": 30, "sample_every": 30}

@@ -1,4 +1,4 @@
-"""``paz6d train ssd``: a single-shot detector trained on a ``paz6d generate`` data set with the shared Trainer.
+"""SSD training: a single-shot detector trained on a ``paz6d generate`` data set with the shared Trainer.
 
 The data set's COCO annotations (``<dataset>/<split>/<scene>/scene_gt_coco.json``, visible boxes) are read
 by :mod:`paz6d.ssd.dataset`; every sample goes through SSD's augmentation
@@ -13,17 +13,14 @@ The run directory (:mod:`paz6d.ssd.run_dir`) gets ``detector.json`` + ``model.ke
 ``tensorboard/`` and ``samples/`` (detections on training images), and ``metrics.json``. Re-running
 the same command resumes.
 
-This module is cheap to import: TensorFlow is loaded inside :func:`run`.
+The command is :mod:`paz6d.ssd.command`, its settings :mod:`paz6d.ssd.config`; TensorFlow is loaded
+inside :func:`train_ssd`.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
-from dataclasses import dataclass, field
 from functools import partial
-from pathlib import Path
 
 import numpy as np
 
@@ -31,73 +28,13 @@ from paz6d.backend.boxes import SSD_VARIANCES
 from paz6d.backend.draw import image_grid
 from paz6d.backend.files import finite_or_none
 from paz6d.backend.image import load_image, resize, save_image
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.processors.boxes import ToBoxes2D
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.dataset import load_detection_set, training_batch
 from paz6d.ssd.encoding import BACKGROUND, decode_outputs, select_detections
+from paz6d.ssd.config import FIXED_SETTINGS, SSDTraining
 from paz6d.ssd.pipeline import draw_detections
 from paz6d.synthesis.box_augment import ssd_augmentation
-
-CONFIGS: dict[str, dict] = {
-    # CPU budget: generation + training within 30 minutes on 2 cores (docs/ssd.md).
-    "quick": {"architecture": "light", "input_size": 320, "width": 1.0, "batch_size": 16, "steps": 1500,
-              "learning_rate": 3e-3, "warmup_steps": 100, "weight_decay": 1e-4, "expand_ratio": 2.0,
-              "expand_probability": 0.3, "iou_threshold": 0.5, "checkpoint_every": 250, "sample_every": 250},
-    # The paper's SSD300 (VGG16, random initialisation) for a GPU.
-    "full": {"architecture": "ssd300", "input_size": 300, "width": 1.0, "batch_size": 32, "steps": 120000,
-             "learning_rate": 1e-3, "warmup_steps": 1000, "weight_decay": 5e-4, "expand_ratio": 4.0,
-             "expand_probability": 0.5, "iou_threshold": 0.5, "checkpoint_every": 5000, "sample_every": 5000},
-}
-#: Keys of a run's settings that must not change when it is resumed.
-FIXED_SETTINGS = ("architecture", "input_size", "width", "iou_threshold")
-
-
-@dataclass
-class SSDTraining:
-    """One ``paz6d train ssd`` run (each field but ``overrides`` is a flag, see :mod:`paz6d.cli_options`)."""
-
-    dataset: Path = option(help="data set folder written by `paz6d generate` (COCO annotations per scene)")
-    out: Path = option(help="run directory (re-run the command to resume)")
-    split: str | None = option(None, "split folder of the data set (default: train)")
-    config: str = option("quick", "network and schedule", choices=tuple(sorted(CONFIGS)))
-    seed: int = option(0, "seed of the initialisation and of every batch")
-    steps: int | None = option(None, "training steps (default: the config's)")
-    batch_size: int | None = option(None, "images per step (default: the config's)")
-    progress: bool = option(True, "progress bar")
-    overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
-
-    def __post_init__(self):
-        self.dataset, self.out = Path(self.dataset), Path(self.out)
-        self.settings()
-
-    def settings(self) -> dict:
-        """The config's settings with ``overrides``, ``steps`` and ``batch_size`` applied."""
-        if self.config not in CONFIGS:
-            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
-        settings = {**CONFIGS[self.config], **self.overrides}
-        for name in ("steps", "batch_size"):
-            value = getattr(self, name)
-            if value is not None:
-                if int(value) <= 0:
-                    raise ValueError(f"{name}: expected a positive integer, got {value}")
-                settings[name] = int(value)
-        return settings
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    """Adds the ``paz6d train ssd`` flags (the fields of :class:`SSDTraining`)."""
-    add_config_arguments(parser, SSDTraining, exclude=("overrides",))
-
-
-def run(args: argparse.Namespace) -> int:
-    """Entry point of ``paz6d train ssd``."""
-    job = config_from_args(SSDTraining, args, exclude=("overrides",))
-    with flags_in_errors(SSDTraining):
-        summary = train_ssd(job)
-    print(json.dumps(summary, indent=2))
-    return 0
-
 
 def _prepare_run_dir(job: SSDTraining, settings: dict, class_names: tuple[str, ...]) -> None:
     """Writes ``config.json`` or checks that an existing one describes the same run."""

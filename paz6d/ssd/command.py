@@ -1,0 +1,25 @@
+"""``paz6d train ssd``: flags from :class:`~paz6d.ssd.config.SSDTraining` and the command."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.ssd.config import SSDTraining
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Adds the ``paz6d train ssd`` flags (the fields of :class:`SSDTraining`)."""
+    add_config_arguments(parser, SSDTraining, exclude=("overrides",))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point of ``paz6d train ssd``."""
+    from paz6d.ssd.train import train_ssd  # here: it loads OpenCV and TensorFlow
+
+    job = config_from_args(SSDTraining, args, exclude=("overrides",))
+    with flags_in_errors(SSDTraining):
+        summary = train_ssd(job)
+    print(json.dumps(summary, indent=2))
+    return 0

@@ -1,0 +1,54 @@
+"""Settings of ``paz6d train ssd``: the quick and full configs and one run's :class:`SSDTraining`
+(whose fields are the command's flags). Light: no numpy, no TensorFlow."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from paz6d.cli_options import option
+
+CONFIGS: dict[str, dict] = {
+    # CPU budget: generation + training within 30 minutes on 2 cores (docs/ssd.md).
+    "quick": {"architecture": "light", "input_size": 320, "width": 1.0, "batch_size": 16, "steps": 1500,
+              "learning_rate": 3e-3, "warmup_steps": 100, "weight_decay": 1e-4, "expand_ratio": 2.0,
+              "expand_probability": 0.3, "iou_threshold": 0.5, "checkpoint_every": 250, "sample_every": 250},
+    # The paper's SSD300 (VGG16, random initialisation) for a GPU.
+    "full": {"architecture": "ssd300", "input_size": 300, "width": 1.0, "batch_size": 32, "steps": 120000,
+             "learning_rate": 1e-3, "warmup_steps": 1000, "weight_decay": 5e-4, "expand_ratio": 4.0,
+             "expand_probability": 0.5, "iou_threshold": 0.5, "checkpoint_every": 5000, "sample_every": 5000},
+}
+#: Keys of a run's settings that must not change when it is resumed.
+FIXED_SETTINGS = ("architecture", "input_size", "width", "iou_threshold")
+
+
+@dataclass
+class SSDTraining:
+    """One ``paz6d train ssd`` run (each field but ``overrides`` is a flag, see :mod:`paz6d.cli_options`)."""
+
+    dataset: Path = option(help="data set folder written by `paz6d generate` (COCO annotations per scene)")
+    out: Path = option(help="run directory (re-run the command to resume)")
+    split: str | None = option(None, "split folder of the data set (default: train)")
+    config: str = option("quick", "network and schedule", choices=tuple(sorted(CONFIGS)))
+    seed: int = option(0, "seed of the initialisation and of every batch")
+    steps: int | None = option(None, "training steps (default: the config's)")
+    batch_size: int | None = option(None, "images per step (default: the config's)")
+    progress: bool = option(True, "progress bar")
+    overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
+
+    def __post_init__(self):
+        self.dataset, self.out = Path(self.dataset), Path(self.out)
+        self.settings()
+
+    def settings(self) -> dict:
+        """The config's settings with ``overrides``, ``steps`` and ``batch_size`` applied."""
+        if self.config not in CONFIGS:
+            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
+        settings = {**CONFIGS[self.config], **self.overrides}
+        for name in ("steps", "batch_size"):
+            value = getattr(self, name)
+            if value is not None:
+                if int(value) <= 0:
+                    raise ValueError(f"{name}: expected a positive integer, got {value}")
+                settings[name] = int(value)
+        return settings
