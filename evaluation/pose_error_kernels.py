@@ -202,13 +202,8 @@ def min_max_pixel_distances(M_est, m_est, M_sym, m_sym, points):
             largest = 0.0
             for n in range(count):
                 u_est, v_est = _pixel(M_est, m_est, e, points[n, 0], points[n, 1], points[n, 2])
-                hx = M_sym[e, s, 0, 0] * points[n, 0] + M_sym[e, s, 0, 1] * points[n, 1] + \
-                    M_sym[e, s, 0, 2] * points[n, 2] + m_sym[e, s, 0]
-                hy = M_sym[e, s, 1, 0] * points[n, 0] + M_sym[e, s, 1, 1] * points[n, 1] + \
-                    M_sym[e, s, 1, 2] * points[n, 2] + m_sym[e, s, 1]
-                hz = M_sym[e, s, 2, 0] * points[n, 0] + M_sym[e, s, 2, 1] * points[n, 1] + \
-                    M_sym[e, s, 2, 2] * points[n, 2] + m_sym[e, s, 2]
-                distance = np.sqrt((u_est - hx / hz) ** 2 + (v_est - hy / hz) ** 2)
+                u_sym, v_sym = _pixel(M_sym[e], m_sym[e], s, points[n, 0], points[n, 1], points[n, 2])
+                distance = np.sqrt((u_est - u_sym) ** 2 + (v_est - v_sym) ** 2)
                 if distance != distance:  # NaN: a point on a camera plane
                     distance = np.inf
                 largest = max(largest, distance)
