@@ -11,6 +11,33 @@ import stat
 from pathlib import Path
 
 
+def _mode(path: Path, parent_is_file: str) -> int | None:
+    """``lstat`` mode of ``path`` (``None`` when nothing is there); ``ValueError(parent_is_file)`` when a
+    file stands where one of its folders should be."""
+    try:
+        return os.lstat(path).st_mode
+    except FileNotFoundError:
+        return None
+    except NotADirectoryError as error:
+        raise ValueError(parent_is_file) from error
+
+
+def _kind(mode: int) -> str:
+    """What stands at a path, in words, from its ``lstat`` mode."""
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    return "a file" if stat.S_ISREG(mode) else "a device, FIFO or socket"
+
+
+def _nearest_existing(path: Path) -> Path:
+    """``path`` or its nearest ancestor that exists (as a link or anything else)."""
+    while not os.path.lexists(path) and path != path.parent:
+        path = path.parent
+    return path
+
+
 def check_output_file(path: str | Path, name: str | None = None) -> Path:
     """Checks, creating nothing, that ``path`` may receive an output file: only a missing path or an
     existing regular file may be (re)placed; a symbolic link, folder, device, FIFO or socket at
@@ -22,20 +49,11 @@ def check_output_file(path: str | Path, name: str | None = None) -> Path:
     """
     path = Path(path)
     label = f"{name}: {path}" if name else str(path)
-    try:
-        mode = os.lstat(path).st_mode
-    except FileNotFoundError:
-        mode = None
-    except NotADirectoryError as error:
-        raise ValueError(f"{label}: a parent of this output path is a file, not a folder") from error
+    mode = _mode(path, f"{label}: a parent of this output path is a file, not a folder")
     if mode is not None and not stat.S_ISREG(mode):
-        kind = ("a symbolic link" if stat.S_ISLNK(mode) else "a folder" if stat.S_ISDIR(mode)
-                else "a device, FIFO or socket")
-        raise ValueError(f"{label}: refusing to replace {kind} with an output file; "
+        raise ValueError(f"{label}: refusing to replace {_kind(mode)} with an output file; "
                          "give the path of a new or existing regular file")
-    existing = path.parent
-    while not os.path.lexists(existing) and existing != existing.parent:
-        existing = existing.parent
+    existing = _nearest_existing(path.parent)
     if not existing.is_dir():
         raise ValueError(f"{label}: cannot create its folder {path.parent} ({existing} is not a folder)")
     return path
@@ -60,19 +78,10 @@ def check_output_folder(path: str | Path, name: str) -> Path:
         ValueError: naming ``name`` and ``path``.
     """
     path = Path(path)
-    try:
-        mode = os.lstat(path).st_mode
-    except FileNotFoundError:
-        mode = None
-    except NotADirectoryError as error:
-        raise ValueError(f"{name}: {path}: a parent of this output folder is a file") from error
+    mode = _mode(path, f"{name}: {path}: a parent of this output folder is a file")
     if mode is not None and not stat.S_ISDIR(mode):
-        kind = "a symbolic link" if stat.S_ISLNK(mode) else "a file" if stat.S_ISREG(mode) else \
-            "a device, FIFO or socket"
-        raise ValueError(f"{name}: {path} is {kind}, not a folder; give a new or existing folder")
-    existing = path
-    while not os.path.lexists(existing) and existing != existing.parent:
-        existing = existing.parent
+        raise ValueError(f"{name}: {path} is {_kind(mode)}, not a folder; give a new or existing folder")
+    existing = _nearest_existing(path)
     if not existing.is_dir():
         raise ValueError(f"{name}: {path}: its parent {existing} is not a folder")
     return path
