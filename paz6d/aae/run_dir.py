@@ -24,7 +24,7 @@ import numpy as np
 from paz6d.aae.codebook import Codebook
 from paz6d.aae.model import load_model
 from paz6d.backend.checks import integer_field, number_field
-from paz6d.backend.files import load_json, load_npz, save_npz_atomically, write_json_atomically
+from paz6d.backend.files import load_json_object, load_npz, save_npz_atomically, write_json_atomically
 
 CONFIG_FILE = "config.json"
 OBJECT_FILE = "object.npz"
@@ -112,9 +112,7 @@ def write_config(run_dir: str | Path, config: dict[str, Any], mesh: str | Path, 
 def read_config(run_dir: str | Path) -> dict[str, Any]:
     """The whole ``config.json`` (see :func:`write_config`), checked for the keys readers use."""
     path = _required(_directory(run_dir) / CONFIG_FILE)
-    data = load_json(path)
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    data = load_json_object(path)
     missing = [key for key in CONFIG_KEYS if key not in data]
     if not missing and isinstance(data["config"], dict):
         missing = [f"config.{key}" for key in MODEL_CONFIG_KEYS if key not in data["config"]]

@@ -163,6 +163,14 @@ def load_json(path: str | Path) -> Any:
         raise ValueError(f"{path}: invalid JSON ({_excerpt(str(error))})") from error
 
 
+def load_json_object(path: str | Path) -> dict:
+    """:func:`load_json` of a file that must hold a JSON object; ``ValueError`` naming the file otherwise."""
+    data = load_json(path)
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    return data
+
+
 def load_npz(path: str | Path, what: str = "arrays") -> dict[str, np.ndarray]:
     """Every array of an ``.npz`` file (no pickled objects); ``ValueError`` naming the file when it is
     missing, a folder, truncated or not an ``.npz`` archive (``what`` says what it should hold)."""

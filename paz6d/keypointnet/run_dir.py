@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from paz6d.backend.checks import as_array, integer_field, number_field
-from paz6d.backend.files import load_json, write_json_atomically
+from paz6d.backend.files import load_json_object, write_json_atomically
 
 CONFIG_FILE = "config.json"
 MODEL_FILE = "model.keras"
@@ -47,9 +47,7 @@ def is_run_dir(run_dir: str | Path) -> bool:
 def _read_json(path: Path, fields: tuple[str, ...]) -> dict:
     if not path.is_file():
         raise ValueError(f"{path}: file not found (is {path.parent} a KeypointNet run directory?)")
-    data = load_json(path)
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    data = load_json_object(path)
     missing = [name for name in fields if name not in data]
     if missing:
         raise ValueError(f"{path}: missing field(s) {missing}")
