@@ -19,11 +19,12 @@ COMMANDS = {
     "train": ({"aae": ("paz6d.aae.command", "Augmented Autoencoder (implicit 6D pose)"),
                "keypointnet": ("paz6d.keypointnet.command", "KeypointNet keypoint discovery"),
                "emotion": ("paz6d.faces.emotion_command", "mini-Xception emotion classifier"),
-               "ssd": ("paz6d.ssd.command", "SSD single-shot object detector")},
+               "ssd": ("paz6d.ssd.command", "SSD single-shot object detector"),
+               "stn": ("paz6d.stn.command", "spatial transformer digit classifier (cluttered digits)")},
               "train a model"),
     "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
     "detect": ("paz6d.ssd.detect", "run a trained SSD over a BOP split or an image folder -> COCO detections JSON"),
-    "estimate": ("paz6d.estimate", "run a trained pose model on a BOP data set (ground-truth boxes) -> BOP results CSV"),
+    "estimate": ("paz6d.estimate", "run trained pose models on a BOP data set (ground-truth boxes or --detector) -> BOP results CSV"),
     "demo": ("paz6d.demo.command", "end-to-end demo: generate data, train, estimate poses, evaluate"),
 }
 

@@ -1,14 +1,20 @@
-"""``paz6d estimate``: run a trained pose model on a BOP data set and write a BOP results CSV.
+"""``paz6d estimate``: run trained pose models on a BOP data set and write one BOP results CSV.
 
-The model gets each annotated instance of one object with its ground-truth 2D box (the setting of
-the AAE paper's and our demo's evaluations; no detector involved), and the estimates are written in
-the BOP'19 results format that ``paz6d evaluate bop`` scores::
+One or more pose run directories (``--run OBJ_ID=RUN_DIR``, repeatable; the method of each, AAE or
+KeypointNet, is found from its files) get every image of a split, either with each annotated
+instance's ground-truth 2D box (the setting of the AAE paper's evaluation) or, with ``--detector``, with
+the boxes a trained SSD finds (:class:`paz6d.detect_and_estimate.DetectAndEstimatePose6D`; no ground
+truth read). Estimates are written in the BOP'19 results format that ``paz6d evaluate bop`` scores, with
+the per-image time (seconds, the same on every row of an image, as BOP asks)::
 
-    paz6d estimate --run runs/aae_lmo5 --dataset ../shared/data/bop_lmo --object-id 5 --out lmo5.csv
-    paz6d evaluate bop --dataset ../shared/data/bop_lmo --results lmo5.csv --metrics mssd,mspd,add \\
-        --out lmo5.json
+    paz6d estimate --run 5=runs/aae_5 --run 8=runs/kp_8 --dataset ../shared/data/bop_lmo --out gt.csv
+    paz6d estimate --detector runs/ssd --run 5=runs/aae_5 --run 8=runs/kp_8 --dataset ../shared/data/bop_lmo \\
+        --out det.csv             # also writes det_detections.json (COCO results of the detector)
+    paz6d evaluate bop --dataset ../shared/data/bop_lmo --results det.csv --metrics mssd,mspd,add --out det.json
 
-Images without an RGB file are skipped (reported), as are instances below ``--min-visible``.
+A bare ``--run RUN_DIR`` with ``--object-id`` (or a run whose mesh is named ``obj_XXXXXX``) keeps working.
+Images without an RGB file are skipped (reported), as are, with ground-truth boxes, instances below
+``--min-visible``. Nothing estimated is an error (exit 2).
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from __future__ import annotations
 import argparse
 import re
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -26,51 +33,206 @@ from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION
 
-METHODS = ("aae", "keypoints")
+METHODS = ("aae", "keypoints", "keypointnet")
 #: ``--method`` value -> the method name of its run directories (:func:`paz6d.run_dirs.method_of`).
-RUN_METHODS = {"aae": "aae", "keypoints": "keypointnet"}
+RUN_METHODS = {"aae": "aae", "keypoints": "keypointnet", "keypointnet": "keypointnet"}
 _OBJECT_MESH = re.compile(r"^obj_(\d+)$")
 BOXES = {"obj": "bbox_obj", "visib": "bbox_visib"}
+DEFAULT_SCORE_THRESHOLD = 0.1
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--run", type=Path, required=True, help="run directory of `paz6d train aae|keypointnet`")
-    parser.add_argument("--method", choices=METHODS, default="aae", help="model type of --run")
+    parser.add_argument("--run", action="append", required=True, metavar="[OBJ_ID=]RUN_DIR",
+                        help="pose run directory of `paz6d train aae|keypointnet` for BOP object OBJ_ID; repeat for "
+                             "more objects. A bare RUN_DIR takes --object-id (or the obj_XXXXXX name of its mesh)")
+    parser.add_argument("--method", choices=METHODS, default=None,
+                        help="optional check: every --run must be of this method (found from the files anyway)")
     parser.add_argument("--dataset", type=Path, required=True, help="BOP data set folder")
     parser.add_argument("--split", default="test", help="split folder of --dataset")
-    parser.add_argument("--object-id", type=int, required=True, help="object the model was trained for")
-    parser.add_argument("--out", type=Path, required=True, help="results CSV to write")
+    parser.add_argument("--object-id", type=int, default=None, help="object of a bare --run RUN_DIR")
+    parser.add_argument("--out", type=Path, required=True, help="results CSV to write (all objects)")
+    parser.add_argument("--detector", type=Path, default=None,
+                        help="SSD run directory (`paz6d train ssd`): boxes from its detections instead of the "
+                             "ground truth (no ground truth is read)")
+    parser.add_argument("--detections-out", type=Path, default=None,
+                        help="with --detector: COCO results JSON of every detection (default: beside --out, "
+                             "<out stem>_detections.json)")
+    parser.add_argument("--score-threshold", type=float, default=DEFAULT_SCORE_THRESHOLD,
+                        help=f"with --detector: detections scoring below it are dropped (default "
+                             f"{DEFAULT_SCORE_THRESHOLD}); the BOP score of an estimate is its detection's")
     parser.add_argument("--box", choices=sorted(BOXES), default="obj",
-                        help="ground-truth box given to the model: of the whole projected object (obj) or of "
-                             "its visible part (visib, what a detector would see)")
+                        help="without --detector, the ground-truth box given to the model: of the whole projected "
+                             "object (obj) or of its visible part (visib, what a detector would see)")
     parser.add_argument("--targets-out", type=Path, default=None,
                         help="also write the BOP'19 targets of the images estimated (for `evaluate bop --targets` "
-                             "when only some images of the split have RGB files)")
+                             "when only some images of the split have RGB files); with --detector, the data "
+                             "set's test_targets_bop19.json entries of those images")
     parser.add_argument("--min-visible", type=float, default=TARGET_MIN_VISIBLE_FRACTION,
-                        help=f"skip instances whose visible fraction is below this (default "
+                        help=f"without --detector, skip instances whose visible fraction is below this (default "
                              f"{TARGET_MIN_VISIBLE_FRACTION}, as BOP'19 targets)")
+    parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
+                        help="progress bar (default: --progress)")
+
+
+# ------------------------------------------------------------------------------------------ run directories
+def run_object_id(run_dir: Path, method: str) -> int | None:
+    """The BOP object id a run directory was trained on, from its mesh's ``obj_XXXXXX`` file name
+    (``None`` when the mesh is named otherwise, e.g. a mesh given with ``--mesh``).
+
+    Reads the run's files through its method's ``run_dir`` module, so a corrupt or incomplete run
+    directory fails here, naming the file, before any image is read.
+    """
+    method = RUN_METHODS.get(method, method)
+    if method == "aae":
+        from paz6d.aae import run_dir as aae_run_dir
+
+        mesh = aae_run_dir.read_config(run_dir)["mesh"]
+        aae_run_dir.read_object(run_dir)
+        Codebook.load(aae_run_dir.codebook_path(run_dir))
+    elif method == "keypointnet":
+        mesh = keypointnet_run_dir.read_config(run_dir).get("mesh_path")
+        keypointnet_run_dir.read_keypoints(run_dir)
+    else:
+        raise ValueError(f"--run: {run_dir} is a {method} run directory, not a pose model (aae or keypointnet)")
+    match = _OBJECT_MESH.match(Path(str(mesh)).stem) if mesh else None
+    return int(match.group(1)) if match else None
+
+
+def parse_run(value: str) -> tuple[int | None, Path]:
+    """``"5=runs/aae"`` -> ``(5, Path("runs/aae"))``; ``"runs/aae"`` -> ``(None, Path("runs/aae"))``.
+
+    Raises:
+        ValueError: an object id that is not a positive integer, or an empty run directory.
+    """
+    head, separator, tail = value.partition("=")
+    if separator and re.fullmatch(r"[+-]?\d+", head.strip()):
+        obj_id = int(head)
+        if obj_id < 1:
+            raise ValueError(f"--run {value}: expected a BOP object id (a positive integer) before '=', got {obj_id}")
+        if not tail:
+            raise ValueError(f"--run {value}: expected OBJ_ID=RUN_DIR, the run directory is empty")
+        return obj_id, Path(tail)
+    if not value:
+        raise ValueError("--run: expected OBJ_ID=RUN_DIR or RUN_DIR, got an empty value")
+    return None, Path(value)
+
+
+def resolve_runs(values: list[str], object_id: int | None, method: str | None = None) -> dict[int, tuple[Path, str]]:
+    """``{obj_id: (run_dir, method)}`` from the ``--run`` values, every run directory checked (its method,
+    its files, the object it was trained on) before any image is read.
+
+    Raises:
+        ValueError: a missing/corrupt/non-pose run directory, an object given twice, a bare run without an
+            object id, or a run trained on another object (naming the flag and the file).
+    """
+    from paz6d.run_dirs import method_of
+
+    if object_id is not None and object_id < 1:
+        raise ValueError(f"--object-id: expected a BOP object id (a positive integer), got {object_id}")
+    runs: dict[int, tuple[Path, str]] = {}
+    for value in values:
+        obj_id, run_dir = parse_run(value)
+        if not run_dir.is_dir():
+            raise ValueError(f"--run: {run_dir} is not a directory")
+        found = method_of(run_dir)
+        if found == "ssd":
+            raise ValueError(f"--run: {run_dir} is an SSD detector run directory; give it as --detector")
+        if method is not None and found != RUN_METHODS[method]:
+            wanted = "aae" if found == "aae" else "keypointnet"
+            raise ValueError(f"--method: {run_dir} is a {found} run directory; use --method {wanted} (or leave "
+                             f"--method out: the method is found from the files)")
+        trained_on = run_object_id(run_dir, found)
+        if obj_id is None:
+            obj_id = object_id if object_id is not None else trained_on
+            if obj_id is None:
+                raise ValueError(f"--run {value}: which object? give --run OBJ_ID={run_dir} (its mesh is not named "
+                                 f"obj_XXXXXX)")
+            if object_id is not None and trained_on is not None and trained_on != object_id:
+                raise ValueError(f"--object-id: {run_dir} was trained on object {trained_on}, not {object_id}")
+        elif trained_on is not None and trained_on != obj_id:
+            raise ValueError(f"--run {value}: {run_dir} was trained on object {trained_on}, not {obj_id}")
+        if obj_id in runs:
+            raise ValueError(f"--run: object {obj_id} given twice ({runs[obj_id][0]} and {run_dir})")
+        runs[obj_id] = (run_dir, found)
+    if not runs:
+        raise ValueError("--run: expected at least one pose run directory")
+    return runs
+
+
+def check_detector(detector: Path, object_ids) -> tuple[str, ...]:
+    """The class names of an SSD run directory, checked to include ``obj_XXXXXX`` of every object.
+
+    Raises:
+        ValueError: not a (valid) SSD run directory, or an object the detector was not trained on.
+    """
+    from paz6d.run_dirs import method_of
+    from paz6d.ssd import run_dir as ssd_run_dir
+
+    if not detector.is_dir():
+        raise ValueError(f"--detector: {detector} is not a directory")
+    found = method_of(detector)
+    if found != "ssd":
+        raise ValueError(f"--detector: {detector} is a {found} run directory, not an SSD detector (`paz6d train ssd`)")
+    class_names = tuple(ssd_run_dir.read_detector(detector)["class_names"])
+    missing = [obj_id for obj_id in sorted(object_ids) if f"obj_{obj_id:06d}" not in class_names]
+    if missing:
+        raise ValueError(f"--detector: {detector} does not detect objects {missing} (its classes: {list(class_names)})")
+    return class_names
+
+
+def detections_path(args: argparse.Namespace) -> Path | None:
+    """Where the detections JSON goes: ``--detections-out``, else ``<out stem>_detections.json`` beside ``--out``."""
+    if args.detector is None:
+        return None
+    if args.detections_out is not None:
+        return args.detections_out
+    return args.out.with_name(f"{args.out.stem}_detections.json")
+
+
+# ------------------------------------------------------------------------------------------ estimation
+class _Estimates:
+    """Rows of the results CSV, grouped per image so that every row of an image gets its time."""
+
+    def __init__(self):
+        self.rows: dict[str, list] = {key: [] for key in ("scene_ids", "im_ids", "obj_ids", "scores", "rotations",
+                                                           "translations", "times")}
+
+    def add_image(self, scene_id: int, im_id: int, poses: list[tuple[int, float, np.ndarray]], seconds: float) -> None:
+        for obj_id, score, T in poses:
+            for key, value in zip(("scene_ids", "im_ids", "obj_ids", "scores", "rotations", "translations", "times"),
+                                  (scene_id, im_id, obj_id, score, T[:3, :3], T[:3, 3], seconds)):
+                self.rows[key].append(value)
+
+    def __len__(self) -> int:
+        return len(self.rows["im_ids"])
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        result = {key: np.asarray(values) for key, values in self.rows.items()}
+        result["rotations"] = result["rotations"].reshape(-1, 3, 3)
+        result["translations"] = result["translations"].reshape(-1, 3)
+        return result
 
 
 def _estimator(method: str, run_dir: Path):
-    """The method's pipeline, loaded once; each image's camera is given per call."""
-    if method == "aae":
-        from paz6d.aae.pipeline import ImplicitPose6D
+    """The pose pipeline of one run directory (``method`` as :func:`paz6d.run_dirs.method_of` names it),
+    loaded once; each image's camera is given per call."""
+    from paz6d.detect_and_estimate import load_pose_estimator
 
-        return ImplicitPose6D(run_dir)
-    from paz6d.keypointnet.pipeline import KeypointPose6D
-
-    return KeypointPose6D(run_dir)
+    return load_pose_estimator(run_dir)[1]
 
 
-def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_id: int, box: str = "obj",
-                     min_visible: float = TARGET_MIN_VISIBLE_FRACTION, progress: bool = True) -> dict:
-    """Estimates the pose of every visible-enough instance of ``obj_id`` from its ground-truth box.
+def _load_estimators(runs: dict[int, tuple[Path, str]]) -> dict[int, object]:
+    return {obj_id: _estimator(method, run_dir) for obj_id, (run_dir, method) in runs.items()}
+
+
+def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path, split: str, box: str = "obj",
+                               min_visible: float = TARGET_MIN_VISIBLE_FRACTION, progress: bool = True) -> dict:
+    """Every visible-enough instance of the runs' objects, from its ground-truth box.
 
     Returns:
-        ``{"scene_ids", "im_ids", "rotations" (E, 3, 3), "translations" (E, 3) metres, "seconds" (E,),
-        "targets" (BOP'19 :class:`Target` of the estimated images), "skipped_images", "failed"}``; an
-        estimate that fails (e.g. PnP with too few keypoints) is counted in ``failed`` and left out
-        (BOP scores a missing estimate as a miss).
+        ``{"estimates": _Estimates, "targets": [Target], "skipped_images", "failed": {obj_id: count},
+        "images"}``; an estimate that fails (e.g. PnP with too few keypoints, a ``ValueError``) is counted
+        and left out (BOP scores a missing estimate as a miss).
     """
     from tqdm.auto import tqdm
 
@@ -79,20 +241,26 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
     if box not in BOXES:
         raise ValueError(f"box: expected one of {sorted(BOXES)}, got {box!r}")
     data = BOPDataset(dataset, split=split)
-    estimator = None  # loaded at the first instance to estimate
-    found = {"scene_ids": [], "im_ids": [], "rotations": [], "translations": [], "seconds": []}
-    skipped_images, failed, targets = 0, 0, []
-    for sample in tqdm(data, desc=f"estimate obj {obj_id}", unit="image", disable=not progress, dynamic_ncols=True):
-        instances = [instance for instance in sample.objects if instance.obj_id == obj_id
+    estimators = None  # loaded at the first instance to estimate
+    estimates, targets = _Estimates(), []
+    skipped_images, images, failed = 0, 0, {obj_id: 0 for obj_id in runs}
+    for sample in tqdm(data, desc="estimate (ground-truth boxes)", unit="image", disable=not progress,
+                       dynamic_ncols=True):
+        instances = [instance for instance in sample.objects if instance.obj_id in runs
                      and (instance.info or {}).get("visib_fract", 1.0) >= min_visible]
         if not instances:
             continue
         if sample.image is None:
             skipped_images += 1
             continue
-        targets.append(Target(sample.scene_id, sample.im_id, obj_id, len(instances)))
-        if estimator is None:
-            estimator = _estimator(method, run_dir)
+        counts: dict[int, int] = {}
+        for instance in instances:
+            counts[instance.obj_id] = counts.get(instance.obj_id, 0) + 1
+        targets += [Target(sample.scene_id, sample.im_id, obj_id, count) for obj_id, count in sorted(counts.items())]
+        if estimators is None:
+            estimators = _load_estimators(runs)
+        images += 1
+        poses, seconds = [], 0.0
         for instance in instances:
             if not instance.info or BOXES[box] not in instance.info:
                 raise ValueError(f"{dataset}: scene {sample.scene_id} image {sample.im_id} has no {BOXES[box]} in "
@@ -100,88 +268,207 @@ def estimate_dataset(run_dir: Path, method: str, dataset: Path, split: str, obj_
             x, y, width, height = instance.info[BOXES[box]]
             started = time.perf_counter()
             try:
-                pose = estimator(sample.image, (float(x), float(y), float(x + width), float(y + height)),
-                                 camera=sample.camera)
+                pose = estimators[instance.obj_id](sample.image, (float(x), float(y), float(x + width),
+                                                                   float(y + height)), camera=sample.camera)
             except ValueError:
                 pose = None
+            seconds += time.perf_counter() - started
             if pose is None:
-                failed += 1
+                failed[instance.obj_id] += 1
                 continue
-            T = pose.to_matrix()
-            found["scene_ids"].append(sample.scene_id)
-            found["im_ids"].append(sample.im_id)
-            found["rotations"].append(T[:3, :3])
-            found["translations"].append(T[:3, 3])
-            found["seconds"].append(time.perf_counter() - started)
-    result = {name: np.asarray(values) for name, values in found.items()}
-    result.update(targets=targets, skipped_images=skipped_images, failed=failed)
-    return result
+            poses.append((instance.obj_id, 1.0, pose.to_matrix()))
+        estimates.add_image(sample.scene_id, sample.im_id, poses, seconds)
+    return {"estimates": estimates, "targets": targets, "skipped_images": skipped_images, "failed": failed,
+            "images": images}
 
 
-def run_object_id(run_dir: Path, method: str) -> int | None:
-    """The BOP object id a run directory was trained on, from its mesh's ``obj_XXXXXX`` file name
-    (``None`` when the mesh is named otherwise, e.g. a mesh given with ``--mesh``).
+def split_images(dataset: Path, split: str):
+    """``(scene_id, im_id, rgb path or None, K (3, 3), (width, height) or None)`` of every image listed in
+    the split's ``scene_camera.json`` files (no ground truth read); the size is the data set's
+    ``camera.json`` size (``None`` when that file is absent: the image's own size applies)."""
+    from paz6d.datasets.bop.camera import load_camera, load_scene_camera
+    from paz6d.datasets.bop.scene import find_image
 
-    Reads the run's files through its method's ``run_dir`` module, so a corrupt or incomplete run
-    directory fails here, naming the file, before any image is read.
+    check_plain_name(split, "--split")
+    folder = Path(dataset) / split
+    if not folder.is_dir():
+        raise ValueError(f"{folder}: split folder not found")
+    camera_path = Path(dataset) / "camera.json"
+    size = None
+    if camera_path.is_file():
+        default = load_camera(camera_path)
+        size = (default.width, default.height)
+    scenes = sorted(path for path in folder.iterdir() if path.name.isdigit() and path.is_dir())
+    if not scenes:
+        raise ValueError(f"{folder}: no scene folders (expected numeric folder names)")
+    for scene in scenes:
+        cameras = load_scene_camera(scene / "scene_camera.json", units="m")
+        for im_id, scene_camera in cameras.items():
+            path = find_image(scene / "rgb", im_id)
+            yield int(scene.name), im_id, path, scene_camera.K, size
+
+
+def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path, dataset: Path, split: str,
+                           score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True) -> dict:
+    """Detect every RGB image of the split, then estimate each detection of an object that has a run.
+
+    Returns:
+        ``{"estimates": _Estimates, "detections": [COCO result dicts], "images": [(scene_id, im_id)],
+        "skipped_images", "failed": {obj_id: count}, "without_model": {class: count}, "seconds_per_image"}``.
     """
-    if method == "aae":
-        from paz6d.aae import run_dir as aae_run_dir
+    from tqdm.auto import tqdm
 
-        mesh = aae_run_dir.read_config(run_dir)["mesh"]
-        aae_run_dir.read_object(run_dir)
-        Codebook.load(aae_run_dir.codebook_path(run_dir))
-    else:
-        mesh = keypointnet_run_dir.read_config(run_dir).get("mesh_path")
-        keypointnet_run_dir.read_keypoints(run_dir)
-    match = _OBJECT_MESH.match(Path(str(mesh)).stem) if mesh else None
-    return int(match.group(1)) if match else None
+    from paz6d.backend.camera import Camera
+    from paz6d.backend.image import load_image
+    from paz6d.datasets.bop.coco_ground_truth import coco_image_id
+    from paz6d.detect_and_estimate import DetectAndEstimatePose6D, MissingPoseModelWarning, bop_object_id
+    from paz6d.ssd.pipeline import DetectSingleShot
+
+    detector = DetectSingleShot(detector_dir, score_threshold=score_threshold)
+    pipeline = DetectAndEstimatePose6D(detector, _load_estimators(runs))
+    estimates, detections, images = _Estimates(), [], []
+    skipped_images, failed, without_model, total = 0, {obj_id: 0 for obj_id in runs}, {}, 0.0
+    entries = list(split_images(dataset, split))
+    for scene_id, im_id, path, K, size in tqdm(entries, desc="detect + estimate", unit="image",
+                                               disable=not progress, dynamic_ncols=True):
+        if path is None:
+            skipped_images += 1
+            continue
+        image = load_image(path)
+        width, height = size if size is not None else (image.shape[1], image.shape[0])
+        if (image.shape[1], image.shape[0]) != (width, height):
+            raise ValueError(f"{path}: image is {image.shape[1]}x{image.shape[0]} pixels, but {dataset}/camera.json "
+                             f"says {width}x{height}")
+        camera = Camera(K, width, height)
+        started = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", MissingPoseModelWarning)
+            values = pipeline.run(image, camera)
+        seconds = time.perf_counter() - started
+        total += seconds
+        images.append((scene_id, im_id))
+        for box in values["detections"]:
+            obj_id = bop_object_id(box.class_name)
+            if obj_id is None:
+                raise ValueError(f"--detector: class {box.class_name!r} is not a BOP object (obj_XXXXXX)")
+            detections.append({"image_id": coco_image_id(scene_id, im_id), "category_id": obj_id,
+                               "bbox": [round(float(v), 2) for v in (box.x_min, box.y_min, box.width, box.height)],
+                               "score": round(float(box.score), 5)})
+            if obj_id not in runs:
+                without_model[box.class_name] = without_model.get(box.class_name, 0) + 1
+        poses = []
+        for box, pose in zip(values["boxes"], values["poses"]):
+            obj_id = bop_object_id(box.class_name)
+            if pose is None:
+                failed[obj_id] += 1
+            else:
+                poses.append((obj_id, float(box.score), pose.to_matrix()))
+        estimates.add_image(scene_id, im_id, poses, seconds)
+    return {"estimates": estimates, "detections": detections, "images": images, "skipped_images": skipped_images,
+            "failed": failed, "without_model": without_model,
+            "seconds_per_image": total / len(images) if images else None}
 
 
-def check_arguments(args: argparse.Namespace) -> None:
-    """Checks every flag, the run directory (its method, its files, its object) and the output paths
-    before any image is read; bad input raises ``ValueError`` naming the flag or file."""
-    from paz6d.run_dirs import method_of
+def detector_targets(dataset: Path, images: list[tuple[int, int]], object_ids) -> list[Target]:
+    """The entries of ``<dataset>/test_targets_bop19.json`` for the estimated images and objects (the BOP
+    protocol's list of what to score; empty when the file is absent)."""
+    from paz6d.datasets.bop.targets import read_targets
 
+    path = Path(dataset) / "test_targets_bop19.json"
+    if not path.is_file():
+        return []
+    wanted = set(images)
+    return [target for target in read_targets(path)
+            if (target.scene_id, target.im_id) in wanted and target.obj_id in object_ids]
+
+
+# ------------------------------------------------------------------------------------------ command
+def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
+    """Checks every flag, the run directories (method, files, object), the detector and the output paths
+    before any image is read; returns ``{obj_id: (run_dir, method)}``. Bad input raises ``ValueError``
+    naming the flag or file."""
     check_plain_name(args.split, "--split")
-    if args.object_id < 1:
-        raise ValueError(f"--object-id: expected a BOP object id (a positive integer), got {args.object_id}")
     if not 0.0 <= args.min_visible <= 1.0:
         raise ValueError(f"--min-visible: expected a visible fraction in [0, 1], got {args.min_visible}")
-    check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out}, {})
+    if not 0.0 <= args.score_threshold <= 1.0:
+        raise ValueError(f"--score-threshold: expected a score in [0, 1], got {args.score_threshold}")
+    if args.detections_out is not None and args.detector is None:
+        raise ValueError("--detections-out: only with --detector")
+    detections = detections_path(args)
+    check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
     check_output_file(args.out, "--out")
     if args.targets_out is not None:
         check_output_file(args.targets_out, "--targets-out")
-    if not args.run.is_dir():
-        raise ValueError(f"--run: {args.run} is not a directory")
-    method = method_of(args.run)
-    if method != RUN_METHODS[args.method]:
-        wanted = next(name for name, value in RUN_METHODS.items() if value == method)
-        raise ValueError(f"--method: {args.run} is a {method} run directory; use --method {wanted}")
-    trained_on = run_object_id(args.run, args.method)
-    if trained_on is not None and trained_on != args.object_id:
-        raise ValueError(f"--object-id: {args.run} was trained on object {trained_on}, not {args.object_id}")
+    if detections is not None:
+        check_output_file(detections, "--detections-out")
+    if not args.dataset.is_dir():
+        raise ValueError(f"--dataset: {args.dataset} is not a directory")
+    runs = resolve_runs(args.run, args.object_id, args.method)
+    if args.detector is not None:
+        check_detector(args.detector, runs)
+    return runs
+
+
+def estimate(args: argparse.Namespace) -> dict:
+    """Runs ``paz6d estimate`` (flags as parsed by :func:`configure`); returns its summary.
+
+    Raises:
+        ValueError: bad flags or files, or nothing estimated (no file is written then).
+    """
+    from paz6d.backend.files import write_json_atomically
+    from paz6d.backend.tensorflow_guard import import_tensorflow
+
+    runs = check_arguments(args)
+    import_tensorflow()
+    objects = sorted(runs)
+    if args.detector is None:
+        found = estimate_with_ground_truth(runs, args.dataset, args.split, args.box, args.min_visible, args.progress)
+        targets = found["targets"]
+        if found["images"] == 0:
+            raise ValueError(f"{args.dataset}: no instance of objects {objects} with an RGB image and visible "
+                             f"fraction >= {args.min_visible} in split {args.split!r}")
+    else:
+        found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
+                                       args.progress)
+        targets = detector_targets(args.dataset, found["images"], runs)
+        if not found["images"]:
+            raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "
+                             f"({found['skipped_images']} listed in scene_camera.json)")
+    estimates = found["estimates"]
+    failed = sum(found["failed"].values())
+    if len(estimates) == 0:
+        which = f"object {objects[0]}" if len(objects) == 1 else f"objects {objects}"
+        reason = (f"every estimate failed ({failed} instances of {which})" if failed else
+                  "the detector found none of the objects" if args.detector is not None else "no estimate")
+        raise ValueError(f"nothing estimated for objects {objects}: {reason}; {args.out} not written")
+    rows = estimates.arrays()
+    write_pose_results(args.out, rows["scene_ids"], rows["im_ids"], rows["obj_ids"], rows["scores"], rows["rotations"],
+                       rows["translations"], rows["times"], units="m")
+    summary = {"out": str(args.out), "estimates": len(estimates),
+               "per_object": {str(obj_id): int(np.sum(rows["obj_ids"] == obj_id)) for obj_id in objects},
+               "failed": {str(key): value for key, value in found["failed"].items()},
+               "images_without_rgb_skipped": found["skipped_images"],
+               "methods": {str(obj_id): method for obj_id, (_, method) in runs.items()},
+               "mean_seconds_per_image": float(np.mean(list(dict(zip(zip(rows["scene_ids"], rows["im_ids"]),
+                                                                        rows["times"])).values())))}
+    if args.detector is not None:
+        path = detections_path(args)
+        write_json_atomically(path, found["detections"])
+        summary.update(detections_out=str(path), detections=len(found["detections"]),
+                       detections_without_pose_model=found["without_model"],
+                       mean_seconds_per_image=found["seconds_per_image"])
+    if args.targets_out is not None:
+        write_targets(args.targets_out, targets)
+        summary["targets_out"] = str(args.targets_out)
+    return summary
 
 
 def run(args: argparse.Namespace) -> int:
-    from paz6d.backend.tensorflow_guard import import_tensorflow
-
-    check_arguments(args)
-    import_tensorflow()
-    found = estimate_dataset(args.run, args.method, args.dataset, args.split, args.object_id, args.box,
-                             args.min_visible)
-    count = len(found["im_ids"])
-    if count == 0 and found["failed"] == 0:
-        raise ValueError(f"{args.dataset}: no instance of object {args.object_id} with an RGB image and visible "
-                         f"fraction >= {args.min_visible} in split {args.split!r}")
-    if count == 0:
-        raise ValueError(f"every estimate failed ({found['failed']} instances of object {args.object_id}); "
-                         f"{args.out} not written (is {args.run} a model of this object and data set?)")
-    write_pose_results(args.out, found["scene_ids"], found["im_ids"], np.full(count, args.object_id),
-                       np.ones(count), found["rotations"].reshape(-1, 3, 3), found["translations"].reshape(-1, 3),
-                       found["seconds"], units="m")
-    if args.targets_out is not None:
-        write_targets(args.targets_out, found["targets"])
-    print(f"wrote {args.out}: {count} estimates of object {args.object_id} ({found['failed']} failed, "
-          f"{found['skipped_images']} images without RGB skipped)")
+    summary = estimate(args)
+    failed = sum(int(value) for value in summary["failed"].values())
+    extra = (f", {summary['detections']} detections -> {summary['detections_out']}"
+             if "detections_out" in summary else "")
+    print(f"wrote {args.out}: {summary['estimates']} estimates of objects {sorted(map(int, summary['per_object']))} "
+          f"({failed} failed, {summary['images_without_rgb_skipped']} images without RGB skipped{extra}; "
+          f"{summary['mean_seconds_per_image']:.3f} s per image)")
     return 0

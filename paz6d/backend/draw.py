@@ -1,4 +1,5 @@
-"""Drawing on ``uint8`` RGB images: keypoints with stable colours, boxes, projected 3D boxes, grids.
+"""Drawing on ``uint8`` RGB images: keypoints with stable colours, boxes, projected 3D boxes, grids,
+a pose's axes and the outline of a posed mesh (:func:`model_silhouette`, :func:`draw_model_outline`).
 
 Every function returns a new image and leaves its input untouched. Point coordinates are camera
 pixels (pixel centres at integers, :mod:`paz6d.backend.camera`); boxes are ``xyxy`` with pixel ``i``
@@ -19,7 +20,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from paz6d.backend.checks import as_array, as_points
+from paz6d.backend.camera import project_points
+from paz6d.backend.checks import as_array, as_camera_matrix, as_points
 from paz6d.backend.image import as_image
 
 #: Fixed, well-separated colours for the first keypoints (keypoint ``i`` always gets colour ``i``).
@@ -126,3 +128,108 @@ def image_grid(images: Sequence[np.ndarray], columns: int, padding: int = 2, pad
         top, left = padding + row * (height + padding), padding + column * (width + padding)
         grid[top:top + height, left:left + width] = tile
     return grid
+
+
+def _posed(points, T_model2cam) -> np.ndarray:
+    """``(N, 3)`` model points (metres) in the camera frame of ``T_model2cam`` ``(4, 4)``."""
+    T = as_array(T_model2cam, "T_model2cam", (4, 4)).reshape(4, 4)
+    return as_points(points, "vertices", dimension=3, min_count=0) @ T[:3, :3].T + T[:3, 3]
+
+
+def model_silhouette(vertices, faces, T_model2cam, K, width: int, height: int, near: float = 1e-3) -> np.ndarray:
+    """``(height, width)`` bool mask of the pixels a posed triangle mesh covers (its projected silhouette).
+
+    Each triangle in front of the camera is filled (pixel centres at integer coordinates, as
+    :func:`paz6d.backend.camera.project_points`); triangles with a vertex closer than ``near`` metres
+    are left out.
+
+    Args:
+        vertices: ``(V, 3)`` model points in metres; faces: ``(F, 3)`` vertex indices.
+        T_model2cam: ``(4, 4)`` pose (metres); K: ``(3, 3)`` intrinsics.
+        width, height: image size in pixels.
+    """
+    if int(width) < 1 or int(height) < 1:
+        raise ValueError(f"width/height: expected a positive image size, got {width}x{height}")
+    faces = np.asarray(faces)
+    if faces.ndim != 2 or faces.shape[1] != 3 or not np.issubdtype(faces.dtype, np.integer):
+        raise ValueError(f"faces: expected (F, 3) integer vertex indices, got {faces.dtype} {faces.shape}")
+    camera_points = _posed(vertices, T_model2cam)
+    if faces.size and (faces.min() < 0 or faces.max() >= len(camera_points)):
+        raise ValueError(f"faces: indices must lie in [0, {len(camera_points)}), got {faces.min()}..{faces.max()}")
+    mask = np.zeros((int(height), int(width)), np.uint8)
+    in_front = camera_points[:, 2] > near
+    faces = faces[np.all(in_front[faces], axis=1)]
+    if len(faces) == 0:
+        return mask.astype(bool)
+    pixels = np.zeros((len(camera_points), 2))
+    pixels[in_front] = project_points(camera_points[in_front], as_camera_matrix(K))
+    triangles = pixels[faces]  # (F, 3, 2)
+    limit = 4.0 * max(width, height)  # fixed-point coordinates must fit int32; clip far-off vertices
+    triangles = _fixed_point(np.clip(triangles, -limit, limit)).astype(np.int32)
+    inside = ((triangles[..., 0].max(axis=1) >= 0) & (triangles[..., 1].max(axis=1) >= 0)
+              & (triangles[..., 0].min(axis=1) < (width << 4)) & (triangles[..., 1].min(axis=1) < (height << 4)))
+    for triangle in triangles[inside]:
+        cv2.fillConvexPoly(mask, triangle, 1, cv2.LINE_8, 4)
+    return mask.astype(bool)
+
+
+def draw_mask_outline(image, mask, color=(0, 255, 0), thickness: int = 1) -> np.ndarray:
+    """The outer and inner contours of a ``(H, W)`` bool ``mask`` of the image's size, drawn on a copy."""
+    canvas = as_image(image).copy()
+    mask = np.asarray(mask)
+    if mask.shape != canvas.shape[:2]:
+        raise ValueError(f"mask: expected the image's shape {canvas.shape[:2]}, got {mask.shape}")
+    if thickness < 1:
+        raise ValueError(f"thickness: expected a positive line width in pixels, got {thickness}")
+    contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    cv2.drawContours(canvas, contours, -1, tuple(int(v) for v in color), thickness, cv2.LINE_8)
+    return canvas
+
+
+def draw_model_outline(image, vertices, faces, T_model2cam, K, color=(0, 255, 0), thickness: int = 1) -> np.ndarray:
+    """The silhouette contour of a posed mesh (:func:`model_silhouette`) drawn on a copy of ``image``.
+
+    The contour runs along the silhouette's own boundary pixels, so every changed pixel lies inside the
+    projected model (``thickness`` > 1 widens the line by up to ``thickness // 2`` pixels outside).
+    """
+    canvas = as_image(image)
+    mask = model_silhouette(vertices, faces, T_model2cam, K, canvas.shape[1], canvas.shape[0])
+    return draw_mask_outline(canvas, mask, color, thickness)
+
+
+def draw_projected_points(image, points, T_model2cam, K, color=(0, 255, 0), radius: int = 1) -> np.ndarray:
+    """``(N, 3)`` model points (metres, e.g. a mesh's surface samples) posed by ``T_model2cam`` and projected
+    by ``K``, drawn as dots of ``radius`` pixels; points behind the camera or outside the image are skipped."""
+    canvas = as_image(image).copy()
+    camera_points = _posed(points, T_model2cam)
+    camera_points = camera_points[camera_points[:, 2] > 1e-3]
+    if len(camera_points) == 0:
+        return canvas
+    pixels = np.rint(project_points(camera_points, as_camera_matrix(K))).astype(np.int64)
+    height, width = canvas.shape[:2]
+    pixels = pixels[(pixels[:, 0] >= 0) & (pixels[:, 0] < width) & (pixels[:, 1] >= 0) & (pixels[:, 1] < height)]
+    colour = tuple(int(v) for v in color)
+    if radius <= 0:
+        canvas[pixels[:, 1], pixels[:, 0]] = colour
+        return canvas
+    for u, v in pixels:
+        cv2.circle(canvas, (int(u), int(v)), int(radius), colour, -1, cv2.LINE_8)
+    return canvas
+
+
+def draw_pose_axes(image, T_model2cam, K, length: float = 0.05, thickness: int = 2) -> np.ndarray:
+    """The model frame's x (red), y (green) and z (blue) axes, ``length`` metres long, from its origin posed
+    by ``T_model2cam`` ``(4, 4)`` and projected by ``K`` ``(3, 3)``; nothing is drawn when the origin or an
+    axis end lies behind the camera."""
+    canvas = as_image(image).copy()
+    if not length > 0:
+        raise ValueError(f"length: expected a positive axis length in metres, got {length}")
+    ends = _posed(np.array([[0.0, 0.0, 0.0], [length, 0.0, 0.0], [0.0, length, 0.0], [0.0, 0.0, length]]),
+                  T_model2cam)
+    if np.any(ends[:, 2] <= 1e-3):
+        return canvas
+    pixels = _fixed_point(np.clip(project_points(ends, as_camera_matrix(K)), -1e5, 1e5))
+    origin = (int(pixels[0, 0]), int(pixels[0, 1]))
+    for end, colour in zip(pixels[1:], ((255, 0, 0), (0, 255, 0), (0, 0, 255))):
+        cv2.line(canvas, origin, (int(end[0]), int(end[1])), colour, thickness, cv2.LINE_AA, 4)
+    return canvas

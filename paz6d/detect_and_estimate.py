@@ -1,0 +1,329 @@
+"""From a whole image to 6D poses: detect -> crop -> pose, ``DetectAndEstimatePose6D``.
+
+A detector (``image -> list[Box2D]`` with class names, e.g. :class:`paz6d.ssd.pipeline.DetectSingleShot`)
+finds the objects; every box whose class has a pose model goes to that model
+(:class:`paz6d.aae.pipeline.ImplicitPose6D` or :class:`paz6d.keypointnet.pipeline.KeypointPose6D`, or any
+callable ``(image, box, camera=...) -> Pose6D``) with the image's camera::
+
+    from paz6d.pipelines import DetectAndEstimatePose6D
+    pipeline = DetectAndEstimatePose6D.from_run_dirs("runs/ssd", {5: "runs/aae_5", 8: "runs/kp_8"}, K)
+    for box, pose in pipeline(image):          # image (H, W, 3) uint8 RGB
+        print(box.class_name, box.score, pose.translation)   # metres, T_model2cam (OpenCV camera frame)
+    overlay = pipeline.draw(image, pipeline(image))
+
+Policy for a detected class that has no pose model: skipped with a :class:`MissingPoseModelWarning`
+(default), or a ``ValueError`` with ``strict=True``. A pose model that fails on one box (e.g. PnP with too
+few keypoints, a ``ValueError``) skips that box the same way. An image whose size does not match a given
+:class:`~paz6d.backend.camera.Camera` raises ``ValueError``.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
+from paz6d.backend.camera import Camera, as_camera
+from paz6d.backend.draw import draw_box, draw_model_outline, draw_pose_axes, draw_projected_points, keypoint_colors
+from paz6d.backend.image import as_image
+
+_BOP_CLASS = re.compile(r"^obj_(\d+)$")
+
+
+class MissingPoseModelWarning(UserWarning):
+    """A detected class has no pose model (or its pose model failed on a box); the box was skipped."""
+
+
+def class_name_of(key: str | int) -> str:
+    """The detector class name of an estimator key: a BOP object id ``5`` -> ``"obj_000005"``; a name as is.
+
+    Raises:
+        ValueError: a negative/zero id, an empty name or another type.
+    """
+    if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+        if key < 1:
+            raise ValueError(f"estimators: expected positive BOP object ids as keys, got {key}")
+        return f"obj_{int(key):06d}"
+    if isinstance(key, str) and key:
+        return key
+    raise ValueError(f"estimators: expected class names (str) or BOP object ids (int) as keys, got {key!r}")
+
+
+def bop_object_id(class_name: str) -> int | None:
+    """The BOP object id of an ``obj_XXXXXX`` class name, ``None`` for other names."""
+    match = _BOP_CLASS.match(str(class_name))
+    return int(match.group(1)) if match else None
+
+
+def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None = None):
+    """The pose pipeline of a run directory, its method found by :func:`paz6d.run_dirs.method_of`.
+
+    Returns:
+        ``(method, estimator)``: ``"aae"`` with an :class:`~paz6d.aae.pipeline.ImplicitPose6D` or
+        ``"keypointnet"`` with a :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`.
+    Raises:
+        ValueError: not a directory, not a pose run directory (an SSD one, say) or a corrupt one (naming the file).
+    """
+    from paz6d.run_dirs import method_of
+
+    method = method_of(run_dir)
+    if method == "aae":
+        from paz6d.aae.pipeline import ImplicitPose6D
+
+        return method, ImplicitPose6D(run_dir, camera, class_name=class_name)
+    if method == "keypointnet":
+        from paz6d.keypointnet.pipeline import KeypointPose6D
+
+        return method, KeypointPose6D(run_dir, camera, class_name=class_name)
+    raise ValueError(f"run_dir: {run_dir} is a {method} run directory, not a pose model (aae or keypointnet)")
+
+
+def run_mesh(run_dir: str | Path) -> tuple[Path, float] | None:
+    """``(mesh file, scale to metres)`` a pose run directory was trained on, ``None`` when not recorded."""
+    from paz6d.run_dirs import method_of
+
+    method = method_of(run_dir)
+    if method == "aae":
+        from paz6d.aae import run_dir as files
+
+        config = files.read_config(run_dir)
+        return Path(config["mesh"]), float(config["mesh_scale"])
+    if method == "keypointnet":
+        from paz6d.keypointnet import run_dir as files
+
+        config = files.read_config(run_dir)
+        if config.get("mesh_path"):
+            return Path(config["mesh_path"]), float(config.get("mesh_scale", 1.0))
+    return None
+
+
+# ------------------------------------------------------------------------------------------ steps
+class ImageCamera(Processor):
+    """``(image, camera) -> (image, Camera)``: checks an RGB ``uint8`` ``(H, W, 3)`` image and completes the
+    camera (a 3x3 ``K`` takes the image's size; a :class:`Camera` must have it).
+
+    Args:
+        default: the camera used when the call gives none.
+    Raises:
+        ValueError: not an RGB image; no camera; a Camera of another size than the image.
+    """
+
+    def __init__(self, default=None, name: str | None = None):
+        super().__init__(name)
+        self.default = default
+
+    def call(self, image, camera=None) -> tuple[np.ndarray, Camera]:
+        image = as_image(image, "image", channels=3)
+        return image, as_camera(self.default if camera is None else camera, image.shape[1], image.shape[0])
+
+
+class SelectBoxes(Processor):
+    """``detections [Box2D] -> boxes [Box2D]`` with a pose model, in detection order.
+
+    Args:
+        class_names: the classes that have a pose model.
+        strict: a detection of another class raises ``ValueError`` instead of a
+            :class:`MissingPoseModelWarning` and skipping it.
+    """
+
+    def __init__(self, class_names, strict: bool = False, name: str | None = None):
+        super().__init__(name)
+        self.class_names, self.strict = tuple(class_names), bool(strict)
+
+    def call(self, detections) -> list[Box2D]:
+        kept = []
+        for box in detections:
+            if box.class_name in self.class_names:
+                kept.append(box)
+                continue
+            message = (f"detections: class {box.class_name!r} has no pose model (pose models: "
+                       f"{list(self.class_names)}); box {[round(v, 1) for v in box.to_array().tolist()]} skipped")
+            if self.strict:
+                raise ValueError(message.replace("skipped", "found (strict=True)"))
+            warnings.warn(message, MissingPoseModelWarning, stacklevel=2)
+        return kept
+
+
+class EstimatePoses(Processor):
+    """``(image, boxes [Box2D], camera) -> poses [Pose6D | None]``: each box's pose model on the image, one
+    pose per box (class name = the box's); ``None`` where the model raised ``ValueError`` (warned, or raised
+    with ``strict``).
+
+    Args:
+        estimators: class name -> callable ``(image, box, camera=...) -> Pose6D``.
+    """
+
+    def __init__(self, estimators: Mapping[str, Callable], strict: bool = False, name: str | None = None):
+        super().__init__(name)
+        self.estimators, self.strict = dict(estimators), bool(strict)
+
+    def call(self, image, boxes, camera) -> list[Pose6D | None]:
+        poses = []
+        for box in boxes:
+            try:
+                pose = self.estimators[box.class_name](image, box, camera=camera)
+            except ValueError as error:
+                if self.strict:
+                    raise
+                warnings.warn(f"pose model of {box.class_name!r} failed on box "
+                              f"{[round(v, 1) for v in box.to_array().tolist()]}: {error}; skipped",
+                              MissingPoseModelWarning, stacklevel=2)
+                poses.append(None)
+                continue
+            poses.append(Pose6D(pose.quaternion, pose.translation, box.class_name, pose.score))
+        return poses
+
+
+def pair_boxes_and_poses(boxes, poses) -> list[tuple[Box2D, Pose6D]]:
+    """``[(box, pose)]`` for the boxes whose pose was found."""
+    return [(box, pose) for box, pose in zip(boxes, poses) if pose is not None]
+
+
+# ------------------------------------------------------------------------------------------ pipeline
+class DetectAndEstimatePose6D(SequentialProcessor):
+    """``image (H, W, 3) uint8 RGB [, camera] -> [(Box2D, Pose6D)]``: a detector, then one pose model per class.
+
+    Steps (each a :class:`~paz6d.abstract.KeyedStep` over a dict of named values):
+
+    ==============  ================================  ===============  ========================
+    step            reads                             writes           processor
+    ==============  ================================  ===============  ========================
+    ``check``       ``image``, ``camera``             ``image``,       :class:`ImageCamera`
+                                                      ``camera``
+    ``detect``      ``image``                         ``detections``   the detector
+    ``select``      ``detections``                    ``boxes``        :class:`SelectBoxes`
+    ``estimate``    ``image``, ``boxes``, ``camera``  ``poses``        :class:`EstimatePoses`
+    ``pair``        ``boxes``, ``poses``              ``results``      :func:`pair_boxes_and_poses`
+    ==============  ================================  ===============  ========================
+
+    Poses are ``T_model2cam`` in metres (OpenCV camera frame), their ``class_name`` the detection's.
+
+    Args:
+        detector: ``image -> list[Box2D]`` with class names (e.g. ``DetectSingleShot``).
+        estimators: class name (``"obj_000005"``) or BOP object id (``5``) -> pose pipeline
+            ``(image, box, camera=...) -> Pose6D``.
+        camera: default :class:`Camera` or ``3x3`` ``K`` of the images (a call may give another).
+        strict: raise ``ValueError`` for a detected class without a pose model, or a pose model failing on a
+            box, instead of warning (:class:`MissingPoseModelWarning`) and skipping the box.
+        meshes: optional class -> ``(vertices (V, 3) metres, faces (F, 3))`` for :meth:`draw`'s outlines
+            (default: the estimators' surface points, drawn as dots).
+    Raises:
+        ValueError: no estimators, a bad key, or a class the detector cannot output (when it lists
+            ``class_names``).
+    """
+
+    def __init__(self, detector: Callable, estimators: Mapping[str | int, Callable], camera=None,
+                 strict: bool = False, meshes: Mapping[str | int, tuple] | None = None):
+        super().__init__(name="DetectAndEstimatePose6D")
+        if not callable(detector):
+            raise ValueError(f"detector: expected a callable image -> [Box2D], got {type(detector).__name__}")
+        if not estimators:
+            raise ValueError("estimators: expected at least one pose model (class name or BOP id -> pipeline)")
+        named: dict[str, Callable] = {}
+        for key, estimator in estimators.items():
+            name = class_name_of(key)
+            if name in named:
+                raise ValueError(f"estimators: class {name!r} given twice (as a name and as an id?)")
+            if not callable(estimator):
+                raise ValueError(f"estimators[{key!r}]: expected a pose pipeline, got {type(estimator).__name__}")
+            named[name] = estimator
+        known = getattr(detector, "class_names", None)
+        if known is not None:
+            unknown = sorted(set(named) - set(known))
+            if unknown:
+                raise ValueError(f"estimators: classes {unknown} are not among the detector's classes {list(known)}")
+        self.detector, self.estimators, self.camera = detector, named, camera
+        self.meshes = {class_name_of(key): value for key, value in (meshes or {}).items()}
+        self.add(KeyedStep(ImageCamera(camera), ("image", "camera"), ("image", "camera"), name="check"))
+        self.add(KeyedStep(detector, "image", "detections", name="detect"))
+        self.add(KeyedStep(SelectBoxes(tuple(named), strict), "detections", "boxes", name="select"))
+        self.add(KeyedStep(EstimatePoses(named, strict), ("image", "boxes", "camera"), "poses", name="estimate"))
+        self.add(KeyedStep(pair_boxes_and_poses, ("boxes", "poses"), "results", name="pair"))
+
+    @classmethod
+    def from_run_dirs(cls, detector_dir: str | Path, pose_dirs: Mapping[str | int, str | Path], camera=None,
+                      score_threshold: float = 0.3, strict: bool = False, load_meshes: bool = True
+                      ) -> "DetectAndEstimatePose6D":
+        """Loads a ``DetectSingleShot`` run and one pose run directory per class (method found by itself).
+
+        Args:
+            detector_dir: SSD run directory (``paz6d train ssd``).
+            pose_dirs: class name or BOP object id -> AAE or KeypointNet run directory.
+            load_meshes: load each pose run's mesh (when its file still exists) for :meth:`draw`.
+        """
+        from paz6d.ssd.pipeline import DetectSingleShot
+
+        estimators, meshes = {}, {}
+        for key, run_dir in pose_dirs.items():
+            name = class_name_of(key)
+            estimators[name] = load_pose_estimator(run_dir, camera, class_name=name)[1]
+            found = run_mesh(run_dir) if load_meshes else None
+            if found is not None and found[0].is_file():
+                from paz6d.backend.mesh import load_mesh  # trimesh, only when outlines are wanted
+
+                mesh = load_mesh(found[0], found[1])
+                meshes[name] = (np.asarray(mesh.vertices), np.asarray(mesh.faces))
+        detector = DetectSingleShot(detector_dir, score_threshold=score_threshold)
+        return cls(detector, estimators, camera, strict, meshes)
+
+    def run(self, image, camera=None) -> dict:
+        """All named values of one image (``detections``, ``boxes``, ``poses``, ``results``...)."""
+        return self.run_steps({"image": image, "camera": camera})
+
+    def call(self, image, camera=None) -> list[tuple[Box2D, Pose6D]]:
+        """``[(box, pose)]`` for every detected object that has a pose model, in detection order.
+
+        Args:
+            image: ``(H, W, 3)`` uint8 RGB.
+            camera: this image's Camera or ``K`` (default: the constructor's).
+        """
+        return self.run(image, camera)["results"]
+
+    def _model_points(self, class_name: str):
+        estimator = self.estimators.get(class_name)
+        for attribute in ("surface_points", "hull_points", "points_model"):
+            points = getattr(estimator, attribute, None)
+            if points is not None:
+                return np.asarray(points)
+        return None
+
+    def draw(self, image, results, camera=None, axis_length: float | None = None) -> np.ndarray:
+        """A copy of ``image`` with each result's box (class name, score), the model's outline under its
+        pose (the silhouette contour of its mesh, or its surface points) and the pose's axes.
+
+        Args:
+            results: what a call returned, ``[(Box2D, Pose6D)]``.
+            camera: the image's Camera or ``K`` (default: the constructor's).
+            axis_length: metres (default: half the model's extent, else 5 cm).
+        """
+        canvas, camera = ImageCamera(self.camera)(image, camera)
+        canvas = canvas.copy()
+        names = sorted(self.estimators)
+        colors = keypoint_colors(max(len(names), 1))
+        for box, pose in results:
+            index = names.index(box.class_name) if box.class_name in names else 0
+            color = tuple(int(c) for c in colors[index])
+            T = pose.to_matrix()
+            canvas = draw_box(canvas, box.to_array(), color, thickness=1)
+            cv2.putText(canvas, f"{box.class_name} {box.score:.2f}", (int(box.x_min), max(int(box.y_min) - 3, 10)),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.4, color, 1, cv2.LINE_AA)
+            length = axis_length
+            if box.class_name in self.meshes:
+                vertices, faces = self.meshes[box.class_name]
+                canvas = draw_model_outline(canvas, vertices, faces, T, camera.K, color, thickness=2)
+                extent = np.ptp(vertices, axis=0).max()
+            else:
+                points = self._model_points(box.class_name)
+                extent = None
+                if points is not None and len(points):
+                    canvas = draw_projected_points(canvas, points, T, camera.K, color, radius=0)
+                    extent = np.ptp(points, axis=0).max()
+            if length is None:
+                length = 0.5 * float(extent) if extent else 0.05
+            canvas = draw_pose_axes(canvas, T, camera.K, length)
+        return canvas
