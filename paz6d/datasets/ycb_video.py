@@ -147,7 +147,7 @@ def read_meta(path: str | Path, class_count: int) -> dict:
         raise ValueError(f"{path}: meta file not found")
     try:
         meta = scipy.io.loadmat(str(path))
-    except (ValueError, TypeError, OSError, NotImplementedError) as error:
+    except (ValueError, TypeError, OSError, NotImplementedError, scipy.io.matlab.MatReadError) as error:
         raise ValueError(f"{path}: not a readable MATLAB .mat file ({error})") from None
     for name in META_FIELDS:
         if name not in meta:
