@@ -1,0 +1,269 @@
+"""Open Images V6/V7 bounding boxes: the box CSVs, the class-description CSV and the split folders.
+
+Files, as Open Images publishes them (looked up in ``root`` and ``root/annotations``):
+
+* boxes: ``<split>-annotations-bbox.csv`` or ``oidv6-<split>-annotations-bbox.csv`` (or
+  ``<root>/<split>/labels/detections.csv``, the downloader layout), header
+  ``ImageID,Source,LabelName,Confidence,XMin,XMax,YMin,YMax,IsOccluded,IsTruncated,IsGroupOf,IsDepiction,IsInside``
+  (the flags may be ``-1``: unknown);
+* classes: ``oidv7-class-descriptions-boxable.csv``, ``oidv6-class-descriptions-boxable.csv``,
+  ``class-descriptions-boxable.csv``, ``oidv7-class-descriptions.csv`` or
+  ``<root>/<split>/metadata/classes.csv``: ``LabelName,DisplayName`` rows (``/m/011k07,Tortoise``),
+  with or without that header line (the boxable lists of V6 have none, V7's have one);
+* images: ``<root>/<split>/<ImageID>.jpg`` (or ``<root>/<split>/data/<ImageID>.jpg``).
+
+Splits are ``train``, ``validation`` (``val`` is accepted) and ``test``.
+
+Conversion: coordinates are fractions of the image size, so the box in pixels is
+``(XMin * W, YMin * H, XMax * W, YMax * H)`` with ``W, H`` read from the image file's header when
+the sample is read (PNG ``IHDR`` or JPEG ``SOF`` marker, without decoding pixels; other formats are
+decoded). No EXIF rotation is applied. ``class_names`` are the display names in the description
+file's order; ``extras`` keep per box ``label_names`` (the ``/m/...`` ids), ``confidence``, ``source``
+and ``is_occluded``, ``is_truncated``, ``is_group_of``, ``is_depiction``, ``is_inside`` (``int8``,
+``-1`` unknown), and per image ``image_id`` and ``image_size`` ``(width, height)``.
+
+Example:
+    >>> samples = load("open-images-v7", "validation")  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from paz6d.backend.files import read_input_text
+from paz6d.backend.image import load_image
+from paz6d.datasets.sample import Sample, SampleSequence
+
+BOX_COLUMNS = ("ImageID", "Source", "LabelName", "Confidence", "XMin", "XMax", "YMin", "YMax", "IsOccluded",
+               "IsTruncated", "IsGroupOf", "IsDepiction", "IsInside")
+FLAG_COLUMNS = ("IsOccluded", "IsTruncated", "IsGroupOf", "IsDepiction", "IsInside")
+FLAG_EXTRAS = {"IsOccluded": "is_occluded", "IsTruncated": "is_truncated", "IsGroupOf": "is_group_of",
+               "IsDepiction": "is_depiction", "IsInside": "is_inside"}
+CLASS_FILES = ("oidv7-class-descriptions-boxable.csv", "oidv6-class-descriptions-boxable.csv",
+               "class-descriptions-boxable.csv", "oidv7-class-descriptions.csv", "class-descriptions.csv")
+SPLITS = {"train": "train", "validation": "validation", "val": "validation", "test": "test"}
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
+_JPEG_FRAMES = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def image_size_from_header(path: str | Path) -> tuple[int, int]:
+    """``(width, height)`` of an image from its PNG ``IHDR`` or JPEG ``SOF`` header (other formats:
+    decoded with OpenCV). Raises ``ValueError`` naming the file when it cannot be read."""
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            start = handle.read(24)
+            if start[:8] == b"\x89PNG\r\n\x1a\n" and start[12:16] == b"IHDR":
+                width, height = struct.unpack(">II", start[16:24])
+                return int(width), int(height)
+            if start[:2] == b"\xff\xd8":
+                handle.seek(2)
+                while True:
+                    marker = handle.read(2)
+                    while len(marker) == 2 and marker[1] == 0xFF:  # fill bytes
+                        marker = marker[1:] + handle.read(1)
+                    if len(marker) < 2 or marker[0] != 0xFF:
+                        break
+                    if marker[1] in (0xD8, 0x01) or 0xD0 <= marker[1] <= 0xD7:
+                        continue
+                    length_bytes = handle.read(2)
+                    if len(length_bytes) < 2:
+                        break
+                    length = struct.unpack(">H", length_bytes)[0]
+                    if marker[1] in _JPEG_FRAMES:
+                        frame = handle.read(5)
+                        if len(frame) < 5:
+                            break
+                        height, width = struct.unpack(">HH", frame[1:5])
+                        return int(width), int(height)
+                    handle.seek(length - 2, io.SEEK_CUR)
+                raise ValueError(f"{path}: JPEG file without a frame header (SOF marker); cannot read the image size")
+    except FileNotFoundError:
+        raise ValueError(f"{path}: image file not found") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path}: expected an image file, found a folder") from None
+    image = load_image(path)
+    return image.shape[1], image.shape[0]
+
+
+def _first_existing(candidates: list[Path]) -> Path | None:
+    return next((path for path in candidates if path.is_file()), None)
+
+
+def find_files(root: str | Path, split: str) -> dict[str, Path | None]:
+    """The box CSV, class-description CSV and image folder of ``split`` under ``root`` (``None``
+    where nothing is found)."""
+    root = Path(root)
+    split = SPLITS.get(split, split)
+    folders = [root, root / "annotations"]
+    boxes = _first_existing([folder / name for folder in folders
+                             for name in (f"{split}-annotations-bbox.csv", f"oidv6-{split}-annotations-bbox.csv",
+                                          f"oidv7-{split}-annotations-bbox.csv")]
+                            + [root / split / "labels" / "detections.csv"])
+    classes = _first_existing([folder / name for folder in folders for name in CLASS_FILES]
+                              + [root / split / "metadata" / "classes.csv"])
+    images = root / split / "data" if (root / split / "data").is_dir() else root / split
+    return {"boxes": boxes, "classes": classes, "images": images}
+
+
+def is_openimages_root(root: str | Path) -> bool:
+    """Whether ``root`` holds an Open Images box CSV of some split."""
+    root = Path(root)
+    return root.is_dir() and any(find_files(root, split)["boxes"] is not None for split in ("train", "validation", "test"))
+
+
+def _rows(path: Path, what: str) -> list[list[str]]:
+    try:
+        return [row for row in csv.reader(io.StringIO(read_input_text(path, what), newline="")) if row]
+    except csv.Error as error:
+        raise ValueError(f"{path}: malformed CSV ({error})") from None
+
+
+def read_class_descriptions(path: str | Path) -> tuple[list[str], list[str]]:
+    """``(label_names, display_names)`` of a ``LabelName,DisplayName`` CSV, with or without header."""
+    path = Path(path)
+    rows = _rows(path, "Open Images class-description CSV")
+    if rows and [cell.strip() for cell in rows[0][:2]] == ["LabelName", "DisplayName"]:
+        rows, first_line = rows[1:], 2
+    else:
+        first_line = 1
+    if not rows:
+        raise ValueError(f"{path}: expected LabelName,DisplayName rows, found none")
+    labels, names = [], []
+    for line, row in enumerate(rows, start=first_line):
+        if len(row) < 2 or not row[0].strip():
+            raise ValueError(f"{path}, line {line}: expected 'LabelName,DisplayName', got {','.join(row)!r}")
+        labels.append(row[0].strip())
+        names.append(row[1].strip())
+    duplicates = sorted({label for label in labels if labels.count(label) > 1}) if len(set(labels)) < len(labels) else []
+    if duplicates:
+        raise ValueError(f"{path}: field LabelName: {duplicates[:5]} listed more than once")
+    return labels, names
+
+
+def _column(path: Path, rows: list[list[str]], index: int, name: str, dtype, check=None, expected: str = "") -> np.ndarray:
+    values = [row[index] for row in rows]
+    try:
+        array = np.array(values, dtype=dtype)
+        bad = ~check(array) if check is not None else np.zeros(len(array), dtype=bool)
+    except ValueError:
+        array, bad = None, None
+    if bad is None or bad.any():
+        for line, value in enumerate(values, start=2):
+            try:
+                if check is None or check(np.array([value], dtype=dtype))[0]:
+                    continue
+            except ValueError:
+                pass
+            raise ValueError(f"{path}, line {line}, field {name}: expected {expected}, got {value!r}")
+    return array
+
+
+def read_boxes(path: str | Path, label_index: dict[str, int]) -> dict[str, np.ndarray]:
+    """Columns of an Open Images box CSV, checked: ``image_ids``, ``class_ids``, ``label_names``,
+    ``source``, ``confidence``, ``normalized (R, 4)`` ``XMin, YMin, XMax, YMax`` and each flag."""
+    path = Path(path)
+    rows = _rows(path, "Open Images box CSV")
+    if not rows:
+        raise ValueError(f"{path}: empty file; expected the header {','.join(BOX_COLUMNS)}")
+    header = [cell.strip() for cell in rows[0]]
+    missing = [column for column in BOX_COLUMNS if column not in header and column not in FLAG_COLUMNS]
+    if missing:
+        raise ValueError(f"{path}: header lacks {missing}; expected {','.join(BOX_COLUMNS)}")
+    rows = rows[1:]
+    for line, row in enumerate(rows, start=2):
+        if len(row) != len(header):
+            raise ValueError(f"{path}, line {line}: expected {len(header)} fields, got {len(row)}")
+    at = {name: header.index(name) for name in header}
+    labels = [row[at["LabelName"]] for row in rows]
+    for line, label in enumerate(labels, start=2):
+        if label not in label_index:
+            raise ValueError(f"{path}, line {line}, field LabelName: unknown class {label!r} (not in the "
+                             "class-description file)")
+
+    def fraction(values):
+        return np.isfinite(values) & (values >= 0) & (values <= 1)
+
+    columns = {name: _column(path, rows, at[name], name, np.float64, fraction, "a fraction of the image size in [0, 1]")
+               for name in ("XMin", "YMin", "XMax", "YMax")}
+    normalized = np.stack([columns["XMin"], columns["YMin"], columns["XMax"], columns["YMax"]], axis=1).reshape(-1, 4)
+    inverted = np.flatnonzero((normalized[:, 2] < normalized[:, 0]) | (normalized[:, 3] < normalized[:, 1]))
+    if len(inverted):
+        raise ValueError(f"{path}, line {inverted[0] + 2}, field XMax/YMax: XMax < XMin or YMax < YMin")
+    result = {"image_ids": np.array([row[at["ImageID"]] for row in rows], dtype=object),
+              "label_names": np.array(labels, dtype=object),
+              "class_ids": np.array([label_index[label] for label in labels], dtype=np.int64),
+              "source": np.array([row[at["Source"]] for row in rows], dtype=object),
+              "confidence": _column(path, rows, at["Confidence"], "Confidence", np.float64,
+                                    lambda v: np.isfinite(v) & (v >= 0) & (v <= 1), "a number in [0, 1]"),
+              "normalized": normalized}
+    for name in FLAG_COLUMNS:
+        if name in at:
+            result[name] = _column(path, rows, at[name], name, np.int64, lambda v: np.isin(v, (-1, 0, 1)),
+                                   "0, 1 or -1 (unknown)").astype(np.int8)
+        else:
+            result[name] = np.full(len(rows), -1, dtype=np.int8)
+    return result
+
+
+def _find_image(folder: Path, image_id: str) -> Path:
+    for suffix in IMAGE_SUFFIXES:
+        if (folder / f"{image_id}{suffix}").is_file():
+            return folder / f"{image_id}{suffix}"
+    return folder / f"{image_id}.jpg"
+
+
+def load(root: str | Path, split: str = "train", boxes_csv: str | Path | None = None,
+         classes_csv: str | Path | None = None, images: str | Path | None = None,
+         include_group_of: bool = True) -> SampleSequence:
+    """An Open Images split as a lazy :class:`SampleSequence`, one sample per image of the box CSV
+    (in order of first appearance); image sizes are read from file headers when a sample is read.
+
+    Args:
+        root: the Open Images folder (see the module doc for the layout).
+        split: ``train``, ``validation`` (or ``val``) or ``test``.
+        boxes_csv, classes_csv, images: explicit paths overriding the layout's.
+        include_group_of: keep ``IsGroupOf`` boxes (boxes around a group of objects).
+    Raises:
+        ValueError: a missing file; a malformed CSV row (file, line and field), an unknown class.
+    """
+    root = Path(root)
+    found = find_files(root, split)
+    boxes_path = Path(boxes_csv) if boxes_csv is not None else found["boxes"]
+    classes_path = Path(classes_csv) if classes_csv is not None else found["classes"]
+    if boxes_path is None:
+        raise ValueError(f"root: no Open Images box CSV for split {split!r} in {root} (expected "
+                         f"{SPLITS.get(split, split)}-annotations-bbox.csv or oidv6-{SPLITS.get(split, split)}-annotations-bbox.csv)")
+    if classes_path is None:
+        raise ValueError(f"root: no Open Images class-description CSV in {root} (expected one of {list(CLASS_FILES)})")
+    image_folder = Path(images) if images is not None else found["images"]
+    label_names, display_names = read_class_descriptions(classes_path)
+    table = read_boxes(boxes_path, {label: position for position, label in enumerate(label_names)})
+    keep = np.ones(len(table["image_ids"]), dtype=bool) if include_group_of else table["IsGroupOf"] != 1
+    order, first = np.unique(table["image_ids"], return_index=True)
+    order = order[np.argsort(first)]
+    rows_of: dict[str, list[int]] = {image_id: [] for image_id in order}
+    for row, (image_id, kept) in enumerate(zip(table["image_ids"], keep)):
+        if kept:
+            rows_of[image_id].append(row)
+
+    def read(position: int) -> Sample:
+        image_id = order[position]
+        rows = np.array(rows_of[image_id], dtype=np.int64)
+        path = _find_image(image_folder, image_id)
+        width, height = image_size_from_header(path)
+        boxes = table["normalized"][rows] * np.array([width, height, width, height], dtype=np.float64)
+        class_ids = table["class_ids"][rows]
+        extras = {"image_id": image_id, "image_size": (width, height),
+                  "label_names": list(table["label_names"][rows]), "source": list(table["source"][rows]),
+                  "confidence": table["confidence"][rows]}
+        extras.update({key: table[name][rows] for name, key in FLAG_EXTRAS.items()})
+        return Sample(image=path, boxes=boxes.reshape(-1, 4), class_ids=class_ids,
+                      class_names=[display_names[i] for i in class_ids], extras=extras)
+
+    return SampleSequence(len(order), read, display_names)
