@@ -1,0 +1,31 @@
+"""``paz6d train hrnet``: flags from :class:`~paz6d.hrnet.config.HRNetTraining` and the command.
+
+Light on purpose: building the parser imports only this module and the settings; the trainer
+(:mod:`paz6d.hrnet.train`, OpenCV, then TensorFlow and the renderers) loads when it runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from paz6d.backend.paths import check_output_folder
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.hrnet.config import HRNetTraining
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Adds the ``paz6d train hrnet`` flags (the fields of :class:`HRNetTraining`)."""
+    add_config_arguments(parser, HRNetTraining, exclude=("overrides",))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point of ``paz6d train hrnet``."""
+    from paz6d.hrnet.train import train_hrnet  # here: it loads OpenCV (then TensorFlow and the renderers)
+
+    job = config_from_args(HRNetTraining, args, exclude=("overrides",))
+    with flags_in_errors(HRNetTraining):
+        check_output_folder(job.out, "out")
+        summary = train_hrnet(job)
+    print(json.dumps(summary, indent=2))
+    return 0

@@ -1,0 +1,77 @@
+"""Scoring HRNet keypoints on held-out crops: PCK (:mod:`evaluation.keypoints`) per decoder, and the PNGs
+(predicted vs true keypoints on crops; PCK against the threshold)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from evaluation.keypoints import pck
+from paz6d.backend.camera import transform_and_project
+from paz6d.backend.draw import draw_keypoints, image_grid
+from paz6d.backend.files import new_figure, save_figure_atomically
+from paz6d.backend.image import save_image
+from paz6d.hrnet.heatmaps import DECODERS, decode_heatmaps
+
+#: PCK thresholds (fractions of the crop side) of the curve in ``pck.png`` and ``evaluation.json``.
+PCK_ALPHAS = (0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2)
+#: The headline threshold: PCK@0.05 of the crop side.
+HEADLINE_ALPHA = 0.05
+
+
+def true_keypoints(points_model, K, T_model2cam) -> np.ndarray:
+    """``(V, N, 2)`` projections (crop pixels) of ``points_model (N, 3)`` with ``K (V, 3, 3)``, ``T (V, 4, 4)``."""
+    return np.stack([transform_and_project(points_model, T, intrinsics) for T, intrinsics in zip(T_model2cam, K)])
+
+
+def score_keypoints(heatmaps, target, input_size: int, stride: int, domain: str, sigma: float,
+                    decoders=DECODERS) -> tuple[dict, dict[str, np.ndarray]]:
+    """PCK of each decoder's keypoints against ``target (V, N, 2)`` (crop pixels, crops ``input_size`` wide).
+
+    Returns:
+        ``(scores, keypoints)``: per decoder ``{"pck@0.05", "pck_curve": {alpha: pck}, "per_keypoint_pck@0.05",
+        "median_px", "mean_px"}`` and the decoded ``(V, N, 2)`` keypoints.
+    """
+    scores, decoded = {}, {}
+    for method in decoders:
+        uv, _ = decode_heatmaps(heatmaps, stride, method, domain, sigma)
+        curve = {alpha: pck(uv, target, input_size, alpha) for alpha in PCK_ALPHAS}
+        headline = curve[HEADLINE_ALPHA]
+        scores[method] = {f"pck@{HEADLINE_ALPHA}": headline.pck,
+                          "pck_curve": {str(alpha): result.pck for alpha, result in curve.items()},
+                          f"per_keypoint_pck@{HEADLINE_ALPHA}": [round(float(value), 4) for value in headline.per_keypoint],
+                          "median_px": float(np.median(headline.distances)),
+                          "mean_px": float(np.mean(headline.distances))}
+        decoded[method] = uv
+    return scores, decoded
+
+
+def save_keypoint_grid(path: str | Path, images, predicted, target, count: int = 16, columns: int = 4) -> Path:
+    """PNG of the first ``count`` crops with predicted keypoints (filled) and true ones (hollow rings),
+    keypoint ``i`` in colour ``i``."""
+    tiles = []
+    for image, guess, truth in list(zip(images, predicted, target))[:count]:
+        canvas = np.asarray(image, dtype=np.uint8)
+        canvas = draw_keypoints(canvas, truth, visible=[False] * len(truth), radius=4)
+        tiles.append(draw_keypoints(canvas, guess, radius=2))
+    return save_image(path, image_grid(tiles, columns=columns))
+
+
+def save_pck_plot(path: str | Path, scores: dict, input_size: int, count: int) -> Path:
+    """PNG of PCK against the threshold (fraction of the crop side) for each decoder in ``scores``."""
+    figure = new_figure(5.5, 4.0)
+    axes = figure.add_subplot(1, 1, 1)
+    for method, result in scores.items():
+        alphas = [float(alpha) for alpha in result["pck_curve"]]
+        axes.plot(alphas, [100 * value for value in result["pck_curve"].values()], marker="o", markersize=3,
+                  label=f"{method} (PCK@{HEADLINE_ALPHA} {100 * result[f'pck@{HEADLINE_ALPHA}']:.1f}%)")
+    axes.axvline(HEADLINE_ALPHA, color="grey", linestyle=":", linewidth=1)
+    axes.set_xlabel(f"threshold (fraction of the {input_size}-pixel crop side)")
+    axes.set_ylabel("correct keypoints (%)")
+    axes.set_title(f"HRNet keypoints, {count} held-out crops")
+    axes.set_ylim(0, 100)
+    axes.grid(alpha=0.3)
+    axes.legend(loc="lower right", fontsize=8)
+    figure.tight_layout()
+    return save_figure_atomically(figure, path)
