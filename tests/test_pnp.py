@@ -106,3 +106,60 @@ def test_degenerate_input_raises_value_error_naming_the_argument():
     with pytest.raises(ValueError, match=r"method: expected one of \['epnp', 'iterative', 'sqpnp'\], got 'p3p'"):
         pnp.solve_pnp(points, pixels, K, method="p3p")
     assert issubclass(pnp.PnPError, ValueError)
+
+
+# ------------------------------------------------------------------ covariance-weighted PnP
+
+def _heteroscedastic_case(seed: int):
+    """16 box-like points seen at ~0.8 m; each pixel gets Gaussian noise from its own random anisotropic
+    covariance (standard deviations 0.3 to 12 px), the covariances known to the solver."""
+    generator = np.random.default_rng(seed)
+    points = generator.uniform(-0.06, 0.06, (16, 3))
+    T = known_pose(seed)
+    sigmas = np.exp(generator.uniform(np.log(0.3), np.log(12.0), (16, 2)))
+    angles = generator.uniform(0, np.pi, 16)
+    rotations = np.stack([[[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]] for a in angles])
+    covariances = np.einsum("nij,nj,nkj->nik", rotations, sigmas ** 2, rotations)
+    noise = np.einsum("nij,nj->ni", np.linalg.cholesky(covariances), generator.normal(size=(16, 2)))
+    return points, camera.transform_and_project(points, T, K) + noise, covariances, T
+
+
+def test_weighted_pnp_beats_unweighted_on_heteroscedastic_noise():
+    weighted_errors, plain_errors = [], []
+    for seed in range(40):
+        points, pixels, covariances, T = _heteroscedastic_case(seed)
+        plain = pnp.solve_pnp(points, pixels, K, method="epnp")
+        weighted = pnp.solve_pnp_weighted(points, pixels, K, covariances, ransac=False, robust_scale=None)
+        plain_errors.append(np.linalg.norm(plain.translation - T[:3, 3]))
+        weighted_errors.append(np.linalg.norm(weighted.translation - T[:3, 3]))
+        assert weighted.count == 16 and len(weighted.inliers) == 16
+    # measured: median 7.9 mm vs 16.5 mm translation error; weighted better in 33 of the 40 cases
+    assert np.median(weighted_errors) < 0.7 * np.median(plain_errors), (np.median(weighted_errors), np.median(plain_errors))
+    assert np.mean(np.array(weighted_errors) < np.array(plain_errors)) >= 0.7
+
+
+def test_weighted_pnp_with_equal_covariances_is_the_unweighted_least_squares_pose():
+    points, pixels, _, T = _heteroscedastic_case(3)
+    plain = pnp.solve_pnp(points, pixels, K, method="epnp")
+    weighted = pnp.solve_pnp_weighted(points, pixels, K, np.tile(4.0 * np.eye(2), (16, 1, 1)), robust_scale=None)
+    np.testing.assert_allclose(weighted.translation, plain.translation, atol=1e-5)  # metres
+    np.testing.assert_allclose(weighted.rotation_vector, plain.rotation_vector, atol=1e-4)  # radians
+    exact = pnp.solve_pnp_weighted(points, camera.transform_and_project(points, T, K), K,
+                                   np.tile(np.eye(2), (16, 1, 1)))
+    np.testing.assert_allclose(exact.T_model2cam, T, atol=1e-8)
+    assert len(exact.inliers) == 16
+
+
+def test_weighted_pnp_errors_name_the_covariances():
+    points, pixels, covariances, _ = _heteroscedastic_case(0)
+    with pytest.raises(pnp.PnPError, match=r"covariances: expected shape \(16, 2, 2\)"):
+        pnp.solve_pnp_weighted(points, pixels, K, covariances[:3])
+    bad = covariances.copy()
+    bad[4] = [[1.0, 2.0], [2.0, 1.0]]
+    with pytest.raises(pnp.PnPError, match=r"not positive definite"):
+        pnp.solve_pnp_weighted(points, pixels, K, bad)
+    bad[4] = [[1.0, 0.5], [0.0, 1.0]]
+    with pytest.raises(pnp.PnPError, match="symmetric"):
+        pnp.solve_pnp_weighted(points, pixels, K, bad)
+    with pytest.raises(pnp.PnPError, match="robust_scale"):
+        pnp.solve_pnp_weighted(points, pixels, K, covariances, robust_scale=-1.0)

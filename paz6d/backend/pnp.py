@@ -145,3 +145,84 @@ def _solve(points3d, points2d, K, method, ransac, distortion, refine, reprojecti
         rotation_vector, translation = cv2.solvePnPRefineLM(points3d[inliers], points2d[inliers], K, distortion,
                                                             rotation_vector, translation)
     return PnPSolution(rotation_vector.ravel(), translation.ravel(), inliers, len(points3d))
+
+
+def _whitening_matrices(covariances, count: int) -> np.ndarray:
+    """``(N, 2, 2)`` matrices ``W_i = L_i^-1`` with ``Σ_i = L_i L_iᵀ`` (Cholesky), so ``W_i r`` has unit covariance."""
+    try:
+        covariances = np.asarray(covariances, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise PnPError(f"covariances: expected ({count}, 2, 2) numbers, got {type(covariances).__name__}") from None
+    if covariances.shape != (count, 2, 2):
+        raise PnPError(f"covariances: expected shape ({count}, 2, 2) (one 2x2 pixel covariance per point), "
+                       f"got {covariances.shape}")
+    if not np.all(np.isfinite(covariances)):
+        raise PnPError("covariances: expected finite values, got NaN or infinity")
+    if not np.allclose(covariances, np.swapaxes(covariances, 1, 2), rtol=1e-6, atol=1e-9):
+        raise PnPError("covariances: expected symmetric 2x2 matrices")
+    determinant = covariances[:, 0, 0] * covariances[:, 1, 1] - covariances[:, 0, 1] ** 2
+    bad = np.flatnonzero((covariances[:, 0, 0] <= 0) | (determinant <= 0))
+    if len(bad):
+        raise PnPError(f"covariances: matrices {bad[:10].tolist()} are not positive definite")
+    cholesky = np.linalg.cholesky(covariances)
+    return np.linalg.inv(cholesky)
+
+
+def solve_pnp_weighted(points3d, points2d, K, covariances, method: str = "epnp", ransac: bool = True,
+                       distortion=None, reprojection_threshold: float = 8.0, robust_scale: float | None = 3.0,
+                       iterations: int = 200, confidence: float = 0.999, seed: int = 0,
+                       max_evaluations: int = 100) -> PnPSolution:
+    """Covariance-weighted PnP: ``T_model2cam`` minimising the whitened reprojection error.
+
+    Each correspondence ``i`` has a ``2×2`` pixel covariance ``Σ_i = L_i L_iᵀ``; the pose minimises
+    ``Σ_i ρ(‖L_i⁻¹ (π(R X_i + t) − x_i)‖²)`` (squared Mahalanobis distances), so uncertain keypoints
+    count less and along their uncertain direction only. It starts from :func:`solve_pnp` (``method``,
+    RANSAC with ``reprojection_threshold`` px when ``ransac``, LM refinement) and refines with
+    Levenberg–Marquardt-style trust-region least squares (``scipy.optimize.least_squares``, Jacobians
+    from ``cv2.projectPoints``) over *all* correspondences; with ``robust_scale`` the loss ``ρ`` is
+    Huber's with that many standard deviations as its knee (outliers with small covariances still
+    count only linearly), else plain least squares.
+
+    Args:
+        covariances: ``(N, 2, 2)`` symmetric positive-definite pixel covariances.
+        max_evaluations: limit on residual evaluations of the refinement.
+    Returns:
+        A :class:`PnPSolution`; ``inliers`` are the correspondences whose Mahalanobis distance is at most
+        ``robust_scale`` (all of them without a robust loss).
+    Raises:
+        PnPError: the checks of :func:`solve_pnp`, covariances of the wrong shape or not positive definite.
+    """
+    points3d, points2d = _check_correspondences(points3d, points2d)
+    whitening = _whitening_matrices(covariances, len(points3d))
+    if robust_scale is not None and not (np.isfinite(robust_scale) and robust_scale > 0):
+        raise PnPError(f"robust_scale: expected a positive number of standard deviations or None, got {robust_scale}")
+    if int(max_evaluations) < 1:
+        raise PnPError(f"max_evaluations: expected a positive integer, got {max_evaluations}")
+    start = solve_pnp(points3d, points2d, K, method, ransac, distortion, True, reprojection_threshold, iterations,
+                      confidence, seed)
+    from scipy.optimize import least_squares  # here: scipy.optimize is heavy and only needed for this solver
+
+    K = as_camera_matrix(K)
+    distortion = _checked_distortion(distortion)
+    count = len(points3d)
+
+    def residuals(parameters):
+        projected, _ = cv2.projectPoints(points3d, parameters[:3], parameters[3:], K, distortion)
+        return np.einsum("nij,nj->ni", whitening, projected.reshape(count, 2) - points2d).ravel()
+
+    def jacobian(parameters):
+        _, derivatives = cv2.projectPoints(points3d, parameters[:3], parameters[3:], K, distortion)
+        return np.einsum("nij,njk->nik", whitening, derivatives[:, :6].reshape(count, 2, 6)).reshape(2 * count, 6)
+
+    initial = np.concatenate([start.rotation_vector, start.translation])
+    robust = robust_scale is not None
+    try:
+        result = least_squares(residuals, initial, jac=jacobian, method="trf" if robust else "lm",
+                               loss="huber" if robust else "linear", f_scale=float(robust_scale) if robust else 1.0,
+                               max_nfev=int(max_evaluations), x_scale="jac")
+    except (ValueError, np.linalg.LinAlgError, cv2.error) as error:
+        raise PnPError(f"solve_pnp_weighted: refinement failed ({str(error)[:200]})") from None
+    parameters = result.x if np.all(np.isfinite(result.x)) and result.x[5] > 0 else initial
+    distances = np.linalg.norm(residuals(parameters).reshape(count, 2), axis=1)
+    inliers = np.flatnonzero(distances <= robust_scale) if robust else np.arange(count)
+    return PnPSolution(parameters[:3].copy(), parameters[3:].copy(), inliers, count)

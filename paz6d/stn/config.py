@@ -1,0 +1,57 @@
+"""Settings of ``paz6d train stn``: the quick and full configs and one run's :class:`STNTraining`
+(whose fields are the command's flags). Light: no numpy, no TensorFlow."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from paz6d.cli_options import option
+
+CONFIGS: dict[str, dict] = {
+    # A few minutes per run on 2 CPU cores (docs/stn.md): 48x48 canvases, 6 clutter fragments.
+    "quick": {"canvas_size": 48, "crop_size": 48, "scale": (12.0, 24.0), "clutter": 6, "filters": 32,
+              "padding": "zeros", "theta_scale": 0.1, "batch_size": 64, "steps": 2000, "learning_rate": 1e-3,
+              "test_samples": 2000, "checkpoint_every": 500, "sample_every": 500},
+    # Jaderberg et al.'s cluttered-MNIST size (60x60, 8 fragments), longer schedule.
+    "full": {"canvas_size": 60, "crop_size": 60, "scale": (12.0, 32.0), "clutter": 8, "filters": 32,
+             "padding": "zeros", "theta_scale": 0.1, "batch_size": 128, "steps": 20000, "learning_rate": 1e-3,
+             "test_samples": 5000, "checkpoint_every": 2000, "sample_every": 2000},
+}
+#: Settings that must not change when a run is resumed.
+FIXED_SETTINGS = ("canvas_size", "crop_size", "scale", "clutter", "filters", "padding", "theta_scale")
+
+
+@dataclass
+class STNTraining:
+    """One ``paz6d train stn`` run (each field but ``overrides`` is a flag, see :mod:`paz6d.cli_options`)."""
+
+    out: Path = option(help="run directory (re-run the command to resume)")
+    config: str = option("quick", "network and schedule", choices=tuple(sorted(CONFIGS)))
+    transformer: bool = option(True, "put the spatial transformer in front of the classifier "
+                                     "(--no-transformer: the same classifier alone, for comparison)")
+    seed: int = option(0, "seed of the initialisation and of every canvas")
+    steps: int | None = option(None, "training steps (default: the config's)")
+    batch_size: int | None = option(None, "canvases per step (default: the config's)")
+    progress: bool = option(True, "progress bar")
+    overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny run in tests)
+
+    def __post_init__(self):
+        self.out = Path(self.out)
+        self.settings()
+
+    def settings(self) -> dict:
+        """The config's settings with ``overrides``, ``steps`` and ``batch_size`` applied."""
+        if self.config not in CONFIGS:
+            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
+        unknown = sorted(set(self.overrides) - set(CONFIGS[self.config]))
+        if unknown:
+            raise ValueError(f"overrides: unknown setting(s) {unknown}; settings are {sorted(CONFIGS[self.config])}")
+        settings = {**CONFIGS[self.config], **self.overrides}
+        for name in ("steps", "batch_size"):
+            value = getattr(self, name)
+            if value is not None:
+                if int(value) <= 0:
+                    raise ValueError(f"{name}: expected a positive integer, got {value}")
+                settings[name] = int(value)
+        return settings
