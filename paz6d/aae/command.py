@@ -42,11 +42,21 @@ def run(args: argparse.Namespace) -> int:
     job = config_from_args(AAETraining, args)
     with flags_in_errors(AAETraining):
         check_output_folder(job.out, "out")
-        mesh, object_id = (job.mesh, 1) if job.dataset is None else _dataset_mesh(job.dataset, job.object_id)
-        if job.dataset is not None:  # before any view is rendered
-            check_object_in_split(job.dataset, job.split, object_id)
-        summary = train_aae(mesh, job.out, job.model_config, job.mesh_scale, job.seed, job.workers, job.platform,
-                            job.progress, dataset=job.dataset, object_id=object_id, split=job.split,
-                            pair_fraction=job.pair_fraction)
+        mesh, object_id, object_class, scale = job.mesh, 1, None, job.mesh_scale
+        split = job.split or "train"
+        if job.format == "bop":
+            found, object_id = _dataset_mesh(job.dataset, job.object_id)
+            mesh = found if job.dataset_mesh is None else job.dataset_mesh
+            check_object_in_split(job.dataset, split, object_id)  # before any view is rendered
+        elif job.format is not None:
+            from paz6d.datasets.pose_crops import pose_dataset  # here: reads YCB-Video / FAT files (scipy, OpenCV)
+
+            source = pose_dataset(job.dataset, job.format, job.split, job.object_class, job.object_id,
+                                  job.dataset_mesh, job.mesh_scale)
+            mesh, object_class, scale, split = source.mesh_path, source.class_name, source.mesh_scale, source.split
+        summary = train_aae(mesh, job.out, job.model_config, scale, job.seed, job.workers, job.platform,
+                            job.progress, dataset=job.dataset, object_id=object_id, split=split,
+                            pair_fraction=job.pair_fraction, dataset_format=job.format or "bop",
+                            object_class=object_class)
     print(json.dumps(summary, indent=2))
     return 0

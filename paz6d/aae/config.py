@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from paz6d.cli_options import option
+from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
 from paz6d.training.source import checked_mesh_scale
 from renderers.platform import PLATFORMS
 
@@ -141,30 +142,40 @@ CONFIGS = {"quick": QUICK, "full": FULL}
 @dataclass(frozen=True)
 class AAETraining:
     """One ``paz6d train aae`` run (each field is a flag, see :mod:`paz6d.cli_options`): the object,
-    from a mesh or a BOP data set, the run directory, the config preset and how to run."""
+    from a mesh or a data set (BOP, YCB-Video or FAT: ``format``, detected from its files by default),
+    the run directory, the config preset and how to run."""
 
     out: Path = option(help="run directory (re-run to resume)")
     mesh: Path | None = option(None, "mesh of the object (PLY/OBJ/GLB)", one_of="source")
-    dataset: Path | None = option(None, "BOP data set (e.g. from `paz6d generate`): its models/obj_XXXXXX.ply "
-                                        "(millimetres) is the object and its image crops are training inputs",
-                                  one_of="source")
-    object_id: int | None = option(None, "object of --dataset (default: the only one)")
-    split: str = option("train", "split of --dataset to read")
+    dataset: Path | None = option(None, "data set whose image crops are training inputs: BOP (e.g. from `paz6d "
+                                        "generate`; its models/obj_XXXXXX.ply, millimetres, is the object), YCB-Video "
+                                        "(models/<class>/textured.obj) or FAT (with --dataset-mesh)", one_of="source")
+    dataset_mesh: Path | None = option(None, "with --dataset: the object's mesh, replacing the data set's model "
+                                             "(FAT ships none: required)")
+    format: str | None = option(None, "format of --dataset (default: detected from its files)", choices=POSE_FORMATS)
+    object_id: int | None = option(None, "object of --dataset: BOP object id, or YCB-Video class index (1-21, as BOP "
+                                         "YCB-V) (default: the only one)")
+    object_class: str | None = option(None, "object of a YCB-Video or FAT --dataset by class name "
+                                            "(e.g. 003_cracker_box)")
+    split: str | None = option(None, "split of --dataset: BOP split folder, YCB-Video image set or FAT folder "
+                                     "(default: train; FAT: mixed)")
     pair_fraction: float = option(0.5, "with --dataset: share of training samples taken from its crops "
                                        "(the rest: rendered views)")
     config: str = option("quick", "quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
                                   "92,232-view codebook (hours on a CPU)", choices=tuple(sorted(CONFIGS)))
     steps: int | None = option(None, "training steps (default: the config's)")
     seed: int = option(0, "seed of the model initialisation and of the data stream")
-    mesh_scale: float | None = option(None, "mesh units to metres (default: 1 with --mesh, 0.001 with --dataset, "
-                                            "whose meshes are BOP millimetres)")
+    mesh_scale: float | None = option(None, "mesh units to metres (default: 1 with --mesh, --dataset-mesh or a "
+                                            "YCB-Video model; 0.001 for BOP models, which are millimetres)")
     workers: int = option(2, "rendering processes (0: render in this process)")
     platform: str | None = option(None, "OpenGL platform of the renderers (default: auto)", choices=PLATFORMS)
     progress: bool = option(True, "progress bars")
 
     def __post_init__(self):
-        scale = checked_mesh_scale(self.mesh, self.dataset, self.mesh_scale, self.seed, self.workers,
-                                   self.object_id, self.split)
+        dataset_format, scale = checked_pose_source(self.dataset, self.format, self.dataset_mesh, self.mesh_scale,
+                                                    self.object_id, self.object_class, self.split)
+        object.__setattr__(self, "format", dataset_format)
+        scale = checked_mesh_scale(self.mesh, self.dataset, scale, self.seed, self.workers, self.object_id, None)
         object.__setattr__(self, "mesh_scale", scale)
         if self.config not in CONFIGS:
             raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")

@@ -1,4 +1,4 @@
-"""AAE training pairs streamed from a BOP data set (e.g. ``paz6d generate`` output).
+"""AAE training pairs streamed from a data set: BOP (e.g. ``paz6d generate`` output), YCB-Video or FAT.
 
 Each annotated instance of the object gives one pair: the input is the square crop of the image around
 its ground-truth box (:func:`paz6d.aae.model.crop_object`, the crop the pipeline makes at test time)
@@ -19,6 +19,7 @@ from paz6d.aae.model import crop_object
 from paz6d.aae.views import render_at_transforms
 from paz6d.backend.square_crop import crop_intrinsics, square_window
 from paz6d.datasets.bop import BOPDataset
+from paz6d.datasets.pose_crops import load_samples, object_instances
 
 
 @dataclass(frozen=True)
@@ -59,11 +60,32 @@ def dataset_crops(root: str | Path, obj_id: int, crop_size: int, padding: float,
     return np.stack(crops), np.stack(Ks), np.stack(poses)
 
 
+def sample_crops(root: str | Path, dataset_format: str, class_name: str, crop_size: int, padding: float,
+                 split: str | None = None, min_visible_fraction: float = 0.1,
+                 progress: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`dataset_crops` for a YCB-Video or FAT data set (:mod:`paz6d.datasets.pose_crops`): the crops
+    around the data set's boxes of ``class_name``, their intrinsics and poses."""
+    crops, Ks, poses = [], [], []
+    samples = load_samples(root, dataset_format, split, masks=True)
+    for instance in object_instances(samples, class_name, min_visible_fraction, progress):
+        crops.append(crop_object(instance.image, instance.box, crop_size, padding))
+        Ks.append(crop_intrinsics(instance.K, square_window(instance.box, padding), crop_size))
+        poses.append(instance.T_model2cam)
+    if not crops:
+        raise ValueError(f"--dataset: {root} ({split} split) has no visible annotated instance of {class_name}")
+    return np.stack(crops), np.stack(Ks), np.stack(poses)
+
+
 def dataset_pairs(root: str | Path, obj_id: int, mesh_path: str | Path, mesh_scale: float, crop_size: int,
                   padding: float, split: str = "train", workers: int = 2, platform: str | None = None,
-                  progress: bool = True) -> CropPairs:
-    """Input crops from the data set and clean targets rendered through the same crop windows."""
-    inputs, Ks, poses = dataset_crops(root, obj_id, crop_size, padding, split, progress=progress)
+                  progress: bool = True, dataset_format: str = "bop", object_class: str | None = None) -> CropPairs:
+    """Input crops from the data set (BOP: object ``obj_id``; YCB-Video / FAT: ``object_class``) and clean
+    targets rendered through the same crop windows."""
+    if dataset_format == "bop":
+        inputs, Ks, poses = dataset_crops(root, obj_id, crop_size, padding, split, progress=progress)
+    else:
+        inputs, Ks, poses = sample_crops(root, dataset_format, object_class, crop_size, padding, split,
+                                         progress=progress)
     targets, _ = render_at_transforms(mesh_path, mesh_scale, Ks, poses, crop_size, workers, platform, progress=progress,
                               description="render targets")
     return CropPairs(inputs, targets, poses)

@@ -103,7 +103,8 @@ def measure_loader(sampler, batch_size: int, batches: int = 4) -> float:
 
 
 def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Path, mesh_scale: float,
-           config: AAEConfig, workers: int, platform: str | None, progress: bool):
+           config: AAEConfig, workers: int, platform: str | None, progress: bool, dataset_format: str = "bop",
+           object_class: str | None = None):
     from paz6d.aae.dataset import CropPairs, dataset_pairs
 
     path = run_files.pairs_path(run_dir)
@@ -111,7 +112,7 @@ def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Pat
     if cached is not None and cached["inputs"].ndim == 4 and cached["inputs"].shape[1] == config.crop_size:
         return CropPairs(cached["inputs"], cached["targets"], cached["poses"])
     pairs = dataset_pairs(dataset, obj_id, mesh_path, mesh_scale, config.crop_size, config.padding, split, workers,
-                          platform, progress)
+                          platform, progress, dataset_format=dataset_format, object_class=object_class)
     save_npz_atomically(path, inputs=pairs.inputs, targets=pairs.targets, poses=pairs.T_model2cam)
     return pairs
 
@@ -119,7 +120,7 @@ def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Pat
 def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QUICK, mesh_scale: float = 1.0,
               seed: int = 0, workers: int = 2, platform: str | None = None, progress: bool = True,
               dataset: str | Path | None = None, object_id: int = 1, split: str = "train",
-              pair_fraction: float = 0.5) -> dict:
+              pair_fraction: float = 0.5, dataset_format: str = "bop", object_class: str | None = None) -> dict:
     """Trains an AAE on renderings of ``mesh_path`` and writes a run directory ``ImplicitPose6D`` loads.
 
     Args:
@@ -130,8 +131,10 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
         seed: seed of the model initialisation and of the data stream.
         workers: rendering processes (0: render in this process).
         platform: OpenGL platform of the renderers (``"egl"``, ``"osmesa"`` or None = auto).
-        dataset: optional BOP data set whose crops of ``object_id`` (``split``) become a share
-            ``pair_fraction`` of the training inputs, with clean rendered targets (the rest are rendered views).
+        dataset: optional data set whose crops of the object (``split``) become a share ``pair_fraction`` of
+            the training inputs, with clean rendered targets (the rest are rendered views): BOP
+            (``dataset_format="bop"``, object ``object_id``) or YCB-Video / FAT (``"ycb_video"``, ``"fat"``,
+            object ``object_class``; see :mod:`paz6d.datasets.pose_crops`).
 
     Returns:
         The summary written to ``summary.json``.
@@ -160,7 +163,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     pairs = None
     if dataset is not None:
         pairs = _pairs(run_dir, dataset, object_id, split, mesh_path, mesh_scale, config, workers, platform,
-                       progress)
+                       progress, dataset_format, object_class)
     sampler = ViewSampler(views["rgb"], views["alpha"], geometry.K, config.crop_size, config.padding,
                           config.augmentation, seed=seed, pairs=pairs, pair_fraction=pair_fraction)
     loader_speed = measure_loader(sampler, config.batch_size)

@@ -28,11 +28,18 @@ def run(args: argparse.Namespace) -> int:
         check_output_folder(job.out, "out")
         views = None
         if job.dataset is not None:
-            from paz6d.keypointnet.dataset import bop_object_views
+            from paz6d.keypointnet.dataset import bop_object_views, sample_object_views
 
-            views, mesh, scale = bop_object_views(job.dataset, job.object_id, job.split,
-                                                  job.settings()["input_size"], job.mesh_scale)
-            job = replace(job, mesh=mesh, mesh_scale=scale, dataset=None)
+            if job.format == "bop":
+                views, mesh, scale = bop_object_views(job.dataset, job.object_id, job.split,
+                                                      job.settings()["input_size"], job.mesh_scale)
+                mesh, scale = (mesh, scale) if job.dataset_mesh is None else (job.dataset_mesh, job.mesh_scale)
+            else:
+                views, mesh, scale = sample_object_views(job.dataset, job.format, job.split, job.object_class,
+                                                         job.object_id, job.dataset_mesh, job.mesh_scale,
+                                                         job.settings()["input_size"], progress=job.progress)
+            job = replace(job, mesh=mesh, mesh_scale=scale, dataset=None, format=None, object_id=None,
+                          object_class=None, split=None, dataset_mesh=None)
         summary = train_keypointnet(job, views=views)
     print(json.dumps(summary, indent=2))
     return 0

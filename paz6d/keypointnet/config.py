@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from paz6d.cli_options import option
+from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
 from paz6d.training.source import checked_mesh_scale
 
 CONFIGS: dict[str, dict] = {
@@ -47,16 +48,25 @@ class KeypointTraining:
     """One ``paz6d train keypointnet`` run (each field but ``overrides`` is a flag, see
     :mod:`paz6d.cli_options`; ``config.json`` in the run directory records it).
 
-    With ``dataset``, :func:`run` cuts the views from the data set's images and fills in ``mesh``.
+    With ``dataset`` (BOP, YCB-Video or FAT: ``format``, detected from its files by default), :func:`run`
+    cuts the views from the data set's images and fills in ``mesh`` (``dataset_mesh``, or the data set's model).
     """
 
     out: Path = option(help="run directory (re-run the command to resume)")
     mesh: Path | None = option(None, "object mesh (PLY/OBJ/GLB); views are rendered on the fly", one_of="source")
-    dataset: Path | None = option(None, "BOP data set folder: views are cut from its images", one_of="source")
-    object_id: int | None = option(None, "with --dataset: BOP object id (default: the first)")
-    split: str | None = option(None, "with --dataset: split folder (default: train_pbr, else train)")
-    mesh_scale: float | None = option(None, "mesh file units to metres (default: 1 with --mesh, 0.001 with "
-                                            "--dataset, whose meshes are BOP millimetres)")
+    dataset: Path | None = option(None, "data set folder (BOP, YCB-Video or FAT): views are cut from its images",
+                                  one_of="source")
+    dataset_mesh: Path | None = option(None, "with --dataset: the object's mesh, replacing the data set's model "
+                                             "(FAT ships none: required)")
+    format: str | None = option(None, "with --dataset: its format (default: detected from its files)",
+                                choices=POSE_FORMATS)
+    object_id: int | None = option(None, "with --dataset: BOP object id (default: the first), or YCB-Video class "
+                                         "index (1-21, as BOP YCB-V)")
+    object_class: str | None = option(None, "with a YCB-Video or FAT --dataset: class name (e.g. 003_cracker_box)")
+    split: str | None = option(None, "with --dataset: BOP split folder (default: train_pbr, else train), YCB-Video "
+                                     "image set (default: train) or FAT folder (default: mixed)")
+    mesh_scale: float | None = option(None, "mesh file units to metres (default: 1 with --mesh, --dataset-mesh or a "
+                                            "YCB-Video model; 0.001 for BOP models, which are millimetres)")
     config: str = option("quick", "model and schedule size", choices=tuple(sorted(CONFIGS)))
     mode: str = option("supervised", "discovery (the paper's, unsupervised) or supervised (farthest-point "
                                      "keypoints)", choices=MODES)
@@ -67,8 +77,10 @@ class KeypointTraining:
     overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
 
     def __post_init__(self):
-        self.mesh_scale = checked_mesh_scale(self.mesh, self.dataset, self.mesh_scale, self.seed, self.workers,
-                                             self.object_id, self.split)
+        self.format, scale = checked_pose_source(self.dataset, self.format, self.dataset_mesh, self.mesh_scale,
+                                                 self.object_id, self.object_class, self.split)
+        self.mesh_scale = checked_mesh_scale(self.mesh, self.dataset, scale, self.seed, self.workers, self.object_id,
+                                             None)
         self.settings()  # checks config, mode and steps
 
     def settings(self) -> dict:
