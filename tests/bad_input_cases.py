@@ -864,6 +864,56 @@ def estimate_cases() -> list[Case]:
     return found
 
 
+#: The YCB-Video and FAT fixtures (``tests/data/datasets``, see ``make_pose_fixtures.py``).
+POSE_DATA = Path(__file__).parent / "data" / "datasets"
+TRAIN_AAE_YCB = ("train", "aae", "--out", "{out}", "--dataset", "{case}/ycb_video", "--object-class", "003_cracker_box",
+                 "--no-progress")
+TRAIN_KEYPOINTNET_YCB = ("train", "keypointnet", "--out", "{out}", "--dataset", "{case}/ycb_video", "--object-id", "2",
+                         "--no-progress")
+TRAIN_KEYPOINTNET_FAT = ("train", "keypointnet", "--out", "{out}", "--dataset", "{case}/fat", "--object-class",
+                         "003_cracker_box", "--dataset-mesh", "{case}/fat/ycb_models/003_cracker_box/google_16k/textured.obj",
+                         "--no-progress")
+
+
+def pose_copy(name: str, relative: str | None = None, content=None) -> Callable[[World, Path], None]:
+    """Setup: a copy of the ``name`` fixture (``ycb_video``, ``fat``) with ``relative`` replaced by
+    ``content`` (see :func:`put`; a callable maps the file's JSON)."""
+
+    def setup(world: World, folder: Path) -> None:
+        shutil.copytree(POSE_DATA / name, folder / name)
+        if relative is not None:
+            path = folder / name / relative
+            put(path, content(json.loads(path.read_text())) if callable(content) else content)
+
+    return setup
+
+
+def pose_dataset_cases() -> list[Case]:
+    """``paz6d train aae|keypointnet --dataset`` on YCB-Video / FAT data with one spoiled file or flag."""
+
+    def drop_quaternion(frame):
+        frame["objects"][0].pop("quaternion_xyzw")
+        return frame
+
+    return [
+        Case("train-keypointnet-ycb-video-meta-garbage", TRAIN_KEYPOINTNET_YCB,
+             pose_copy("ycb_video", "data/0048/000001-meta.mat", b"garbage"), ("000001-meta.mat",)),
+        Case("train-keypointnet-ycb-video-box-unknown-class", TRAIN_KEYPOINTNET_YCB,
+             pose_copy("ycb_video", "data/0048/000002-box.txt", "999_x 1 2 3 4\n"), ("000002-box.txt", "999_x")),
+        Case("train-aae-ycb-video-no-class", replace_flag(TRAIN_AAE_YCB, "--object-class", "999_x"),
+             pose_copy("ycb_video"), ("--object-class", "999_x")),
+        Case("train-aae-ycb-video-no-image-set", TRAIN_AAE_YCB + ("--split", "test"), pose_copy("ycb_video"),
+             ("--split", "test.txt")),
+        Case("train-keypointnet-fat-no-quaternion", TRAIN_KEYPOINTNET_FAT,
+             pose_copy("fat", "mixed/kitchen_0/000000.left.json", drop_quaternion),
+             ("000000.left.json", "objects[0]", "quaternion_xyzw")),
+        Case("train-keypointnet-fat-without-mesh", replace_flag(TRAIN_KEYPOINTNET_FAT, "--dataset-mesh"), pose_copy("fat"),
+             ("--dataset-mesh",)),
+        Case("train-keypointnet-fat-split-outside", TRAIN_KEYPOINTNET_FAT + ("--split", "../.."), pose_copy("fat"),
+             ("--split",)),
+    ]
+
+
 def train_cases() -> list[Case]:
     found = _flag_cases("train-aae-", TRAIN_AAE, {
         "--mesh": [(("{case}/none.ply",), "none.ply"), (("{world}/bop",), "bop")],
@@ -891,6 +941,7 @@ def train_cases() -> list[Case]:
     found.append(Case("train-aae-dataset-no-models", TRAIN_AAE_DATASET, bop_file("models", None), ("models",)))
     found.append(Case("train-aae-dataset-scene-gt-garbage", TRAIN_AAE_DATASET,
                       bop_file("test/000000/scene_gt.json", "{"), ("scene_gt.json",)))
+    found += pose_dataset_cases()
     found += _flag_cases("train-keypointnet-", TRAIN_KEYPOINTNET, {
         "--mesh": [(("{case}/none.ply",), "none.ply")],
         "--workers": [(("-1",), "")],

@@ -157,13 +157,13 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     config, seed = _prepare_run(run_dir, mesh_path, mesh_scale, config, seed, dataset)
     geometry_data = _object_geometry(run_dir, mesh_path, mesh_scale, seed)
     geometry = ViewGeometry.for_points(geometry_data["vertices"], config.render_size)
-    views = _views(run_dir, mesh_path, mesh_scale, config, geometry, workers, platform, progress)
-    timings["views_seconds"] = time.perf_counter() - started
-
-    pairs = None
-    if dataset is not None:
+    pairs, tick = None, time.perf_counter()
+    if dataset is not None:  # before the views: a bad data set file fails before minutes of rendering
         pairs = _pairs(run_dir, dataset, object_id, split, mesh_path, mesh_scale, config, workers, platform,
                        progress, dataset_format, object_class)
+    timings["pairs_seconds"] = time.perf_counter() - tick
+    views = _views(run_dir, mesh_path, mesh_scale, config, geometry, workers, platform, progress)
+    timings["views_seconds"] = time.perf_counter() - started - timings["pairs_seconds"]
     sampler = ViewSampler(views["rgb"], views["alpha"], geometry.K, config.crop_size, config.padding,
                           config.augmentation, seed=seed, pairs=pairs, pair_fraction=pair_fraction)
     loader_speed = measure_loader(sampler, config.batch_size)
