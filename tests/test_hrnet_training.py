@@ -179,3 +179,19 @@ def test_settings_and_cli_errors(mesh_path, tmp_path, capsys):
         HRNetTraining(tmp_path, mesh_path, mesh_scale=-1.0)
     assert main(["train", "hrnet", "--mesh", str(tmp_path / "missing.ply"), "--out", str(tmp_path / "r")]) == 2
     assert "missing.ply" in capsys.readouterr().err
+
+
+def test_pose_scores_from_exact_keypoints_are_perfect_and_wrong_ones_miss():
+    from paz6d.hrnet.evaluate import score_poses, true_keypoints
+
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-0.05, 0.05, (8, 3))
+    poses = np.stack([np.eye(4)] * 3)
+    poses[:, :3, 3] = [[0.0, 0.0, 0.5], [0.02, -0.01, 0.6], [-0.01, 0.0, 0.4]]
+    K = np.repeat(np.array([[300.0, 0.0, 63.5], [0.0, 300.0, 63.5], [0.0, 0.0, 1.0]])[None], 3, axis=0)
+    uv = true_keypoints(points, K, poses)
+    scores = score_poses(uv, K, poses, points, points, diameter=0.1, input_size=128)
+    assert scores["count"] == 3 and scores["failures"] == 0 and scores["add_recall_0.1d"] == 1.0
+    assert scores["median_rotation_deg"] < 1e-3 and scores["median_translation_mm"] < 1e-3
+    uv[1] = uv[1][::-1]  # keypoints in the wrong order: a wrong pose
+    assert score_poses(uv, K, poses, points, points, 0.1, 128)["add_recall_0.1d"] == 2 / 3

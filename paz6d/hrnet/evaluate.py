@@ -1,5 +1,6 @@
-"""Scoring HRNet keypoints on held-out crops: PCK (:mod:`evaluation.keypoints`) per decoder, and the PNGs
-(predicted vs true keypoints on crops; PCK against the threshold)."""
+"""Scoring HRNet keypoints on held-out crops: PCK (:mod:`evaluation.keypoints`) per decoder, the poses that
+PnP makes of them (ADD, :mod:`evaluation.pose_errors`), and the PNGs (predicted vs true keypoints on crops;
+PCK against the threshold)."""
 
 from __future__ import annotations
 
@@ -8,11 +9,16 @@ from pathlib import Path
 import numpy as np
 
 from evaluation.keypoints import pck
+from evaluation.pose_errors import add_error, rotation_error_deg, translation_error
+from paz6d.abstract import Keypoints2D
+from paz6d.backend.camera import Camera
+from paz6d.backend.pnp import PnPError
 from paz6d.backend.camera import transform_and_project
 from paz6d.backend.draw import draw_keypoints, image_grid
 from paz6d.backend.files import new_figure, save_figure_atomically
 from paz6d.backend.image import save_image
 from paz6d.hrnet.heatmaps import DECODERS, decode_heatmaps
+from paz6d.keypointnet.pipeline import KeypointPnP
 
 #: PCK thresholds (fractions of the crop side) of the curve in ``pck.png`` and ``evaluation.json``.
 PCK_ALPHAS = (0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2)
@@ -45,6 +51,38 @@ def score_keypoints(heatmaps, target, input_size: int, stride: int, domain: str,
                           "mean_px": float(np.mean(headline.distances))}
         decoded[method] = uv
     return scores, decoded
+
+
+def score_poses(uv, K, T_model2cam, points_model, vertices, diameter: float, input_size: int,
+                ransac_threshold: float = 5.0) -> dict:
+    """Poses from keypoints by the pose pipeline's PnP step (:class:`~paz6d.keypointnet.pipeline.KeypointPnP`:
+    RANSAC EPnP, then Levenberg–Marquardt) and their ADD against the true poses.
+
+    Args:
+        uv: ``(V, N, 2)`` keypoints in crop pixels; K: ``(V, 3, 3)`` crop intrinsics; T_model2cam: ``(V, 4, 4)``.
+        points_model: ``(N, 3)`` metres; vertices: ``(M, 3)`` model points for ADD (metres); diameter: metres.
+    Returns:
+        ``{"count", "failures", "add_recall_0.1d", "median_rotation_deg", "median_translation_mm"}``
+        (a failed PnP counts as a miss).
+    """
+    solve = KeypointPnP(points_model, ransac_threshold, input_size)
+    errors, rotations, translations, failures = [], [], [], 0
+    for keypoints, intrinsics, T in zip(uv, K, T_model2cam):
+        try:
+            pose = solve(Keypoints2D(keypoints, np.ones(len(keypoints))), (0, 0, input_size),
+                         Camera(intrinsics, input_size, input_size))
+        except PnPError:
+            failures += 1
+            errors.append(np.inf)
+            continue
+        estimate = pose.to_matrix()
+        errors.append(float(add_error(estimate, T, vertices)[0]))
+        rotations.append(float(rotation_error_deg(estimate[:3, :3], T[:3, :3])))
+        translations.append(float(translation_error(estimate[:3, 3], T[:3, 3])))
+    errors = np.asarray(errors)
+    return {"count": len(errors), "failures": failures, "add_recall_0.1d": float(np.mean(errors < 0.1 * diameter)),
+            "median_rotation_deg": float(np.median(rotations)) if rotations else None,
+            "median_translation_mm": 1000 * float(np.median(translations)) if translations else None}
 
 
 def save_keypoint_grid(path: str | Path, images, predicted, target, count: int = 16, columns: int = 4) -> Path:

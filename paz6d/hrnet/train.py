@@ -27,7 +27,8 @@ import numpy as np
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.hrnet import run_dir as run_files
 from paz6d.hrnet.config import FIXED_SETTINGS, MARGIN, STRIDE, HRNetTraining
-from paz6d.hrnet.evaluate import HEADLINE_ALPHA, save_keypoint_grid, save_pck_plot, score_keypoints, true_keypoints
+from paz6d.hrnet.evaluate import (HEADLINE_ALPHA, save_keypoint_grid, save_pck_plot, score_keypoints, score_poses,
+                                  true_keypoints)
 from paz6d.hrnet.heatmaps import decode_heatmaps
 from paz6d.keypointnet.config import resolve_precision
 from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
@@ -133,9 +134,11 @@ def held_out_crops(job: HRNetTraining, settings: dict, sampling) -> tuple[np.nda
     return images, K, T
 
 
-def evaluate_run(model, crops, points_model: np.ndarray, settings: dict, out: Path) -> dict:
-    """PCK of every decoder on held-out ``crops = (images, K, T)``; writes ``evaluation.json``,
+def evaluate_run(model, crops, points_model: np.ndarray, settings: dict, out: Path, vertices=None) -> dict:
+    """PCK of every decoder on held-out ``crops = (images, K, T)`` and, with the mesh ``vertices (M, 3)``
+    (metres), ADD recall of the poses PnP makes of the keypoints; writes ``evaluation.json``,
     ``keypoints.png`` and ``pck.png`` into ``out`` and returns the evaluation."""
+    from paz6d.backend.mesh import diameter
     from paz6d.hrnet.model import inference_function
 
     images, K, T = crops
@@ -149,6 +152,9 @@ def evaluate_run(model, crops, points_model: np.ndarray, settings: dict, out: Pa
                   "threshold_px": HEADLINE_ALPHA * settings["input_size"],
                   f"pck@{HEADLINE_ALPHA}": scores["quadratic"][f"pck@{HEADLINE_ALPHA}"], "decoder": "quadratic",
                   "decoders": scores, "inference_ms_per_crop": round(1000 * seconds / max(len(images), 1), 2)}
+    if vertices is not None:
+        evaluation["pnp"] = score_poses(decoded["quadratic"], K, T, points_model, vertices,
+                                        diameter(np.asarray(vertices)), settings["input_size"])
     run_files.write_evaluation(out, evaluation)
     save_keypoint_grid(out / run_files.KEYPOINTS_PLOT, images, decoded["quadratic"], target)
     save_pck_plot(out / run_files.PCK_PLOT, scores, settings["input_size"], len(images))
@@ -220,7 +226,7 @@ def train_hrnet(job: HRNetTraining) -> dict:
 
     evaluation_started = time.perf_counter()
     crops = held_out_crops(job, settings, sampling)
-    evaluation = evaluate_run(model, crops, points_model, settings, out)
+    evaluation = evaluate_run(model, crops, points_model, settings, out, np.asarray(mesh.vertices))
     summary = {"config": job.config, "steps": training.final_step, "precision": precision,
                "parameters": int(model.count_params()), "render_seconds": round(render_seconds, 1),
                "train_seconds": round(train_seconds, 1),
@@ -230,6 +236,7 @@ def train_hrnet(job: HRNetTraining) -> dict:
                "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1),
                "held_out_crops": evaluation["held_out_crops"],
                f"pck@{HEADLINE_ALPHA}": evaluation[f"pck@{HEADLINE_ALPHA}"],
-               "median_px": evaluation["decoders"]["quadratic"]["median_px"]}
+               "median_px": evaluation["decoders"]["quadratic"]["median_px"],
+               "add_recall_0.1d": evaluation["pnp"]["add_recall_0.1d"]}
     run_files.write_metrics(out, summary)
     return summary
