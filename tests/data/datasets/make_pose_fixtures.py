@@ -4,7 +4,7 @@
 Both follow the published on-disk formats (see ``paz6d/datasets/ycb_video.py`` and ``fat.py``) at a
 tiny size. The objects are boxes, ray-cast exactly at pixel centres (OpenCV convention), so images,
 depth, label/segmentation masks, boxes, projected centres and cuboids all agree with the stored poses
-and intrinsics. Output is deterministic (same bytes every run).
+and intrinsics. Output is deterministic (the same content every run; .mat headers carry their creation time).
 """
 
 from __future__ import annotations
