@@ -159,6 +159,9 @@ def test_malformed_files_name_the_file_the_object_and_the_field(copy):
                                                               **{"class": "003_cracker_box_16k"}))
     with pytest.raises(ValueError, match=r"objects\[1\] bounding_box: missing field 'bottom_right'"):
         samples[1]
+    (copy / "mixed/kitchen_0/000001.left.seg.png").unlink()
+    with pytest.raises(ValueError, match=r"000001.left.seg.png: segmentation image not found"):
+        samples[1]
     frame.write_text("{not json")
     with pytest.raises(ValueError, match=r"000001.left.json: invalid JSON"):
         samples[1]

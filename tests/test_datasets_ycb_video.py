@@ -130,6 +130,15 @@ def test_malformed_meta_files_name_the_file_the_object_and_the_field(copy):
     _resave_meta(meta, poses=good, intrinsic_matrix=np.zeros((3, 3)))
     with pytest.raises(ValueError, match=r"field 'intrinsic_matrix' must be"):
         samples[0]
+    _resave_meta(meta, intrinsic_matrix=scipy.io.loadmat(str(copy / "data/0051/000001-meta.mat"))["intrinsic_matrix"])
+    label = copy / "data/0048/000001-label.png"
+    label.write_bytes((copy / "data/0048/000001-color.png").read_bytes())
+    with pytest.raises(ValueError, match=r"000001-label.png: expected a single-channel 8- or 16-bit label image"):
+        samples[0]
+    label.unlink()
+    with pytest.raises(ValueError, match=r"000001-label.png: label image not found"):
+        samples[0]
+    assert ycb_video.load(copy, "train", masks=False)[0].masks is None  # boxes from -box.txt: no label needed
     meta.write_bytes(b"not a mat file")
     with pytest.raises(ValueError, match=r"000001-meta.mat: not a readable MATLAB .mat file"):
         samples[0]

@@ -56,9 +56,8 @@ import numpy as np
 from paz6d.backend import quaternion
 from paz6d.backend.checks import required_field, short_repr
 from paz6d.backend.files import load_json_object
-from paz6d.backend.image import load_image
 from paz6d.datasets.sample import Sample, SampleSequence
-from paz6d.datasets.ycb_video import YCB_VIDEO_CLASSES, read_depth
+from paz6d.datasets.ycb_video import YCB_VIDEO_CLASSES, read_depth, read_label_image
 
 CM_PER_M = 100.0
 #: FAT's depth PNGs: units per metre (0.1 mm).
@@ -275,7 +274,7 @@ def load(root: str | Path, split: str = "mixed", camera: str = "left", masks: bo
         instance_masks = None
         seg_path = Path(f"{prefix}.seg.png")
         if masks:
-            seg = load_image(seg_path, grayscale=True)
+            seg = read_label_image(seg_path, "segmentation image")
             ids = np.array([settings[record["class"]]["segmentation_class_id"] for record in records], dtype=np.int64)
             instance_masks = seg[None] == ids[:, None, None]
         extras = {"frame": str(prefix.relative_to(root)), "image_size": size, "camera": camera,

@@ -44,7 +44,7 @@ import numpy as np
 import scipy.io
 
 from paz6d.backend.files import read_input_text
-from paz6d.backend.image import load_image, mask_box
+from paz6d.backend.image import mask_box
 from paz6d.datasets.sample import Sample, SampleSequence
 
 #: The 21 objects in YCB-Video's ``image_sets/classes.txt`` order (class index = position + 1).
@@ -218,6 +218,22 @@ def read_boxes(path: str | Path, class_names: list[str]) -> dict[str, np.ndarray
     return boxes
 
 
+def read_label_image(path: str | Path, what: str = "label image") -> np.ndarray:
+    """A single-channel 8- or 16-bit PNG of per-pixel ids (YCB-Video ``-label.png``, FAT ``.seg.png``),
+    values unchanged, ``(H, W)``.
+
+    Raises:
+        ValueError: naming the file when it is missing, undecodable or not single-channel.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: {what} not found")
+    image = cv2.imdecode(np.fromfile(path, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if image is None or image.ndim != 2 or image.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"{path}: expected a single-channel 8- or 16-bit {what} (PNG of per-pixel ids)")
+    return image
+
+
 def read_depth(path: str | Path, factor_depth: float) -> np.ndarray:
     """``-depth.png`` as ``float32 (H, W)`` metres (stored value / ``factor_depth``; 0 = no data)."""
     path = Path(path)
@@ -259,7 +275,7 @@ def load(root: str | Path, split: str = "train", masks: bool = True, depth: bool
         label_path = Path(f"{prefix}-label.png")
         label = None
         if masks or not Path(f"{prefix}-box.txt").is_file():
-            label = load_image(label_path, grayscale=True)
+            label = read_label_image(label_path)
         instance_masks = None
         if label is not None:
             instance_masks = label[None] == meta["label_ids"][:, None, None]  # (N, H, W)
