@@ -1,4 +1,4 @@
-"""The ``paz6d`` command: ``generate``, ``train``, ``detect``, ``estimate``, ``evaluate`` and ``demo``.
+"""The ``paz6d`` command: ``generate``, ``train``, ``detect``, ``estimate``, ``evaluate``, ``demo`` and ``benchmark``.
 
 Each command lives in its own module exposing ``configure(parser)`` and ``run(args) -> int``;
 those modules import heavy libraries (TensorFlow, pyrender, trimesh, numba, ...) only inside ``run``.
@@ -28,6 +28,9 @@ COMMANDS = {
     "detect": ("paz6d.ssd.detect", "run a trained SSD over a BOP split or an image folder -> COCO detections JSON"),
     "estimate": ("paz6d.estimate", "run trained pose models on a BOP data set (ground-truth boxes or --detector) -> BOP results CSV"),
     "demo": ("paz6d.demo.command", "end-to-end demo: generate data, train, estimate poses, evaluate"),
+    "benchmark": ({"lmo": ("paz6d.benchmark.command", "synthetic training only, scored on the real LM-O frames "
+                                                      "(detector + one pose model per object; resumable)")},
+                  "real-data benchmarks"),
 }
 
 

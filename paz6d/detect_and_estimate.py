@@ -301,29 +301,54 @@ class DetectAndEstimatePose6D(SequentialProcessor):
             camera: the image's Camera or ``K`` (default: the constructor's).
             axis_length: metres (default: half the model's extent, else 5 cm).
         """
-        canvas, camera = ImageCamera(self.camera)(image, camera)
-        canvas = canvas.copy()
-        names = sorted(self.estimators)
-        colors = keypoint_colors(max(len(names), 1))
-        for box, pose in results:
-            index = names.index(box.class_name) if box.class_name in names else 0
-            color = tuple(int(c) for c in colors[index])
-            T = pose.to_matrix()
-            canvas = draw_box(canvas, box.to_array(), color, thickness=1)
-            cv2.putText(canvas, f"{box.class_name} {box.score:.2f}", (int(box.x_min), max(int(box.y_min) - 3, 10)),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.4, color, 1, cv2.LINE_AA)
-            length = axis_length
-            if box.class_name in self.meshes:
-                vertices, faces = self.meshes[box.class_name]
-                canvas = draw_model_outline(canvas, vertices, faces, T, camera.K, color, thickness=2)
-                extent = np.ptp(vertices, axis=0).max()
-            else:
-                points = self._model_points(box.class_name)
-                extent = None
-                if points is not None and len(points):
-                    canvas = draw_projected_points(canvas, points, T, camera.K, color, radius=0)
-                    extent = np.ptp(points, axis=0).max()
-            if length is None:
-                length = 0.5 * float(extent) if extent else 0.05
-            canvas = draw_pose_axes(canvas, T, camera.K, length)
-        return canvas
+        image, camera = ImageCamera(self.camera)(image, camera)
+        points = {name: self._model_points(name) for name in self.estimators if name not in self.meshes}
+        return draw_estimates(image, [pose for _, pose in results], camera.K, self.meshes,
+                              [box for box, _ in results], {k: v for k, v in points.items() if v is not None},
+                              axis_length, class_names=sorted(self.estimators))
+
+
+def draw_estimates(image, poses, K, meshes: Mapping[str, tuple] | None = None, boxes=(),
+                   points: Mapping[str, np.ndarray] | None = None, axis_length: float | None = None,
+                   class_names=None) -> np.ndarray:
+    """A copy of ``image`` (uint8 RGB) with boxes (labelled with class and score), and for each pose the
+    outline of its class's mesh (:func:`~paz6d.backend.draw.draw_model_outline`; else its model points as
+    dots) and its axes, one colour per class.
+
+    Args:
+        poses: ``[Pose6D]`` (metres, ``T_model2cam``) with class names.
+        K: ``(3, 3)`` intrinsics of the image.
+        meshes: class name -> ``(vertices (V, 3) metres, faces (F, 3))``.
+        boxes: ``[Box2D]`` to draw (e.g. the detections).
+        points: class name -> ``(N, 3)`` model points (metres) for classes without a mesh.
+        axis_length: metres (default: half the model's extent, else 5 cm).
+        class_names: the classes in colour order (default: those of meshes, points, poses and boxes, sorted).
+    """
+    canvas = as_image(image, "image", channels=3).copy()
+    meshes, points = dict(meshes or {}), dict(points or {})
+    if class_names is None:
+        class_names = sorted({*meshes, *points, *(pose.class_name for pose in poses if pose.class_name),
+                              *(box.class_name for box in boxes if box.class_name)})
+    names = list(class_names)
+    colors = keypoint_colors(max(len(names), 1))
+
+    def color_of(name) -> tuple[int, int, int]:
+        return tuple(int(c) for c in colors[names.index(name) if name in names else 0])
+
+    for box in boxes:
+        color = color_of(box.class_name)
+        canvas = draw_box(canvas, box.to_array(), color, thickness=1)
+        cv2.putText(canvas, f"{box.class_name} {box.score:.2f}", (int(box.x_min), max(int(box.y_min) - 3, 10)),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.4, color, 1, cv2.LINE_AA)
+    for pose in poses:
+        color, T, extent = color_of(pose.class_name), pose.to_matrix(), None
+        if pose.class_name in meshes:
+            vertices, faces = meshes[pose.class_name]
+            canvas = draw_model_outline(canvas, vertices, faces, T, K, color, thickness=2)
+            extent = float(np.ptp(np.asarray(vertices), axis=0).max())
+        elif pose.class_name in points and len(points[pose.class_name]):
+            canvas = draw_projected_points(canvas, points[pose.class_name], T, K, color, radius=0)
+            extent = float(np.ptp(np.asarray(points[pose.class_name]), axis=0).max())
+        length = axis_length if axis_length is not None else (0.5 * extent if extent else 0.05)
+        canvas = draw_pose_axes(canvas, T, K, length)
+    return canvas

@@ -1,0 +1,51 @@
+"""``paz6d benchmark lmo``: the real-data benchmark of :mod:`paz6d.benchmark.lmo` (flags: :class:`LmoOptions`).
+
+Light on purpose: building the parser imports only this module; the stages (TensorFlow, the renderers)
+load when the command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+from paz6d.backend.paths import check_output_folder
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
+
+#: ``../shared/data/bop_lmo`` next to this checkout.
+DEFAULT_LMO = Path(__file__).resolve().parents[3] / "shared" / "data" / "bop_lmo"
+
+
+@dataclass(frozen=True)
+class LmoOptions:
+    """One ``paz6d benchmark lmo`` run."""
+
+    out: Path = option(help="output folder (detector/, pose/obj_XXXXXX/, results/, overlays/, report.json); "
+                            "re-run the same command to resume")
+    quick: bool = option(False, "the quick sizes (~45 min on an idle 2-core CPU) instead of the full ones (~3 h)")
+    method: str = option("aae", "pose model per object (keypointnet runs go to OUT/pose_keypointnet/)",
+                         choices=("aae", "keypointnet"))
+    lmo: Path = option(DEFAULT_LMO, "LM-O BOP folder: its models/ train everything, its test/ RGB frames are scored")
+    seed: int = option(0, "seed of the synthetic data and of every training run")
+    progress: bool = option(True, "progress bars")
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Adds the ``paz6d benchmark lmo`` flags (the fields of :class:`LmoOptions`)."""
+    add_config_arguments(parser, LmoOptions)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Runs (or resumes) the benchmark."""
+    from paz6d.benchmark.lmo import Benchmark, run_benchmark  # here: the stages load TensorFlow and the renderers
+
+    options = config_from_args(LmoOptions, args)
+    with flags_in_errors(LmoOptions):
+        check_output_folder(options.out, "out")
+        job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
+                        progress=options.progress, seed=options.seed)
+        report = run_benchmark(job)
+    print(f"wrote {Path(options.out) / 'report.json'} and {Path(options.out) / 'report.md'} "
+          f"({report['total_minutes']:.1f} min of stages)")
+    return 0

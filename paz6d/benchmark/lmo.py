@@ -1,0 +1,423 @@
+"""``paz6d benchmark lmo``: synthetic training only, scored on the real LM-O frames.
+
+From the 8 LM-O meshes (``<lmo>/models``) only:
+
+1. ``backgrounds``: photographic collages of scikit-image's bundled sample photos
+   (:mod:`paz6d.synthesis.photo_backgrounds`);
+2. ``synthetic``: ``paz6d generate`` of floating multi-object scenes over those collages at LM-O's camera,
+   distances and viewpoints (the settings that transferred best to the real frames, ``docs/ssd.md`` q1);
+3. ``detector``: ``paz6d train ssd`` (quick network) -> ``DIR/detector/``;
+4. ``pose/obj_XXXXXX``: one pose model per object (AAE by default, KeypointNet with ``method="keypointnet"``)
+   -> ``DIR/pose/obj_XXXXXX/`` (KeypointNet: ``DIR/pose_keypointnet/obj_XXXXXX/``); the AAE also trains on
+   crops of the synthetic scenes (real inter-object occlusion) besides its own rendered views;
+5. ``estimate_gt`` / ``estimate_detections``: ``paz6d estimate`` on the real RGB frames with the ground-truth
+   visible boxes and with the detector's boxes (which reads no ground truth);
+6. ``evaluate_*``: ``paz6d evaluate bop`` (AR_MSSD, AR_MSPD, ADD(-S), per object) of both, and
+   ``paz6d evaluate coco`` of the detections;
+7. ``report``: ``DIR/report.json``, ``DIR/report.md`` (the table) and PNG overlays of the estimates on the
+   real frames (``DIR/overlays/``).
+
+The real frames' ground truth is read only to score and for the ground-truth-box condition. Every stage
+is skipped when its output is complete (a ``DIR/stages/<stage>.json`` marker written after it, and the
+trainers resume mid-run), so re-running the same command continues. TensorFlow is imported first
+(:mod:`paz6d.backend.tensorflow_guard`); rendering happens in the spawn worker processes of the generator
+and the trainers, as in ``paz6d demo``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
+from paz6d.benchmark.command import DEFAULT_LMO
+
+#: LM-O's camera (``camera.json`` of the BOP data set): fx, fy, cx, cy.
+LMO_INTRINSICS = (572.4114, 573.57043, 325.2611, 242.04899)
+METHODS = ("aae", "keypointnet")
+
+
+@dataclass(frozen=True)
+class BenchmarkSettings:
+    """Sizes of one benchmark (``quick`` or ``full``); times are for an idle 2-core CPU (``docs/real_photos.md``).
+
+    Attributes:
+        images: synthetic training images; backgrounds: photo collages.
+        detector_steps: SSD steps (quick network).
+        aae_steps / aae_views / aae_in_plane: AAE steps, view-sphere directions and codebook in-plane
+            rotations per view.
+        keypointnet_steps / keypointnet_views: KeypointNet steps and rendered training views.
+        scene_crops: share of AAE training samples cut from the synthetic scenes (0: rendered views only).
+        workers: rendering processes.
+    """
+
+    images: int
+    backgrounds: int
+    detector_steps: int
+    aae_steps: int
+    aae_in_plane: int
+    keypointnet_steps: int
+    keypointnet_views: int
+    scene_crops: float = 0.5
+    workers: int = 2
+    aae_views: int = 1000
+
+
+QUICK = BenchmarkSettings(images=1500, backgrounds=200, detector_steps=1500, aae_steps=1000, aae_in_plane=36,
+                          keypointnet_steps=1000, keypointnet_views=2000)
+FULL = BenchmarkSettings(images=2500, backgrounds=300, detector_steps=3000, aae_steps=5000, aae_in_plane=72,
+                         keypointnet_steps=5000, keypointnet_views=4000)
+
+
+@dataclass
+class Benchmark:
+    """One ``paz6d benchmark lmo`` run: where, which sizes and which pose method."""
+
+    out: Path
+    lmo: Path = DEFAULT_LMO
+    quick: bool = False
+    method: str = "aae"
+    progress: bool = True
+    settings: BenchmarkSettings | None = None  # default: QUICK or FULL
+    seed: int = 0
+    objects: tuple[int, ...] = field(default=())  # default: every mesh in <lmo>/models
+
+    def __post_init__(self):
+        self.out, self.lmo = Path(self.out), Path(self.lmo)
+        if self.method not in METHODS:
+            raise ValueError(f"method: expected one of {METHODS}, got {self.method!r}")
+        if self.settings is None:
+            self.settings = QUICK if self.quick else FULL
+        models = self.lmo / "models"
+        if not models.is_dir():
+            raise ValueError(f"lmo: {models} not found (expected the LM-O BOP folder with models/ and test/)")
+        found = sorted(int(path.stem.split("_")[1]) for path in models.glob("obj_*.ply"))
+        if not found:
+            raise ValueError(f"lmo: {models} holds no obj_XXXXXX.ply meshes")
+        if self.objects:
+            missing = sorted(set(self.objects) - set(found))
+            if missing:
+                raise ValueError(f"objects: {missing} have no mesh in {models}")
+        else:
+            self.objects = tuple(found)
+
+    # -- paths ----------------------------------------------------------------------------------
+    def mesh(self, obj_id: int) -> Path:
+        return self.lmo / "models" / f"obj_{obj_id:06d}.ply"
+
+    @property
+    def pose_root(self) -> Path:
+        return self.out / ("pose" if self.method == "aae" else f"pose_{self.method}")
+
+    def pose_dir(self, obj_id: int) -> Path:
+        return self.pose_root / f"obj_{obj_id:06d}"
+
+    def result(self, condition: str, suffix: str) -> Path:
+        """``DIR/results/<method>_<condition><suffix>`` (condition ``gt`` or ``detections``)."""
+        return self.out / "results" / f"{self.method}_{condition}{suffix}"
+
+    def marker(self, stage: str) -> Path:
+        return self.out / "stages" / f"{stage.replace('/', '_')}.json"
+
+
+# ------------------------------------------------------------------------------------------ stages
+def _stage_backgrounds(job: Benchmark) -> dict:
+    from paz6d.synthesis.photo_backgrounds import write_backgrounds
+
+    return {"files": len(write_backgrounds(job.out / "backgrounds", job.settings.backgrounds, seed=job.seed))}
+
+
+def generation_config(job: Benchmark):
+    """The ``paz6d generate`` settings of the synthetic training set (``docs/ssd.md``, q1)."""
+    from data_gen.config import GenerationConfig
+
+    return GenerationConfig(meshes=tuple(job.mesh(obj_id) for obj_id in job.objects), out=job.out / "synthetic",
+                            num_images=job.settings.images, seed=job.seed, mesh_scale=0.001,
+                            intrinsics=LMO_INTRINSICS, rotation="view-sphere", elevation_degrees=(15.0, 80.0),
+                            inplane_degrees=30.0, objects_per_image=(min(4, len(job.objects)), min(8, len(job.objects))),
+                            distance=(0.75, 1.35), distractors=8, occluder_probability=0.3,
+                            backgrounds=job.out / "backgrounds", rgb_format="jpg")
+
+
+def _stage_synthetic(job: Benchmark) -> dict:
+    from data_gen.generator import generate
+
+    summary = generate(generation_config(job), workers=job.settings.workers, show_progress=job.progress)
+    return {"images": job.settings.images, "summary": str(summary)[:500]}
+
+
+def _stage_detector(job: Benchmark) -> dict:
+    from paz6d.ssd.config import SSDTraining
+    from paz6d.ssd.train import train_ssd
+
+    return train_ssd(SSDTraining(dataset=job.out / "synthetic", out=job.out / "detector",
+                                 steps=job.settings.detector_steps, seed=job.seed, progress=job.progress))
+
+
+def _stage_pose(job: Benchmark, obj_id: int) -> dict:
+    if job.method == "aae":
+        from paz6d.aae.config import QUICK as AAE_QUICK, Augmentation
+        from paz6d.aae.train import train_aae
+
+        # paper-sized crop shifts/scales: the boxes come from a detector or from visible parts
+        config = replace(AAE_QUICK, steps=job.settings.aae_steps, in_plane=job.settings.aae_in_plane,
+                         views=job.settings.aae_views, augmentation=Augmentation())
+        crops = job.settings.scene_crops > 0
+        return train_aae(job.mesh(obj_id), job.pose_dir(obj_id), config, mesh_scale=0.001, seed=job.seed,
+                         workers=job.settings.workers, progress=job.progress,
+                         dataset=job.out / "synthetic" if crops else None, object_id=obj_id,
+                         pair_fraction=job.settings.scene_crops if crops else 0.5)
+    from paz6d.keypointnet.config import KeypointTraining
+    from paz6d.keypointnet.train import train_keypointnet
+
+    return train_keypointnet(KeypointTraining(job.pose_dir(obj_id), job.mesh(obj_id), mesh_scale=0.001,
+                                              seed=job.seed, workers=job.settings.workers,
+                                              steps=job.settings.keypointnet_steps, progress=job.progress,
+                                              overrides={"views": job.settings.keypointnet_views}))
+
+
+def _estimate_args(job: Benchmark, condition: str) -> list[str]:
+    argv = ["estimate", *[f"--run={obj_id}={job.pose_dir(obj_id)}" for obj_id in job.objects],
+            "--dataset", str(job.lmo), "--split", "test", "--out", str(job.result(condition, ".csv")),
+            "--targets-out", str(job.result(condition, "_targets.json"))]
+    if condition == "gt":
+        argv += ["--box", "visib"]
+    else:
+        argv += ["--detector", str(job.out / "detector"), "--detections-out",
+                 str(job.result(condition, "_detections.json"))]
+    return argv + ([] if job.progress else ["--no-progress"])
+
+
+def _run_command(argv: list[str]) -> dict | int:
+    """A ``paz6d`` command run in this process (its function, not a shell); errors propagate."""
+    from paz6d.cli import build_parser
+
+    args = build_parser().parse_args(argv)
+    if argv[0] == "estimate":
+        from paz6d.estimate import estimate
+
+        return estimate(args)
+    return args._run(args)
+
+
+def _stage_estimate(job: Benchmark, condition: str) -> dict:
+    return _run_command(_estimate_args(job, condition))
+
+
+def _stage_evaluate(job: Benchmark, condition: str) -> dict:
+    scores = job.result(condition, "_scores.json")
+    _run_command(["evaluate", "bop", "--dataset", str(job.lmo), "--split", "test",
+                  "--results", str(job.result(condition, ".csv")),
+                  "--targets", str(job.result(condition, "_targets.json")), "--metrics", "mssd,mspd,add",
+                  "--out", str(scores), "--plots", str(job.out / "results" / f"{job.method}_{condition}_plots")]
+                 + ([] if job.progress else ["--no-progress"]))
+    return {"scores": str(scores)}
+
+
+def _stage_detection_ap(job: Benchmark) -> dict:
+    from paz6d.datasets.bop.coco_ground_truth import bop_split_to_coco
+
+    truth = job.out / "results" / "coco_ground_truth.json"
+    write_json_atomically(truth, bop_split_to_coco(job.lmo, "test"))  # scoring only
+    scores = job.out / "results" / "detector_coco.json"
+    _run_command(["evaluate", "coco", "--gt", str(truth), "--results", str(job.result("detections",
+                                                                                       "_detections.json")),
+                  "--out", str(scores)])
+    return {"scores": str(scores)}
+
+
+def stages(job: Benchmark) -> list[tuple[str, Callable[[], dict], list[Path]]]:
+    """``(name, run, outputs)`` of every stage in order; a stage is done when its marker and outputs exist."""
+    found = [("backgrounds", lambda: _stage_backgrounds(job), [job.out / "backgrounds"]),
+             ("synthetic", lambda: _stage_synthetic(job), [job.out / "synthetic" / "camera.json"]),
+             ("detector", lambda: _stage_detector(job), [job.out / "detector" / "model.keras"])]
+    for obj_id in job.objects:
+        found.append((f"{job.pose_root.name}/obj_{obj_id:06d}", lambda obj_id=obj_id: _stage_pose(job, obj_id),
+                      [job.pose_dir(obj_id)]))
+    for condition in ("gt", "detections"):
+        found.append((f"estimate_{job.method}_{condition}", lambda c=condition: _stage_estimate(job, c),
+                      [job.result(condition, ".csv")]))
+        found.append((f"evaluate_{job.method}_{condition}", lambda c=condition: _stage_evaluate(job, c),
+                      [job.result(condition, "_scores.json")]))
+    found.append((f"detector_ap_{job.method}", lambda: _stage_detection_ap(job),
+                  [job.out / "results" / "detector_coco.json"]))
+    return found
+
+
+def stage_done(job: Benchmark, name: str, outputs: list[Path]) -> bool:
+    """Whether a stage finished: its marker file and every output exist."""
+    return job.marker(name).is_file() and all(path.exists() for path in outputs)
+
+
+def _check_settings(job: Benchmark) -> None:
+    """Records the benchmark's settings in ``DIR/benchmark.json``; a re-run with other sizes is refused."""
+    path = job.out / "benchmark.json"
+    current = {"quick": job.quick, "settings": asdict(job.settings), "seed": job.seed,
+               "objects": list(job.objects), "lmo": str(job.lmo.resolve())}
+    if path.is_file():
+        stored = load_json_object(path)
+        differing = sorted(key for key in current if stored.get(key) != current[key])
+        if differing:
+            raise ValueError(f"out: {job.out} holds a benchmark with other settings ({', '.join(differing)} differ; "
+                             f"see {path}); use another --out or the same flags")
+    else:
+        write_json_atomically(path, current, indent=2)
+
+
+def run_benchmark(job: Benchmark, only: tuple[str, ...] | None = None) -> dict:
+    """Runs (or resumes) every stage, then writes the report; returns ``report.json``'s content.
+
+    Args:
+        only: run just the stages whose name starts with one of these (tests, partial runs).
+    """
+    from paz6d.backend.tensorflow_guard import import_tensorflow
+
+    import_tensorflow()  # first: anything rendered in this process is then safe next to TensorFlow
+    job.out.mkdir(parents=True, exist_ok=True)
+    _check_settings(job)
+    timings: dict[str, float] = {}
+    for name, function, outputs in stages(job):
+        if only is not None and not name.startswith(only):
+            continue
+        if stage_done(job, name, outputs):
+            print(f"[benchmark lmo] {name}: done (skipped)", flush=True)
+            timings[name] = float(load_json_object(job.marker(name)).get("seconds", 0.0))
+            continue
+        print(f"[benchmark lmo] {name} ...", flush=True)
+        started = time.perf_counter()
+        summary = function()
+        seconds = time.perf_counter() - started
+        timings[name] = seconds
+        write_json_atomically(job.marker(name), {"stage": name, "seconds": seconds,
+                                                 "summary": _json_safe(summary)}, indent=2)
+        print(f"[benchmark lmo] {name}: {seconds / 60:.1f} min", flush=True)
+    if only is not None:
+        return {"timings": timings}
+    return write_report(job, timings)
+
+
+def _json_safe(value):
+    try:
+        json.dumps(value)
+        return value
+    except (TypeError, ValueError):
+        return str(value)[:2000]
+
+
+# ------------------------------------------------------------------------------------------ report
+def _scores(path: Path) -> dict | None:
+    return load_json_object(path) if path.is_file() else None
+
+
+def _mean_ar(summary: dict | None) -> float | None:
+    if not summary or summary.get("AR_MSSD") is None or summary.get("AR_MSPD") is None:
+        return None
+    return 0.5 * (summary["AR_MSSD"] + summary["AR_MSPD"])
+
+
+def score_table(report: dict) -> str:
+    """The Markdown table of ``report.json``: per object and over all, per method and condition."""
+    lines = ["| method | boxes | object | instances | AR_MSSD | AR_MSPD | mean | ADD(-S) |",
+             "|---|---|---|---:|---:|---:|---:|---:|"]
+
+    def cell(value):
+        return "-" if value is None else f"{value:.3f}"
+
+    for method, conditions in sorted(report["methods"].items()):
+        for condition, summary in conditions.items():
+            if summary is None:
+                continue
+            for obj_id, entry in sorted(summary.get("per_object", {}).items(), key=lambda item: int(item[0])):
+                lines.append(f"| {method} | {condition} | {int(obj_id)} | {entry.get('instances', '-')} | "
+                             f"{cell(entry.get('AR_MSSD'))} | {cell(entry.get('AR_MSPD'))} | {cell(_mean_ar(entry))} | "
+                             f"{cell(entry.get('ADD(-S)_recall'))} |")
+            lines.append(f"| {method} | {condition} | **all** | {summary.get('counts', {}).get('gt_instances', '-')} | "
+                         f"{cell(summary.get('AR_MSSD'))} | {cell(summary.get('AR_MSPD'))} | "
+                         f"**{cell(_mean_ar(summary))}** | {cell(summary.get('ADD(-S)_recall'))} |")
+    return "\n".join(lines) + "\n"
+
+
+def _overlays(job: Benchmark, condition: str) -> list[Path]:
+    """One PNG per real frame with the estimates' model outlines and axes, and a grid of all frames."""
+    import cv2
+    import numpy as np
+
+    from paz6d.abstract import Box2D, Pose6D
+    from paz6d.backend.draw import image_grid
+    from paz6d.backend.image import load_image, save_image
+    from paz6d.backend.mesh import load_mesh
+    from paz6d.datasets.bop import read_pose_results
+    from paz6d.datasets.bop.camera import load_scene_camera
+    from paz6d.datasets.bop.scene import find_image
+    from paz6d.detect_and_estimate import draw_estimates
+
+    results_path = job.result(condition, ".csv")
+    if not results_path.is_file():
+        return []
+    results = read_pose_results(results_path, units="m")
+    meshes = {}
+    for obj_id in job.objects:
+        mesh = load_mesh(job.mesh(obj_id), 0.001)
+        meshes[f"obj_{obj_id:06d}"] = (np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    boxes = {}
+    detections = job.result(condition, "_detections.json")
+    if condition == "detections" and detections.is_file():
+        for entry in json.loads(detections.read_text()):
+            if entry["score"] >= 0.1:
+                x, y, w, h = entry["bbox"]
+                boxes.setdefault(entry["image_id"], []).append(Box2D(x, y, x + w, y + h, entry["score"],
+                                                                     f"obj_{entry['category_id']:06d}"))
+    folder = job.out / "overlays" / f"{job.method}_{condition}"
+    written, tiles = [], []
+    for scene in sorted((job.lmo / "test").iterdir()):
+        if not scene.name.isdigit():
+            continue
+        cameras = load_scene_camera(scene / "scene_camera.json")
+        for im_id, camera in sorted(cameras.items()):
+            path = find_image(scene / "rgb", im_id)
+            if path is None:
+                continue
+            image = load_image(path)
+            rows = np.nonzero((results.scene_ids == int(scene.name)) & (results.im_ids == im_id))[0]
+            poses = [Pose6D.from_matrix(results.T_model2cam[row], f"obj_{int(results.obj_ids[row]):06d}",
+                                        float(results.scores[row])) for row in rows]
+            image_id = int(scene.name) * 1_000_000 + im_id
+            canvas = draw_estimates(image, poses, camera.K, meshes, boxes.get(image_id, []))
+            out = folder / f"{int(scene.name):06d}_{im_id:06d}.png"
+            out.parent.mkdir(parents=True, exist_ok=True)
+            written.append(save_image(out, canvas))
+            tiles.append(cv2.resize(canvas, (320, 240), interpolation=cv2.INTER_AREA))
+    if tiles:
+        written.append(save_image(job.out / "overlays" / f"{job.method}_{condition}.png", image_grid(tiles, 4)))
+    return written
+
+
+def write_report(job: Benchmark, timings: dict[str, float]) -> dict:
+    """``DIR/report.json`` (settings, timings, scores of every method run so far), ``DIR/report.md`` and the
+    overlays of this method."""
+    path = job.out / "report.json"
+    report = load_json_object(path) if path.is_file() else {}
+    methods = dict(report.get("methods", {}))
+    methods[job.method] = {"gt_visible_boxes": _scores(job.result("gt", "_scores.json")),
+                           "detections": _scores(job.result("detections", "_scores.json"))}
+    for summary in methods[job.method].values():
+        if summary is not None:
+            summary["mean_AR_MSSD_AR_MSPD"] = _mean_ar(summary)
+    all_timings = {**report.get("timings_seconds", {}), **timings}
+    detector = _scores(job.out / "results" / "detector_coco.json")
+    overlays = {condition: [str(p) for p in _overlays(job, condition)] for condition in ("gt", "detections")}
+    report = {"benchmark": "lmo", "quick": job.quick, "settings": asdict(job.settings), "objects": list(job.objects),
+              "lmo": str(job.lmo), "methods": methods, "detector_coco": detector,
+              "timings_seconds": all_timings, "total_minutes": sum(all_timings.values()) / 60,
+              "overlays": {**report.get("overlays", {}), job.method: overlays}}
+    write_json_atomically(path, report, indent=2)
+    table = score_table(report)
+    header = (f"# paz6d benchmark lmo ({'quick' if job.quick else 'full'})\n\n"
+              f"Synthetic training only; {len(job.objects)} LM-O objects; scored on the real RGB frames of "
+              f"{job.lmo} with `paz6d evaluate bop`. Total stage time {report['total_minutes']:.1f} min.\n\n")
+    write_text_atomically(job.out / "report.md", header + table)
+    print(table)
+    return report

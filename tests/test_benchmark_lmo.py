@@ -1,0 +1,152 @@
+"""`paz6d benchmark lmo`: stage order, skip/resume logic, settings check and the report (stages mocked), and
+(slow) one tiny real run of every stage on the shared LM-O data."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from paz6d.benchmark import lmo
+from paz6d.benchmark.lmo import Benchmark, BenchmarkSettings, run_benchmark, score_table, stages
+
+TINY = BenchmarkSettings(images=6, backgrounds=3, detector_steps=4, aae_steps=4, aae_in_plane=4,
+                         keypointnet_steps=4, keypointnet_views=8, workers=1, aae_views=12)
+
+
+def _fake_lmo(root: Path, objects=(1, 5)) -> Path:
+    (root / "models").mkdir(parents=True)
+    for obj_id in objects:
+        (root / "models" / f"obj_{obj_id:06d}.ply").write_text("ply\n")
+    (root / "test").mkdir()
+    return root
+
+
+@pytest.fixture
+def mocked(tmp_path, monkeypatch):
+    """Every stage replaced by one that writes its outputs and records the call."""
+    calls = []
+
+    def touch(path: Path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("{}") if path.suffix else path.mkdir(exist_ok=True)
+
+    monkeypatch.setattr(lmo, "_stage_backgrounds", lambda job: (calls.append("backgrounds"),
+                                                                 touch(job.out / "backgrounds"))[0] or {})
+    monkeypatch.setattr(lmo, "_stage_synthetic", lambda job: (calls.append("synthetic"),
+                                                               touch(job.out / "synthetic" / "camera.json"))[0] or {})
+    monkeypatch.setattr(lmo, "_stage_detector", lambda job: (calls.append("detector"),
+                                                              touch(job.out / "detector" / "model.keras"))[0] or {})
+    monkeypatch.setattr(lmo, "_stage_pose", lambda job, obj_id: (calls.append(f"pose {obj_id}"),
+                                                                  touch(job.pose_dir(obj_id)))[0] or {})
+
+    def estimate(job, condition):
+        calls.append(f"estimate {condition}")
+        touch(job.result(condition, ".csv"))
+        return {"estimates": 3}
+
+    def evaluate(job, condition):
+        calls.append(f"evaluate {condition}")
+        scores = {"AR_MSSD": 0.2, "AR_MSPD": 0.4, "ADD(-S)_recall": 0.1, "counts": {"gt_instances": 4},
+                  "per_object": {"1": {"instances": 2, "AR_MSSD": 0.1, "AR_MSPD": 0.3, "ADD(-S)_recall": 0.0},
+                                 "5": {"instances": 2, "AR_MSSD": 0.3, "AR_MSPD": 0.5, "ADD(-S)_recall": 0.2}}}
+        path = job.result(condition, "_scores.json")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(scores))
+        return {}
+
+    monkeypatch.setattr(lmo, "_stage_estimate", estimate)
+    monkeypatch.setattr(lmo, "_stage_evaluate", evaluate)
+    monkeypatch.setattr(lmo, "_stage_detection_ap", lambda job: (calls.append("detector ap"), touch(
+        job.out / "results" / "detector_coco.json"))[0] or {})
+    monkeypatch.setattr(lmo, "_overlays", lambda job, condition: [])
+    monkeypatch.setattr("paz6d.backend.tensorflow_guard.import_tensorflow", lambda: None)
+    return _fake_lmo(tmp_path / "lmo"), calls
+
+
+def test_stages_run_in_order_once_and_a_rerun_skips_every_finished_one(mocked, tmp_path):
+    data, calls = mocked
+    job = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False)
+    assert [name for name, _, _ in stages(job)] == [
+        "backgrounds", "synthetic", "detector", "pose/obj_000001", "pose/obj_000005", "estimate_aae_gt",
+        "evaluate_aae_gt", "estimate_aae_detections", "evaluate_aae_detections", "detector_ap_aae"]
+    report = run_benchmark(job)
+    assert calls == ["backgrounds", "synthetic", "detector", "pose 1", "pose 5", "estimate gt", "evaluate gt",
+                     "estimate detections", "evaluate detections", "detector ap"]
+    stored = json.loads((job.out / "report.json").read_text())
+    assert stored == json.loads(json.dumps(report))
+    assert stored["methods"]["aae"]["detections"]["mean_AR_MSSD_AR_MSPD"] == pytest.approx(0.3)
+    assert "| aae | detections | **all** | 4 | 0.200 | 0.400 | **0.300** | 0.100 |" in (job.out / "report.md").read_text()
+    calls.clear()
+    run_benchmark(job)
+    assert calls == []  # everything was complete
+    # a stage whose output went missing runs again, and only that one
+    (job.out / "results" / "aae_gt.csv").unlink()
+    run_benchmark(job)
+    assert calls == ["estimate gt"]
+    # a stage that crashed (no marker) runs again even though a partial output exists
+    calls.clear()
+    job.marker("detector").unlink()
+    run_benchmark(job)
+    assert calls == ["detector"]
+
+
+def test_keypointnet_reuses_the_data_and_detector_and_adds_its_scores_to_the_report(mocked, tmp_path):
+    data, calls = mocked
+    aae = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False)
+    run_benchmark(aae)
+    calls.clear()
+    keypointnet = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, method="keypointnet",
+                            progress=False)
+    assert keypointnet.pose_dir(5) == tmp_path / "bench" / "pose_keypointnet" / "obj_000005"
+    report = run_benchmark(keypointnet)
+    assert calls[:2] == ["pose 1", "pose 5"] and "detector" not in calls
+    assert sorted(report["methods"]) == ["aae", "keypointnet"]
+    assert "| keypointnet | gt_visible_boxes | 5 |" in score_table(report)
+
+
+def test_other_settings_in_the_same_folder_and_bad_input_are_refused(mocked, tmp_path):
+    data, _ = mocked
+    run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
+    with pytest.raises(ValueError, match=r"holds a benchmark with other settings \(settings differ"):
+        run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, progress=False,
+                                settings=replace(TINY, images=7)))
+    with pytest.raises(ValueError, match="lmo: .*models not found"):
+        Benchmark(out=tmp_path / "x", lmo=tmp_path / "none")
+    with pytest.raises(ValueError, match=r"objects: \[9\] have no mesh"):
+        Benchmark(out=tmp_path / "x", lmo=data, objects=(9,))
+    with pytest.raises(ValueError, match="method: expected one of"):
+        Benchmark(out=tmp_path / "x", lmo=data, method="pvnet")
+
+
+def test_quick_and_full_sizes_and_the_generator_settings(tmp_path, shared_data):
+    job = Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo", quick=True)
+    assert job.settings == lmo.QUICK and len(job.objects) == 8
+    config = lmo.generation_config(job)
+    assert config.backgrounds == tmp_path / "b" / "backgrounds" and config.num_images == lmo.QUICK.images
+    assert config.intrinsics == lmo.LMO_INTRINSICS and config.mesh_scale == 0.001 and len(config.meshes) == 8
+    assert Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo").settings == lmo.FULL
+
+
+def test_command_is_registered_and_light(tmp_path):
+    from paz6d.cli import build_parser, main
+
+    args = build_parser().parse_args(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--quick"])
+    assert args.quick and args.method == "aae"
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(tmp_path / "none")]) == 2
+
+
+@pytest.mark.slow
+def test_every_real_stage_runs_on_the_shared_lmo_data_at_toy_size(tmp_path, shared_data):
+    job = Benchmark(out=tmp_path / "bench", lmo=shared_data / "bop_lmo", quick=True, settings=TINY, objects=(5, 8),
+                    progress=False)
+    report = run_benchmark(job)
+    for condition in ("gt_visible_boxes", "detections"):
+        scores = report["methods"]["aae"][condition]
+        assert scores is not None and sorted(scores["per_object"]) == ["5", "8"]
+        assert 0 <= scores["mean_AR_MSSD_AR_MSPD"] <= 1
+    assert (job.out / "detector" / "model.keras").is_file() and (job.pose_dir(5) / "codebook.npz").is_file()
+    assert len(list((job.out / "overlays" / "aae_detections").glob("*.png"))) == 20
+    assert (job.out / "overlays" / "aae_gt.png").is_file() and (job.out / "report.md").is_file()
