@@ -142,6 +142,9 @@ def test_splits_cameras_and_scene_folders():
 def test_malformed_files_name_the_file_the_object_and_the_field(copy):
     frame = copy / "mixed/kitchen_0/000001.left.json"
     samples = fat.load(copy, "mixed")
+    (copy / "mixed/kitchen_0/000001.left.seg.png").unlink()
+    with pytest.raises(ValueError, match=r"000001.left.seg.png: segmentation image not found"):
+        samples[1]
     _edit_json(frame, lambda data: data["objects"][1].pop("quaternion_xyzw"))
     with pytest.raises(ValueError, match=r"000001.left.json, objects\[1\]: missing field 'quaternion_xyzw'"):
         samples[1]
@@ -158,9 +161,6 @@ def test_malformed_files_name_the_file_the_object_and_the_field(copy):
     _edit_json(frame, lambda data: data["objects"][1].update(bounding_box={"top_left": [1, 2]},
                                                               **{"class": "003_cracker_box_16k"}))
     with pytest.raises(ValueError, match=r"objects\[1\] bounding_box: missing field 'bottom_right'"):
-        samples[1]
-    (copy / "mixed/kitchen_0/000001.left.seg.png").unlink()
-    with pytest.raises(ValueError, match=r"000001.left.seg.png: segmentation image not found"):
         samples[1]
     frame.write_text("{not json")
     with pytest.raises(ValueError, match=r"000001.left.json: invalid JSON"):
