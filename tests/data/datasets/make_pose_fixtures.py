@@ -9,6 +9,7 @@ and intrinsics. Output is deterministic (the same content every run; .mat header
 
 from __future__ import annotations
 
+import io
 import json
 import shutil
 from pathlib import Path
@@ -16,6 +17,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import scipy.io
+
+from paz6d.backend.files import write_bytes_atomically, write_text_atomically
 
 HERE = Path(__file__).resolve().parent
 YCB_VIDEO = HERE / "ycb_video"
@@ -105,19 +108,17 @@ def project(K: np.ndarray, points_cam: np.ndarray) -> np.ndarray:
 
 
 def write_png(path: Path, image: np.ndarray) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
     if image.ndim == 3:
         image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
     ok, data = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     assert ok
-    path.write_bytes(data.tobytes())
+    write_bytes_atomically(path, data.tobytes())
 
 
 def write_jpg(path: Path, image: np.ndarray) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
     ok, data = cv2.imencode(".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 90])
     assert ok
-    path.write_bytes(data.tobytes())
+    write_bytes_atomically(path, data.tobytes())
 
 
 def write_box_obj(path: Path, corners: np.ndarray) -> None:
@@ -127,8 +128,7 @@ def write_box_obj(path: Path, corners: np.ndarray) -> None:
     lines = ["# box stand-in for a YCB object (metres)"]
     lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in corners]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
+    write_text_atomically(path, "\n".join(lines) + "\n")
 
 
 def box_surface_points(name: str, per_side: int = 4) -> np.ndarray:
@@ -162,14 +162,14 @@ YCB_FRAMES = {
 
 def make_ycb_video(root: Path = YCB_VIDEO) -> None:
     shutil.rmtree(root, ignore_errors=True)
-    (root / "image_sets").mkdir(parents=True)
-    (root / "image_sets" / "classes.txt").write_text("\n".join(CLASSES) + "\n")
-    (root / "image_sets" / "train.txt").write_text("0048/000001\n0048/000002\n")
-    (root / "image_sets" / "keyframe.txt").write_text("0051/000001\n")
+    write_text_atomically(root / "image_sets" / "classes.txt", "\n".join(CLASSES) + "\n")
+    write_text_atomically(root / "image_sets" / "train.txt", "0048/000001\n0048/000002\n")
+    write_text_atomically(root / "image_sets" / "keyframe.txt", "0051/000001\n")
     for name in OBJECTS:
         write_box_obj(root / "models" / name / "textured.obj", box_corners(name))
         points = box_surface_points(name)
-        (root / "models" / name / "points.xyz").write_text("".join(f"{x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in points))
+        write_text_atomically(root / "models" / name / "points.xyz",
+                              "".join(f"{x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in points))
     width, height = YCB_SIZE
     for frame, instances in YCB_FRAMES.items():
         prefix = root / frame
@@ -185,17 +185,19 @@ def make_ycb_video(root: Path = YCB_VIDEO) -> None:
             poses = poses[:, :, 0]  # as MATLAB saves a one-object frame
         centers = np.stack([project(YCB_K, T[:3, 3][None])[0] for _, T in instances])
         camera = np.hstack([rotation((0, 0, 1), 10.0), [[0.1], [0.2], [0.3]]])
-        scipy.io.savemat(f"{prefix}-meta.mat", {
+        meta = io.BytesIO()
+        scipy.io.savemat(meta, {
             "cls_indexes": np.array([[CLASSES.index(name) + 1] for name, _ in instances], dtype=np.float64),
             "poses": poses, "intrinsic_matrix": YCB_K, "factor_depth": np.array([[10000.0]]), "center": centers,
             "rotation_translation_matrix": camera}, do_compression=True)
+        write_bytes_atomically(f"{prefix}-meta.mat", meta.getvalue())
         if not frame.startswith("data_syn"):
             lines = []
             for name, T in instances:
                 uv = project(YCB_K, box_corners(name) @ T[:3, :3].T + T[:3, 3]) + 0.5  # box convention
                 lines.append(f"{name} {uv[:, 0].min():.2f} {uv[:, 1].min():.2f} {uv[:, 0].max():.2f} "
                              f"{uv[:, 1].max():.2f}")
-            Path(f"{prefix}-box.txt").write_text("\n".join(lines) + "\n")
+            write_text_atomically(f"{prefix}-box.txt", "\n".join(lines) + "\n")
 
 
 # ------------------------------------------------------------------------------------------------- FAT
@@ -270,14 +272,13 @@ def make_fat(root: Path = FAT) -> None:
             exported.append({"class": f"{name}_16k", "segmentation_class_id": FAT_OBJECTS[name]["segmentation_class_id"],
                              "fixed_model_transform": stored, "cuboid_dimensions": dimensions.round(4).tolist()})
         folder = root / scene
-        folder.mkdir(parents=True)
-        (folder / "_object_settings.json").write_text(json.dumps(
+        write_text_atomically(folder / "_object_settings.json", json.dumps(
             {"exported_object_classes": [f"{name}_16k" for name in names], "exported_objects": exported}, indent=1))
         cameras = [{"name": camera, "horizontal_fov": 64,
                     "intrinsic_settings": {"resX": width, "resY": height, "fx": FAT_K[0, 0], "fy": FAT_K[1, 1],
                                            "cx": FAT_K[0, 2], "cy": FAT_K[1, 2], "s": 0},
                     "captured_image_size": {"width": width, "height": height}} for camera in ("left", "right")]
-        (folder / "_camera_settings.json").write_text(json.dumps({"camera_settings": cameras}, indent=1))
+        write_text_atomically(folder / "_camera_settings.json", json.dumps({"camera_settings": cameras}, indent=1))
     for frame, instances in FAT_FRAMES.items():
         for camera, shift in (("left", 0.0), ("right", -BASELINE)):
             posed = []
@@ -296,7 +297,7 @@ def make_fat(root: Path = FAT) -> None:
             write_jpg(Path(f"{prefix}.jpg"), rgb)
             write_png(Path(f"{prefix}.depth.png"), np.rint(depth * 10000).astype(np.uint16))
             write_png(Path(f"{prefix}.seg.png"), seg)
-            Path(f"{prefix}.json").write_text(json.dumps({
+            write_text_atomically(f"{prefix}.json", json.dumps({
                 "camera_data": {"location_worldframe": [-shift * 100.0, 0.0, 0.0],
                                 "quaternion_xyzw_worldframe": [0.0, 0.0, 0.0, 1.0]},
                 "objects": objects}, indent=1))
