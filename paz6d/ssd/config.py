@@ -18,6 +18,8 @@ CONFIGS: dict[str, dict] = {
              "learning_rate": 1e-3, "warmup_steps": 1000, "weight_decay": 5e-4, "expand_ratio": 4.0,
              "expand_probability": 0.5, "iou_threshold": 0.5, "checkpoint_every": 5000, "sample_every": 5000},
 }
+#: Data set formats ``paz6d train ssd --format`` reads (``paz6d.ssd.dataset.FORMATS``, kept here light).
+DATASET_FORMATS = ("auto", "generated", "voc", "coco", "openimages")
 #: Keys of a run's settings that must not change when it is resumed.
 FIXED_SETTINGS = ("architecture", "input_size", "width", "iou_threshold")
 
@@ -26,9 +28,11 @@ FIXED_SETTINGS = ("architecture", "input_size", "width", "iou_threshold")
 class SSDTraining:
     """One ``paz6d train ssd`` run (each field but ``overrides`` is a flag, see :mod:`paz6d.cli_options`)."""
 
-    dataset: Path = option(help="data set folder written by `paz6d generate` (COCO annotations per scene)")
+    dataset: Path = option(help="data set: a `paz6d generate` output, a VOC devkit year folder (or folder of "
+                                "XML files), a COCO folder (or instances JSON file) or an Open Images folder")
     out: Path = option(help="run directory (re-run the command to resume)")
-    split: str | None = option(None, "split folder of the data set (default: train)")
+    split: str | None = option(None, "split of the data set (default: train; VOC: trainval; COCO: the train* file)")
+    format: str = option("auto", "data set format (auto: detected from the folder)", choices=DATASET_FORMATS)
     config: str = option("quick", "network and schedule", choices=tuple(sorted(CONFIGS)))
     seed: int = option(0, "seed of the initialisation and of every batch")
     steps: int | None = option(None, "training steps (default: the config's)")

@@ -1,8 +1,12 @@
-"""Detection training data: the COCO annotations ``paz6d generate`` writes, turned into SSD batches.
+"""Detection training data: a ``paz6d generate`` output or a VOC, COCO or Open Images folder, turned
+into SSD batches.
 
 ``paz6d generate`` writes ``<dataset>/<split>/<scene>/scene_gt_coco.json`` (visible boxes, categories
-named ``obj_XXXXXX``) next to ``rgb/``. :func:`load_detection_set` reads every scene of a split;
-:func:`training_batch` makes one augmented batch as a pure function of ``(seed, step)``.
+named ``obj_XXXXXX``) next to ``rgb/``. VOC devkit (or bare XML) folders, COCO folders (or one
+instances JSON file) and Open Images folders are read through :mod:`paz6d.datasets` (difficult VOC
+boxes, COCO crowd boxes and Open Images group boxes are left out of training). :func:`load_detection_set`
+reads a split of any of them (:func:`detect_format` tells them apart); :func:`training_batch` makes one
+augmented batch as a pure function of ``(seed, step)``.
 """
 
 from __future__ import annotations
@@ -17,10 +21,15 @@ from paz6d.abstract.processor import reseed
 from paz6d.backend import boxes as boxes_backend
 from paz6d.backend.files import load_json
 from paz6d.backend.image import load_image, resize
+from paz6d.datasets import coco, openimages, voc
+from paz6d.datasets.sample import SampleSequence
+from paz6d.ssd.config import DATASET_FORMATS
 from paz6d.ssd.encoding import encode_targets
 from paz6d.synthesis.box_augment import AnnotatedImage
 
 COCO_FILE = "scene_gt_coco.json"
+#: Values of ``--format`` (``auto``: :func:`detect_format`).
+FORMATS = DATASET_FORMATS
 
 
 @dataclass(frozen=True)
@@ -35,7 +44,8 @@ class DetectionSample:
 
 @dataclass(frozen=True)
 class DetectionSet:
-    """A split's samples and its class names (sorted; class id ``i`` is ``class_names[i - 1]``)."""
+    """A split's samples and its class names (class id ``i`` is ``class_names[i - 1]``; sorted for a
+    generated set, the data set's own order for VOC, COCO and Open Images)."""
 
     class_names: tuple[str, ...]
     samples: tuple[DetectionSample, ...]
@@ -55,9 +65,9 @@ def default_split(dataset: Path) -> str:
     return splits[0]
 
 
-def load_detection_set(dataset: str | Path, split: str | None = None,
+def _load_generated(dataset: str | Path, split: str | None = None,
                        class_names: tuple[str, ...] | None = None) -> DetectionSet:
-    """Reads every ``<dataset>/<split>/*/scene_gt_coco.json``.
+    """Reads every ``<dataset>/<split>/*/scene_gt_coco.json`` (a ``paz6d generate`` output).
 
     Args:
         dataset: data set folder (BOP layout, as ``paz6d generate`` writes).
@@ -104,6 +114,118 @@ def load_detection_set(dataset: str | Path, split: str | None = None,
     if not class_names:
         raise ValueError(f"dataset: {dataset / split} has no categories")
     return DetectionSet(tuple(class_names), tuple(samples))
+
+
+def detect_format(dataset: str | Path) -> str:
+    """The format of a data set folder: ``generated`` (``<split>/<scene>/scene_gt_coco.json``), ``voc``
+    (``Annotations/`` or ``*.xml``), ``coco`` (``annotations/instances_*.json``, or a JSON file) or
+    ``openimages`` (``*-annotations-bbox.csv``).
+
+    Raises:
+        ValueError: none of them, naming the folder and what each format needs.
+    """
+    dataset = Path(dataset)
+    if dataset.is_dir() and any(dataset.glob(f"*/*/{COCO_FILE}")):
+        return "generated"
+    if coco.is_coco_root(dataset):
+        return "coco"
+    if dataset.is_dir() and voc.is_voc_root(dataset):
+        return "voc"
+    if openimages.is_openimages_root(dataset):
+        return "openimages"
+    raise ValueError(f"dataset: cannot tell the format of {dataset}: expected a `paz6d generate` output "
+                     f"(<split>/<scene>/{COCO_FILE}), a VOC folder (Annotations/*.xml or *.xml), a COCO folder "
+                     "(annotations/instances_<split>.json) or an Open Images folder (<split>-annotations-bbox.csv); "
+                     "or name it with --format")
+
+
+def _default_split(dataset: Path, dataset_format: str) -> str | None:
+    """``train``-like split of a VOC, COCO or Open Images folder (``None``: the format has no splits)."""
+    if dataset_format == "voc":
+        if not voc.is_devkit_folder(dataset):
+            return None
+        for split in ("trainval", "train"):
+            if (dataset / voc.IMAGE_SETS / f"{split}.txt").is_file():
+                return split
+        return None
+    if dataset_format == "coco":
+        if dataset.is_file():
+            return None
+        splits = sorted(p.stem.removeprefix("instances_") for p in (dataset / "annotations").glob("instances_*.json"))
+        if not splits:
+            raise ValueError(f"dataset: {dataset} has no COCO annotations/instances_<split>.json")
+        training = [split for split in splits if split.startswith("train")]
+        if len(training) == 1 or len(splits) == 1:
+            return (training or splits)[0]
+        raise ValueError(f"dataset: {dataset} has the COCO splits {splits}; name one with --split")
+    for split in ("train", "validation", "test"):
+        if openimages.find_files(dataset, split)["boxes"] is not None:
+            return split
+    return "train"
+
+
+def samples_to_detection_set(samples: SampleSequence, source: str,
+                             class_names: tuple[str, ...] | None = None) -> DetectionSet:
+    """A :class:`DetectionSet` of a loader's samples: images with at least one box of positive size,
+    class ids shifted past the background (1-based).
+
+    Args:
+        samples: from :mod:`paz6d.datasets` (``Sample.image`` a path).
+        source: what the samples come from (for messages).
+        class_names: the classes to use (e.g. a trained model's); default the data set's.
+    """
+    names = tuple(samples.class_names) if class_names is None else tuple(class_names)
+    index = {name: position + 1 for position, name in enumerate(names)}
+    kept = []
+    for sample in samples:
+        unknown = sorted(set(sample.class_names) - set(index))
+        if unknown:
+            raise ValueError(f"{source}: image {sample.image}: unknown class(es) {unknown}; the classes are {list(names)}")
+        boxes = np.asarray(sample.boxes, dtype=np.float64).reshape(-1, 4)
+        ids = np.array([index[name] for name in sample.class_names], dtype=np.int64)
+        keep = np.all(boxes[:, 2:] > boxes[:, :2], axis=1)
+        if np.any(keep):
+            kept.append(DetectionSample(Path(sample.image), boxes[keep], ids[keep]))
+    if not kept:
+        raise ValueError(f"dataset: {source} holds no annotated image (empty data set)")
+    if not names:
+        raise ValueError(f"dataset: {source} has no classes")
+    return DetectionSet(names, tuple(kept))
+
+
+def load_detection_set(dataset: str | Path, split: str | None = None, class_names: tuple[str, ...] | None = None,
+                       dataset_format: str = "auto") -> DetectionSet:
+    """Reads a detection data set of any supported format.
+
+    Args:
+        dataset: a ``paz6d generate`` output, a VOC devkit year folder (or folder of XML files), a COCO
+            folder (or instances JSON file) or an Open Images folder.
+        split: split (generated: ``train`` or the only one; VOC: ``trainval``/``train``; COCO: the
+            ``train*`` instances file; Open Images: ``train``, else ``validation``).
+        class_names: the classes to use (e.g. a trained model's); default: the data set's.
+        dataset_format: one of :data:`FORMATS`.
+    Raises:
+        ValueError: an unknown format, no annotated image (empty data set), a class outside
+            ``class_names``, malformed annotations; messages name the file.
+    """
+    if dataset_format not in FORMATS:
+        raise ValueError(f"format: expected one of {FORMATS}, got {dataset_format!r}")
+    dataset = Path(dataset)
+    if not dataset.exists():
+        raise ValueError(f"dataset: {dataset} does not exist")
+    if dataset_format == "auto":
+        dataset_format = detect_format(dataset)
+    if dataset_format == "generated":
+        return _load_generated(dataset, split, class_names)
+    split = _default_split(dataset, dataset_format) if split is None else split
+    if dataset_format == "voc":
+        samples = voc.load(dataset, split, drop_difficult=True)
+    elif dataset_format == "coco":
+        samples = coco.load(dataset, split, masks=False, include_crowd=False)
+    else:
+        samples = openimages.load(dataset, split or "train", include_group_of=False)
+    where = f"{dataset_format} data set {dataset}" + (f", split {split}" if split else "")
+    return samples_to_detection_set(samples, where, class_names)
 
 
 def prepare_sample(sample: AnnotatedImage, input_size: int, priors: np.ndarray, num_classes: int,

@@ -72,7 +72,9 @@ def _sample_drawer(images: list[np.ndarray], spec, class_names: tuple[str, ...],
             height, width = image.shape[:2]
             pixels = boxes * np.array([width, height, width, height])
             tiles.append(draw_detections(image, ToBoxes2D((BACKGROUND,) + class_names)(pixels, scores, ids), class_names))
-        save_image(path, image_grid(tiles, columns=2))
+        size = (tiles[0].shape[1], tiles[0].shape[0])  # data sets on disk mix image sizes: tile at the first's
+        save_image(path, image_grid([tile if tile.shape[:2] == size[::-1] else resize(tile, size) for tile in tiles],
+                                    columns=2))
 
     return draw
 
@@ -91,7 +93,7 @@ def train_ssd(job: SSDTraining) -> dict:
 
     settings = job.settings()
     started = time.perf_counter()
-    data = load_detection_set(job.dataset, job.split)
+    data = load_detection_set(job.dataset, job.split, dataset_format=job.format)
     job.out.mkdir(parents=True, exist_ok=True)
     _prepare_run_dir(job, settings, data.class_names)
     keras.utils.set_random_seed(job.seed)
