@@ -6,6 +6,7 @@ Fixture: ``tests/data/datasets/ycb_video`` (``make_pose_fixtures.py``: boxes ray
 import shutil
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import scipy.io
@@ -163,3 +164,32 @@ def test_malformed_box_files_name_the_line(copy):
     (copy / "image_sets/train.txt").write_text("0048/000001\n0048\n")
     with pytest.raises(ValueError, match=r"train.txt, line 2: expected <video>/<frame>"):
         ycb_video.load(copy, "train")
+
+
+def test_the_fixture_generator_reproduces_the_committed_fixtures(tmp_path):
+    """``make_pose_fixtures.py`` regenerates both fixtures (text files byte for byte, images pixel for
+    pixel, ``.mat`` files array for array: their headers carry the creation time)."""
+    import importlib.util
+
+    path = ROOT.parent / "make_pose_fixtures.py"
+    spec = importlib.util.spec_from_file_location("make_pose_fixtures", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.make_ycb_video(tmp_path / "ycb_video")
+    module.make_fat(tmp_path / "fat")
+    for name in ("ycb_video", "fat"):
+        committed = sorted(p.relative_to(ROOT.parent / name) for p in (ROOT.parent / name).rglob("*") if p.is_file())
+        made = sorted(p.relative_to(tmp_path / name) for p in (tmp_path / name).rglob("*") if p.is_file())
+        assert made == committed
+        for relative in committed:
+            new, old = tmp_path / name / relative, ROOT.parent / name / relative
+            if relative.suffix == ".mat":
+                new_meta, old_meta = scipy.io.loadmat(str(new)), scipy.io.loadmat(str(old))
+                for key in (key for key in old_meta if not key.startswith("__")):
+                    np.testing.assert_array_equal(new_meta[key], old_meta[key])
+            elif relative.suffix in (".png", ".jpg"):  # pixels, not bytes: encoders differ between builds
+                decoded = [cv2.imdecode(np.fromfile(p, np.uint8), cv2.IMREAD_UNCHANGED).astype(int) for p in (new, old)]
+                tolerance = 3 if relative.suffix == ".jpg" else 0
+                assert np.abs(decoded[0] - decoded[1]).max() <= tolerance, relative
+            else:
+                assert new.read_bytes() == old.read_bytes(), relative
