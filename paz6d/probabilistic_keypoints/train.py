@@ -29,6 +29,8 @@ import numpy as np
 from evaluation.calibration import ellipse_coverage, mahalanobis_squared, plot_calibration
 from evaluation.pose_errors import add_error, rotation_error_deg, translation_error
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
+from paz6d.keypointnet.config import resolve_precision
+from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
 from paz6d.probabilistic_keypoints import run_dir as run_files
 from paz6d.probabilistic_keypoints.config import (FIXED_SETTINGS, RANSAC_THRESHOLD, ROBUST_SCALE, SUPERVISED_WEIGHTS,
                                                   ProbabilisticTraining)
@@ -259,8 +261,6 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
 
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
-    from paz6d.keypointnet.config import resolve_precision
-    from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
     from paz6d.keypointnet.views import ViewSampling, render_test_images, render_views, training_batch
     from paz6d.probabilistic_keypoints import model as pk
     from paz6d.training.trainer import Trainer
