@@ -15,11 +15,13 @@ from paz6d.detect_and_estimate import DetectAndEstimatePose6D
 from paz6d.faces.emotion import DetectEmotion, EmotionClassifier
 from paz6d.faces.haar import HaarCascadeDetector, available_cascades
 from paz6d.faces.head_pose import HeadPose6D, draw_axes, yaw_pitch_roll_degrees
+from paz6d.hrnet.pipeline import HRNetKeypoints2D, HRNetPose6D
 from paz6d.keypointnet.pipeline import KeypointPose6D
 from paz6d.probabilistic_keypoints.pipeline import ProbabilisticKeypointPose6D
 from paz6d.ssd.pipeline import DetectSingleShot
 from paz6d.stn.pipeline import ClassifyDigit
 
-__all__ = ["DetectAndEstimatePose6D", "DetectEmotion", "DetectSingleShot", "EmotionClassifier", "HaarCascadeDetector", "HeadPose6D", "ImplicitPose6D",
+__all__ = ["DetectAndEstimatePose6D", "DetectEmotion", "DetectSingleShot", "EmotionClassifier", "HaarCascadeDetector", "HeadPose6D", "HRNetKeypoints2D", "HRNetPose6D",
+           "ImplicitPose6D",
            "KeypointPose6D", "available_cascades", "draw_axes", "yaw_pitch_roll_degrees"]
 __all__ += ["ClassifyDigit", "ProbabilisticKeypointPose6D"]
