@@ -125,13 +125,15 @@ def _command_configs() -> dict[tuple[str, ...], list[tuple[type, tuple[str, ...]
     """Each command's config dataclasses and the fields that are not flags."""
     from data_gen.config import GenerationConfig, GenerationRun
     from paz6d.aae.config import AAETraining
+    from paz6d.benchmark.command import LmoOptions
     from paz6d.demo.command import DemoOptions
     from paz6d.faces.emotion_config import EmotionTraining
     from paz6d.keypointnet.config import KeypointTraining
 
     return {("generate",): [(GenerationConfig, ()), (GenerationRun, ())], ("train", "aae"): [(AAETraining, ())],
             ("train", "keypointnet"): [(KeypointTraining, ("overrides",))],
-            ("train", "emotion"): [(EmotionTraining, ())], ("demo",): [(DemoOptions, ())]}
+            ("train", "emotion"): [(EmotionTraining, ())], ("demo",): [(DemoOptions, ())],
+            ("benchmark", "lmo"): [(LmoOptions, ())]}
 
 
 def _subparser(path: tuple[str, ...]) -> argparse.ArgumentParser:
@@ -172,7 +174,8 @@ def test_parsed_defaults_build_the_default_config(path, tmp_path):
     required = {("generate",): ["--meshes", "a.ply", "--out", "o", "--num-images", "3"],
                 ("train", "aae"): ["--mesh", "a.ply", "--out", "o"],
                 ("train", "keypointnet"): ["--mesh", "a.ply", "--out", "o"],
-                ("train", "emotion"): ["--data", "d.csv", "--out", "o"], ("demo",): []}[path]
+                ("train", "emotion"): ["--data", "d.csv", "--out", "o"], ("demo",): [],
+                ("benchmark", "lmo"): ["--out", "o"]}[path]
     args = _subparser(path).parse_args(required)
     for config_class, exclude in _command_configs()[path]:
         config = config_from_args(config_class, args, exclude)
