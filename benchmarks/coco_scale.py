@@ -11,7 +11,8 @@ folder. Each side runs as its own process, start to finish, as a user would run 
 
 Both report their 12 summary numbers, which must be identical. Best of ``--repeats`` alternating
 runs; wall and CPU seconds (user + system of the child) are printed, the CPU ones being the steadier
-on a shared machine. Run: ``.venv/bin/python benchmarks/coco_scale.py [--copies 50] [--repeats 3]``.
+on a shared machine. Run: ``.venv/bin/python benchmarks/coco_scale.py [--copies 50] [--repeats 3]
+[--iou-types bbox segm]``.
 """
 
 from __future__ import annotations
@@ -75,6 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--coco-dir", type=Path, default=SHARED_COCO, help="the coco folder of the shared data")
     parser.add_argument("--copies", type=int, default=50, help="replicas of the 100-image sample")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each side (best time is kept)")
+    parser.add_argument("--iou-types", nargs="+", choices=tuple(RESULTS), default=list(RESULTS),
+                        help="which jobs to time")
     args = parser.parse_args(argv)
     if not (args.coco_dir / GROUND_TRUTH).is_file():
         parser.error(f"--coco-dir: {args.coco_dir / GROUND_TRUTH} not found")
@@ -87,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{'iou type':<9s} {'pycocotools wall/cpu [s]':>25s} {'paz6d wall/cpu [s]':>20s} "
               f"{'speed-up wall/cpu':>18s} {'stats identical':>16s}")
         failed = False
-        for iou_type, result_path in results.items():
+        for iou_type in args.iou_types:
+            result_path = results[iou_type]
             out = folder / f"{iou_type}_paz6d.json"
             ours_command = [*paz6d_command(), "evaluate", "coco", "--gt", str(truth), "--results", str(result_path),
                             "--iou-type", iou_type, "--out", str(out)]

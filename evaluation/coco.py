@@ -20,6 +20,8 @@ size differs from the image raise ``ValueError`` instead of getting IoU ``-1``.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -432,13 +434,28 @@ def _segment_reverse_cummax(values: np.ndarray, first: np.ndarray, last: np.ndar
     return result
 
 
+def _recall_thresholds_reached(recall: np.ndarray) -> np.ndarray:
+    """Number of ``RECALL_THRESHOLDS`` at or below each recall (``searchsorted(..., side="right")``).
+
+    The thresholds are ``k * 0.01``, so ``floor(100 * r)`` is right to within one; the two
+    comparisons around it settle the count exactly, without a binary search per value.
+    """
+    last = len(RECALL_THRESHOLDS) - 1
+    guess = np.clip((recall * last).astype(np.int64), 0, last)
+    reached = guess + (RECALL_THRESHOLDS[guess] <= recall)
+    reached += (guess < last) & (RECALL_THRESHOLDS[np.minimum(guess + 1, last)] <= recall)
+    reached -= (guess > 0) & (RECALL_THRESHOLDS[np.maximum(guess - 1, 0)] > recall)
+    return reached
+
+
 def _accumulate(det_category: np.ndarray, det_score: np.ndarray, det_image: np.ndarray, det_rank: np.ndarray,
                 matched: np.ndarray, ignored: np.ndarray, positives: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """COCOeval.accumulate for all thresholds, categories, area ranges and max-detection limits at once.
+    """COCOeval.accumulate for all thresholds, categories, area ranges and max-detection limits.
 
     The detections of every (max-detection limit, category) pair form one segment of columns,
-    ordered like COCOeval (score, then image, then rank in the image); every (threshold, area
-    range) is one row. Cumulative TP/FP counts restart at each segment.
+    ordered like COCOeval (score, then image, then rank in the image); every area range is one row,
+    and one IoU threshold is done at a time (small temporaries). Cumulative TP/FP counts restart
+    at each segment.
 
     Args:
         det_category, det_score, det_image, det_rank: (D,) per detection.
@@ -461,34 +478,29 @@ def _accumulate(det_category: np.ndarray, det_score: np.ndarray, det_image: np.n
         segments, first = np.unique(segment_of_column, return_index=True)
         segment = np.searchsorted(segments, segment_of_column)  # dense segment number per column
         last = np.append(first[1:], len(columns)) - 1
-        rows = n_thresholds * n_areas
-        counted = ~ignored[:, :, columns].reshape(rows, -1)
-        hits = matched[:, :, columns].reshape(rows, -1)
-        zero = np.zeros((rows, 1), dtype=np.int64)
-        tp = np.cumsum(hits & counted, axis=1)
-        fp = np.cumsum(~hits & counted, axis=1)
-        tp = (tp - np.concatenate([zero, tp], axis=1)[:, first][:, segment]).astype(np.float64)
-        fp = (fp - np.concatenate([zero, fp], axis=1)[:, first][:, segment]).astype(np.float64)
-        area_of_row = np.tile(np.arange(n_areas), n_thresholds)
-        n_positive = positives[det_category[columns]][:, area_of_row].T  # (rows, N)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rc = tp / n_positive
-        pr = tp / (fp + tp + np.spacing(1))
-        recall.reshape(rows, -1)[:, segments] = rc[:, last]
-        pr = _segment_reverse_cummax(pr, first, last)
-        # recall threshold r takes the precision at the first column whose recall reaches it:
-        # column i serves thresholds reached[i - 1] .. reached[i] - 1 of its segment
-        reached = np.searchsorted(RECALL_THRESHOLDS, np.where(np.isfinite(rc), rc, 0.0), side="right")
-        before = np.concatenate([zero, reached[:, :-1]], axis=1)
-        before[:, first] = 0
-        served = (reached - before).ravel()
-        threshold_of_row, area_of_row = np.divmod(np.arange(rows), n_areas)
+        n_positive = positives[det_category[columns]].T  # (A, N)
+        zero = np.zeros((n_areas, 1), dtype=np.int64)
         limit, category = np.divmod(segments[segment], n_categories)
-        base = (threshold_of_row[:, None] * (n_recall * n_categories * n_areas * n_limits)
-                + (category * (n_areas * n_limits) + limit)[None, :] + (area_of_row * n_limits)[:, None])
-        recall_index = coco_masks.concatenated_ranges(before.ravel(), served)
-        target = np.repeat(base.ravel(), served) + recall_index * (n_categories * n_areas * n_limits)
-        precision.reshape(-1)[target] = np.repeat(pr.ravel(), served)
+        base = (category * (n_areas * n_limits) + limit)[None, :] + (np.arange(n_areas) * n_limits)[:, None]
+        for t in range(n_thresholds):
+            counted = ~ignored[t][:, columns]
+            tp = np.cumsum(matched[t][:, columns] & counted, axis=1)
+            fp = np.cumsum(counted, axis=1) - tp
+            tp = (tp - np.concatenate([zero, tp], axis=1)[:, first][:, segment]).astype(np.float64)
+            fp = (fp - np.concatenate([zero, fp], axis=1)[:, first][:, segment]).astype(np.float64)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rc = tp / n_positive
+            pr = _segment_reverse_cummax(tp / (fp + tp + np.spacing(1)), first, last)
+            recall[t][:, segments] = rc[:, last]
+            # recall threshold r takes the precision at the first column whose recall reaches it:
+            # column i serves thresholds reached[i - 1] .. reached[i] - 1 of its segment
+            reached = _recall_thresholds_reached(np.where(np.isfinite(rc), rc, 0.0))
+            before = np.concatenate([zero, reached[:, :-1]], axis=1)
+            before[:, first] = 0
+            served = (reached - before).ravel()
+            recall_index = coco_masks.concatenated_ranges(before.ravel(), served)
+            target = np.repeat(base.ravel(), served) + recall_index * (n_categories * n_areas * n_limits)
+            precision[t].reshape(-1)[target] = np.repeat(pr.ravel(), served)
     recall = recall.reshape(n_thresholds, n_areas, n_limits, n_categories).transpose(0, 3, 1, 2).copy()
     undefined = positives == 0  # (K, A)
     precision[:, :, undefined, :] = -1
@@ -626,8 +638,23 @@ def evaluate(ground_truth: CocoGroundTruth, detections: CocoDetections, iou_type
                           category_names=ground_truth.category_names)
 
 
+@contextlib.contextmanager
+def _cyclic_collector_paused():
+    """Pauses Python's cyclic garbage collector: a large COCO file parses into millions of acyclic
+    objects (freed by reference counting alone), and the collector's passes over them cost about
+    as much as the parsing itself (25 MB of ground truth: 0.55 s with it, 0.28 s without)."""
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
+
+
 def evaluate_files(ground_truth_path: str | Path, results_path: str | Path, iou_type: str = "bbox") -> CocoEvaluation:
     """Loads a COCO ground-truth file and a results file and evaluates them (see :func:`evaluate`)."""
-    ground_truth = CocoGroundTruth.from_file(ground_truth_path)
-    detections = CocoDetections.from_file(results_path, ground_truth)
-    return evaluate(ground_truth, detections, iou_type)
+    with _cyclic_collector_paused():
+        ground_truth = CocoGroundTruth.from_file(ground_truth_path)
+        detections = CocoDetections.from_file(results_path, ground_truth)
+        return evaluate(ground_truth, detections, iou_type)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Sequence
 
 import numpy as np
@@ -59,8 +60,7 @@ class MaskIntervals:
 
     def areas(self) -> np.ndarray:
         """(N,) int64 foreground pixel counts."""
-        lengths = np.concatenate([[0], np.cumsum(self.ends - self.starts)])
-        return lengths[self.offsets[1:]] - lengths[self.offsets[:-1]]
+        return self._areas_and_boxes[0]
 
     def boxes(self) -> np.ndarray:
         """(N, 4) float64 tight boxes ``[x, y, w, h]`` (pixels), zeros for empty masks.
@@ -68,25 +68,13 @@ class MaskIntervals:
         Equals pycocotools ``toBbox``: a run that wraps from one column into the next spans the
         full image height.
         """
-        boxes = np.zeros((len(self), 4))
-        if len(self.starts) == 0:
-            return boxes
-        owner = self.owners()
-        height = self.heights[owner]
-        last = self.ends - 1
-        x_first, y_first = np.divmod(self.starts, height)
-        x_last, y_last = np.divmod(last, height)
-        wraps = x_last > x_first
-        y_first = np.where(wraps, 0, y_first)
-        y_last = np.where(wraps, height - 1, y_last)
-        present = np.diff(self.offsets) > 0
-        firsts = self.offsets[:-1][present]
-        x_min = np.minimum.reduceat(x_first, firsts)
-        x_max = np.maximum.reduceat(x_last, firsts)
-        y_min = np.minimum.reduceat(y_first, firsts)
-        y_max = np.maximum.reduceat(y_last, firsts)
-        boxes[present] = np.stack([x_min, y_min, x_max - x_min + 1, y_max - y_min + 1], axis=1)
-        return boxes
+        return self._areas_and_boxes[1]
+
+    @cached_property
+    def _areas_and_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        from evaluation import coco_kernels  # here: numba loads only when masks are measured
+
+        return coco_kernels.areas_and_boxes(self.heights, self.starts, self.ends, self.offsets)
 
 
 def concatenated_ranges(firsts: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -96,11 +84,6 @@ def concatenated_ranges(firsts: np.ndarray, counts: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=np.int64)
     segment_starts = np.cumsum(counts) - counts
     return np.repeat(firsts - segment_starts, counts) + np.arange(total, dtype=np.int64)
-
-
-def _segment_ids(counts: np.ndarray) -> np.ndarray:
-    """(sum(counts),) index of the segment each element belongs to."""
-    return np.repeat(np.arange(len(counts), dtype=np.int64), counts)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -138,27 +121,60 @@ def _decode_counts_flat(strings: Sequence[str | bytes], source: str,
     Returns:
         (total,) int64 run lengths and (N,) number of runs per string.
     """
-    def where(char_index: int) -> str:
-        string = int(np.searchsorted(string_ends, char_index, side="right"))
-        return f"{source}[{string if labels is None else labels[string]}]"
-
-    try:
-        encoded = [s.encode("ascii") if isinstance(s, str) else bytes(s) for s in strings]
-    except UnicodeEncodeError as error:
-        raise ValueError(f"{source}: compressed RLE counts must be ASCII strings") from error
-    string_ends = np.cumsum(np.array([len(s) for s in encoded], dtype=np.int64))
     from evaluation import coco_kernels  # here: numba loads only when masks are decoded
 
-    chars = np.frombuffer(b"".join(encoded), dtype=np.uint8)
+    chars, string_ends = _characters(strings, source)
     counts, per_string, error, at = coco_kernels.decode_rle_strings(chars, string_ends, _CHAR_OFFSET,
                                                                     _MAX_CHARS_PER_COUNT)
+    if error:
+        raise ValueError(_string_error_message(error, at, string_ends, source, labels))
+    return counts, per_string
+
+
+def _string_runs(strings: Sequence[str | bytes], heights: np.ndarray, widths: np.ndarray, source: str,
+                 labels: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Foreground runs ``(starts, ends, runs per string)`` of compressed RLE strings, decoded straight
+    into runs; ``ValueError`` as :func:`_decode_counts_flat`, or naming the first string whose run
+    lengths do not sum to ``height * width``."""
+    from evaluation import coco_kernels  # here: numba loads only when masks are decoded
+
+    chars, string_ends = _characters(strings, source)
+    starts, ends, runs, error, at, total = coco_kernels.rle_string_runs(
+        chars, string_ends, _CHAR_OFFSET, _MAX_CHARS_PER_COUNT, heights * widths)
+    if error == coco_kernels.WRONG_SUM:
+        raise ValueError(f"{source}[{labels[at]}]: RLE run lengths sum to {total}, expected height*width = "
+                         f"{heights[at] * widths[at]} ({heights[at]}x{widths[at]})")
+    if error:
+        raise ValueError(_string_error_message(error, at, string_ends, source, labels))
+    return starts, ends, runs
+
+
+def _characters(strings: Sequence[str | bytes], source: str) -> tuple[np.ndarray, np.ndarray]:
+    """The strings' characters laid end to end (uint8) and where each string ends (exclusive)."""
+    try:
+        if all(type(s) is str for s in strings):
+            text = "".join(strings).encode("ascii")
+            lengths = np.fromiter(map(len, strings), dtype=np.int64, count=len(strings))
+        else:
+            encoded = [s.encode("ascii") if isinstance(s, str) else bytes(s) for s in strings]
+            text = b"".join(encoded)
+            lengths = np.array([len(s) for s in encoded], dtype=np.int64)
+    except UnicodeEncodeError as error:
+        raise ValueError(f"{source}: compressed RLE counts must be ASCII strings") from error
+    return np.frombuffer(text, dtype=np.uint8), np.cumsum(lengths)
+
+
+def _string_error_message(error: int, char_index: int, string_ends: np.ndarray, source: str,
+                          labels: Sequence[int] | None) -> str:
+    """Message for an error of :func:`evaluation.coco_kernels.decode_rle_strings` at ``char_index``."""
+    from evaluation import coco_kernels
+
     messages = {coco_kernels.BAD_CHARACTER: "compressed RLE counts must use characters '0'..'o'",
                 coco_kernels.TRUNCATED: "compressed RLE string ends inside a value (truncated counts)",
                 coco_kernels.TOO_LONG: f"compressed RLE value longer than {_MAX_CHARS_PER_COUNT} characters",
                 coco_kernels.NEGATIVE: "compressed RLE decodes to negative run lengths"}
-    if error:
-        raise ValueError(f"{where(at)}: {messages[error]}")
-    return counts, per_string
+    string = int(np.searchsorted(string_ends, char_index, side="right"))
+    return f"{source}[{string if labels is None else labels[string]}]: {messages[error]}"
 
 
 def encode_counts_string(counts: np.ndarray) -> str:
@@ -199,39 +215,35 @@ def intervals_from_counts(counts_list: Sequence[np.ndarray], heights: np.ndarray
     Raises:
         ValueError: if the run lengths of a mask do not sum to ``height * width``.
     """
-    sizes = np.array([len(c) for c in counts_list], dtype=np.int64)
-    flat = np.concatenate(counts_list).astype(np.int64) if len(counts_list) else np.zeros(0, np.int64)
-    return _intervals_from_flat_counts(flat, sizes, heights, widths, source, labels)
-
-
-def _intervals_from_flat_counts(flat: np.ndarray, sizes: np.ndarray, heights, widths, source: str,
-                                labels: Sequence[int] | None) -> MaskIntervals:
-    """:func:`intervals_from_counts` for run lengths laid end to end, ``sizes[i]`` runs per mask."""
     heights = np.asarray(heights, dtype=np.int64)
     widths = np.asarray(widths, dtype=np.int64)
-    running = np.cumsum(flat)
-    mask_end = np.cumsum(sizes)
-    total_before = np.concatenate([[0], running])[mask_end - sizes]
-    totals = np.concatenate([[0], running])[mask_end] - total_before
-    bad = np.flatnonzero(totals != heights * widths)
-    if len(bad):
-        i = int(bad[0])
-        label = i if labels is None else labels[i]
-        raise ValueError(f"{source}[{label}]: RLE run lengths sum to {totals[i]}, expected height*width = "
-                         f"{heights[i] * widths[i]} ({heights[i]}x{widths[i]})")
-    owner = _segment_ids(sizes)
-    local = np.arange(len(flat)) - (mask_end - sizes)[owner]
-    foreground = np.flatnonzero((local % 2 == 1) & (flat > 0))  # odd runs are foreground
-    owner = owner[foreground]
-    ends = running[foreground] - total_before[owner]
-    return _pack(heights, widths, ends - flat[foreground], ends, owner)
+    sizes = np.array([len(c) for c in counts_list], dtype=np.int64)
+    flat = np.concatenate(counts_list).astype(np.int64) if len(counts_list) else np.zeros(0, np.int64)
+    starts, ends, runs = _runs_from_flat_counts(flat, sizes, heights, widths, source, labels)
+    return _pack(heights, widths, starts, ends, runs)
+
+
+def _runs_from_flat_counts(flat: np.ndarray, sizes: np.ndarray, heights: np.ndarray, widths: np.ndarray,
+                           source: str, labels: Sequence[int] | None) -> tuple[np.ndarray, ...]:
+    """Foreground runs ``(starts, ends, runs per mask)`` of run lengths laid end to end, ``sizes[i]``
+    per mask; ``ValueError`` naming the first mask whose lengths do not sum to ``height * width``."""
+    from evaluation import coco_kernels  # here: numba loads only when masks are decoded
+
+    starts, ends, runs, bad, total = coco_kernels.runs_from_counts(flat, sizes, heights * widths)
+    if bad >= 0:
+        label = bad if labels is None else labels[bad]
+        raise ValueError(f"{source}[{label}]: RLE run lengths sum to {total}, expected height*width = "
+                         f"{heights[bad] * widths[bad]} ({heights[bad]}x{widths[bad]})")
+    return starts, ends, runs
 
 
 def _pack(heights: np.ndarray, widths: np.ndarray, starts: np.ndarray, ends: np.ndarray,
-          owner: np.ndarray) -> MaskIntervals:
-    """Wraps runs (already grouped by ascending ``owner``) into a :class:`MaskIntervals`."""
-    offsets = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=len(heights)))]).astype(np.int64)
-    return MaskIntervals(heights, widths, starts.astype(np.int64), ends.astype(np.int64), offsets)
+          runs_per_mask: np.ndarray) -> MaskIntervals:
+    """Wraps runs (mask by mask, ``runs_per_mask[i]`` each) into a :class:`MaskIntervals`."""
+    offsets = np.zeros(len(heights) + 1, dtype=np.int64)
+    np.cumsum(runs_per_mask, out=offsets[1:])
+    return MaskIntervals(heights, widths, starts.astype(np.int64, copy=False), ends.astype(np.int64, copy=False),
+                         offsets)
 
 
 def counts_from_intervals(masks: MaskIntervals, index: int) -> np.ndarray:
@@ -265,7 +277,7 @@ def intervals_from_mask(mask: np.ndarray) -> MaskIntervals:
     flat = np.ascontiguousarray(mask.astype(bool).T).ravel()
     change = np.flatnonzero(np.diff(np.concatenate([[False], flat, [False]]).astype(np.int8)))
     starts, ends = change[0::2], change[1::2]
-    return _pack(np.array([height]), np.array([width]), starts, ends, np.zeros(len(starts), dtype=np.int64))
+    return _pack(np.array([height]), np.array([width]), starts, ends, np.array([len(starts)]))
 
 
 def mask_from_intervals(masks: MaskIntervals, index: int) -> np.ndarray:
@@ -292,50 +304,8 @@ def decode_rle(rle: dict) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------------------------
-# Polygons
+# Segmentations of any kind: RLE dicts and polygons
 # ----------------------------------------------------------------------------------------------
-
-def _parts_to_intervals(coordinates: np.ndarray, vertex_counts: np.ndarray, heights: np.ndarray,
-                        widths: np.ndarray, part_owner: np.ndarray, n_masks: int) -> tuple:
-    """Rasterizes polygon parts (:func:`evaluation.coco_kernels.polygon_runs`, rleFrPoly's walk) and
-    unites the parts of each mask.
-
-    Returns:
-        (starts, ends, owner) runs sorted by owner then position.
-    """
-    if len(vertex_counts) == 0:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, empty, empty
-    from evaluation import coco_kernels  # here: numba loads only when polygons are rasterized
-
-    # rleFrPoly's grid: C casts double -> int by truncation toward zero, as numpy's astype does
-    scaled = (POLYGON_SCALE * coordinates + 0.5).astype(np.int64)
-    part, starts, ends = coco_kernels.polygon_runs(
-        np.ascontiguousarray(scaled[:, 0]), np.ascontiguousarray(scaled[:, 1]), np.asarray(vertex_counts, np.int64),
-        np.asarray(heights, np.int64), np.asarray(widths, np.int64))
-    owner = part_owner[part]  # parts are listed mask by mask, so runs stay grouped by owner
-    shared = (np.bincount(part_owner, minlength=n_masks) > 1)[owner]
-    if not np.any(shared):
-        return starts, ends, owner
-    # union of the parts of multi-part masks: sweep +1/-1 events per mask
-    mask_stride = int((heights * widths).max()) + 2  # above every position, end included
-    event_keys = np.concatenate([starts[shared], ends[shared]]) + np.tile(owner[shared], 2) * mask_stride
-    event_delta = np.repeat(np.array([1, -1], dtype=np.int64), np.count_nonzero(shared))
-    order = np.argsort(event_keys, kind="stable")
-    event_keys, event_delta = event_keys[order], event_delta[order]
-    distinct = np.concatenate([[True], event_keys[1:] != event_keys[:-1]])
-    positions = event_keys[distinct]
-    coverage = np.cumsum(np.add.reduceat(event_delta, np.flatnonzero(distinct)))
-    previous = np.concatenate([[0], coverage[:-1]])
-    union_starts = positions[(previous == 0) & (coverage > 0)]
-    union_ends = positions[(previous > 0) & (coverage == 0)]
-    union_owner = union_starts // mask_stride
-    starts = np.concatenate([starts[~shared], union_starts - union_owner * mask_stride])
-    ends = np.concatenate([ends[~shared], union_ends - union_owner * mask_stride])
-    owner = np.concatenate([owner[~shared], union_owner])
-    order = np.argsort(owner, kind="stable")
-    return starts[order], ends[order], owner[order]
-
 
 def segmentations_to_intervals(segmentations: Sequence, heights: Sequence, widths: Sequence,
                                source: str = "segmentation") -> MaskIntervals:
@@ -354,148 +324,219 @@ def segmentations_to_intervals(segmentations: Sequence, heights: Sequence, width
         ValueError: naming ``source`` and the entry index for malformed input.
     """
     n = len(segmentations)
+    is_rle = np.array([isinstance(s, dict) for s in segmentations], dtype=bool)
+    groups = [np.flatnonzero(is_rle), np.flatnonzero(~is_rle)]
+    rle_rows, polygon_rows = groups
+    # every entry's structure is checked before anything is decoded, so the first bad entry is named
+    rle = _rle_fields([segmentations[i] for i in rle_rows.tolist()], rle_rows, heights, widths)
+    polygons = _polygon_fields([segmentations[i] for i in polygon_rows.tolist()], polygon_rows, heights, widths,
+                               source)
+    if rle is None or polygons is None:
+        _raise_first_entry_error(segmentations, heights, widths, source)
     out_heights = np.zeros(n, dtype=np.int64)
     out_widths = np.zeros(n, dtype=np.int64)
-    rle_index, rle_strings, rle_lists = [], [], []
-    poly_coords, poly_vertices, poly_owner = [], [], []
-    for i, segmentation in enumerate(segmentations):
-        height, width = heights[i], widths[i]
-        if isinstance(segmentation, dict):
-            size = segmentation.get("size")
-            counts = segmentation.get("counts")
-            if (not isinstance(size, (list, tuple)) or len(size) != 2 or counts is None
-                    or not all(isinstance(s, int) and s > 0 for s in size)):
-                raise ValueError(f"{source}[{i}]: expected an RLE dict with 'size': [H, W] (positive "
-                                 "integers) and 'counts' (string or list of integers)")
-            if height is not None and (size[0] != height or size[1] != width):
-                raise ValueError(f"{source}[{i}]: RLE size {list(size)} differs from the image size "
-                                 f"[{height}, {width}]")
-            out_heights[i], out_widths[i] = size
-            rle_index.append(i)
-            if isinstance(counts, (str, bytes)):
-                rle_strings.append((len(rle_index) - 1, counts))
-            elif isinstance(counts, list):
-                rle_lists.append((len(rle_index) - 1, counts))
-            else:
-                raise ValueError(f"{source}[{i}]: RLE 'counts' must be a string or a list of integers")
-            continue
-        if not isinstance(segmentation, list) or height is None:
-            raise ValueError(f"{source}[{i}]: expected a polygon list [[x0, y0, x1, y1, ...], ...] or an RLE "
-                             "dict with 'size' and 'counts'")
-        out_heights[i], out_widths[i] = height, width
-        parts = segmentation
-        if parts and not all(isinstance(p, list) for p in parts):
-            raise ValueError(f"{source}[{i}]: polygon parts must be lists of numbers [x0, y0, x1, y1, ...]")
-        if parts and len(parts[0]) == 4:
-            if not all(len(p) == 4 for p in parts):
-                raise ValueError(f"{source}[{i}]: first polygon part has 4 numbers (read as a box "
-                                 "[x, y, w, h]), so every part must be a box")
-            parts = [[x, y, x, y + h, x + w, y + h, x + w, y] for x, y, w, h in parts]
-        elif parts and len(parts[0]) < 4:
-            raise ValueError(f"{source}[{i}]: polygon needs at least 3 points (6 numbers), got "
-                             f"{len(parts[0])} numbers")
-        for part in parts:
-            vertices = len(part) // 2
-            if vertices == 0:
-                continue
-            poly_coords.append(part[:2 * vertices])
-            poly_vertices.append(vertices)
-            poly_owner.append(i)
     pieces = []
-    if poly_vertices:
-        flat = np.array(list(itertools.chain.from_iterable(poly_coords)), dtype=np.float64)
-        if not np.all(np.isfinite(flat)):
-            raise ValueError(f"{source}: polygon coordinates must be finite numbers")
-        owner = np.array(poly_owner, dtype=np.int64)
-        pieces.append(_parts_to_intervals(flat.reshape(-1, 2), np.array(poly_vertices, dtype=np.int64),
-                                          out_heights[owner], out_widths[owner], owner, n))
-    if rle_index:
-        counts_list: list = [None] * len(rle_index)
-        if rle_strings:
-            decoded, sizes = _decode_counts_flat([s for _, s in rle_strings], source,
-                                                 [rle_index[slot] for slot, _ in rle_strings])
-            if not rle_lists:  # common case: every RLE compressed, keep the flat layout
-                counts_list = []
-            else:
-                for (slot, _), counts in zip(rle_strings, np.split(decoded, np.cumsum(sizes)[:-1])):
-                    counts_list[slot] = counts
-        for slot, counts in rle_lists:
+    if len(rle_rows):
+        out_heights[rle_rows], out_widths[rle_rows] = rle[0][:, 0], rle[0][:, 1]
+        pieces += _rle_runs(rle[1], rle_rows, out_heights[rle_rows], out_widths[rle_rows], source)
+    if len(polygon_rows):
+        out_heights[polygon_rows], out_widths[polygon_rows] = polygons[0], polygons[1]
+        pieces.append((polygon_rows, *_polygon_runs(*polygons, source)))
+    return _gather(out_heights, out_widths, pieces)
+
+
+def _gather(heights: np.ndarray, widths: np.ndarray, pieces: list) -> MaskIntervals:
+    """Joins runs made for groups of entries, ``(rows, starts, ends, runs per row)`` each, in entry order."""
+    if len(pieces) == 1 and len(pieces[0][0]) == len(heights):  # one kind only: already in entry order
+        return _pack(heights, widths, *pieces[0][1:])
+    from evaluation import coco_kernels  # here: numba loads only when masks are decoded
+
+    runs_per_mask = np.zeros(len(heights), dtype=np.int64)
+    for rows, _, _, runs in pieces:
+        runs_per_mask[rows] = runs
+    total = int(runs_per_mask.sum())
+    masks = _pack(heights, widths, np.empty(total, np.int64), np.empty(total, np.int64), runs_per_mask)
+    for rows, starts, ends, runs in pieces:
+        coco_kernels.place_runs(rows, starts, ends, runs, masks.offsets, masks.starts, masks.ends)
+    return masks
+
+
+def _given_sizes(rows: np.ndarray, heights: Sequence, widths: Sequence) -> np.ndarray:
+    """(k, 2) image sizes of ``rows``, -1 where not given."""
+    sizes = np.array([[-1 if heights[i] is None else heights[i], -1 if widths[i] is None else widths[i]]
+                      for i in rows.tolist()], dtype=np.int64).reshape(-1, 2)
+    return sizes
+
+
+def _rle_fields(entries: list, rows: np.ndarray, heights: Sequence, widths: Sequence) -> tuple | None:
+    """``(sizes (k, 2), counts values)`` of RLE dicts, or ``None`` when one is malformed (sizes not
+    two positive integers, sizes differing from the given image size, counts neither a string nor a list)."""
+    if not entries:
+        return np.zeros((0, 2), dtype=np.int64), []
+    try:
+        sizes = np.array([entry["size"] for entry in entries], dtype=object).reshape(len(entries), -1)
+        counts = [entry["counts"] for entry in entries]
+        if sizes.shape[1] != 2 or not all(type(value) is int for value in sizes.ravel().tolist()):
+            return None
+        sizes = sizes.astype(np.int64)
+    except (KeyError, TypeError, ValueError, OverflowError):
+        return None
+    given = _given_sizes(rows, heights, widths)
+    if np.any(sizes <= 0) or np.any((given >= 0) & (given != sizes)):
+        return None
+    if not all(isinstance(value, (str, bytes, list)) for value in counts):
+        return None
+    return sizes, counts
+
+
+def _rle_runs(counts: list, rows: np.ndarray, heights: np.ndarray, widths: np.ndarray, source: str) -> list:
+    """Runs of RLE entries: one piece ``(rows, starts, ends, runs per row)`` for the compressed
+    strings and one for the uncompressed lists."""
+    pieces = []
+    is_string = np.array([not isinstance(value, list) for value in counts], dtype=bool)
+    strings = np.flatnonzero(is_string)
+    if len(strings):
+        pieces.append((rows[strings], *_string_runs([counts[k] for k in strings.tolist()], heights[strings],
+                                                    widths[strings], source, rows[strings].tolist())))
+    lists = np.flatnonzero(~is_string)
+    if len(lists):
+        arrays = []
+        for k in lists.tolist():
             try:
-                array = np.asarray(counts, dtype=np.int64)
-            except (TypeError, ValueError) as error:
-                raise ValueError(f"{source}[{rle_index[slot]}]: RLE 'counts' list must hold integers") from error
+                array = np.asarray(counts[k], dtype=np.int64)
+            except (TypeError, ValueError, OverflowError) as error:
+                raise ValueError(f"{source}[{rows[k]}]: RLE 'counts' list must hold integers") from error
             if array.ndim != 1 or np.any(array < 0):
-                raise ValueError(f"{source}[{rle_index[slot]}]: RLE 'counts' must be non-negative integers")
-            counts_list[slot] = array
-        index = np.array(rle_index, dtype=np.int64)
-        if counts_list:
-            rle = intervals_from_counts(counts_list, out_heights[index], out_widths[index], source, index)
-        else:
-            rle = _intervals_from_flat_counts(decoded, sizes, out_heights[index], out_widths[index], source, index)
-        pieces.append((rle.starts, rle.ends, index[rle.owners()]))
-    if not pieces:
-        empty = np.zeros(0, dtype=np.int64)
-        return _pack(out_heights, out_widths, empty, empty, empty)
-    starts = np.concatenate([p[0] for p in pieces])
-    ends = np.concatenate([p[1] for p in pieces])
-    owner = np.concatenate([p[2] for p in pieces])
-    order = np.argsort(owner, kind="stable")
-    return _pack(out_heights, out_widths, starts[order], ends[order], owner[order])
+                raise ValueError(f"{source}[{rows[k]}]: RLE 'counts' must be non-negative integers")
+            arrays.append(array)
+        sizes = np.array([len(a) for a in arrays], dtype=np.int64)
+        pieces.append((rows[lists], *_runs_from_flat_counts(np.concatenate(arrays), sizes, heights[lists],
+                                                            widths[lists], source, rows[lists].tolist())))
+    return pieces
+
+
+def _polygon_fields(entries: list, rows: np.ndarray, heights: Sequence, widths: Sequence,
+                    source: str) -> tuple | None:
+    """``(heights, widths, parts, parts per entry)`` of polygon entries with boxes turned into
+    4-vertex polygons and empty parts dropped, or ``None`` when one is malformed (not a list of lists,
+    no image size, a first part of fewer than 4 numbers, boxes mixed with polygons)."""
+    if not all(type(entry) is list for entry in entries):
+        return None
+    sizes = _given_sizes(rows, heights, widths)
+    if np.any(sizes < 0):
+        return None
+    parts = [part for entry in entries for part in entry]
+    if not all(type(part) is list for part in parts):
+        return None
+    parts_per_entry = np.array([len(entry) for entry in entries], dtype=np.int64)
+    lengths = np.array([len(part) for part in parts], dtype=np.int64)
+    first_lengths = lengths[np.cumsum(parts_per_entry)[parts_per_entry > 0] - parts_per_entry[parts_per_entry > 0]]
+    if np.any(first_lengths < 4):
+        return None
+    if np.any(first_lengths == 4):
+        parts, parts_per_entry = _boxes_as_polygons(entries, source)
+        if parts is None:
+            return None
+        lengths = np.array([len(part) for part in parts], dtype=np.int64)
+    empty = lengths < 2
+    if np.any(empty):
+        parts = [part for part, drop in zip(parts, empty.tolist()) if not drop]
+        parts_per_entry -= np.bincount(np.repeat(np.arange(len(entries)), parts_per_entry)[empty],
+                                       minlength=len(entries))
+    return np.ascontiguousarray(sizes[:, 0]), np.ascontiguousarray(sizes[:, 1]), parts, parts_per_entry
+
+
+def _boxes_as_polygons(entries: list, source: str) -> tuple:
+    """Parts with each box entry (first part of 4 numbers ``[x, y, w, h]``) turned into rectangles, as
+    pycocotools reads them; ``(None, None)`` when a box entry holds a part that is not a box."""
+    parts, parts_per_entry = [], []
+    for entry in entries:
+        if entry and len(entry[0]) == 4:
+            if not all(len(part) == 4 for part in entry):
+                return None, None
+            try:
+                entry = [[x, y, x, y + h, x + w, y + h, x + w, y] for x, y, w, h in entry]
+            except TypeError:
+                raise ValueError(f"{source}: polygon coordinates must be finite numbers") from None
+        parts += entry
+        parts_per_entry.append(len(entry))
+    return parts, np.array(parts_per_entry, dtype=np.int64)
+
+
+def _polygon_runs(heights: np.ndarray, widths: np.ndarray, parts: list, parts_per_entry: np.ndarray,
+                  source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Foreground runs ``(starts, ends, runs per entry)`` of polygon entries, rasterized as pycocotools
+    does (:func:`evaluation.coco_kernels.polygon_masks`)."""
+    vertex_counts = np.array([len(part) // 2 for part in parts], dtype=np.int64)
+    if np.any(vertex_counts * 2 != [len(part) for part in parts]):  # an odd last number is ignored
+        parts = [part[:2 * count] for part, count in zip(parts, vertex_counts.tolist())]
+    try:
+        flat = np.fromiter(itertools.chain.from_iterable(parts), dtype=np.float64, count=2 * int(vertex_counts.sum()))
+    except (TypeError, ValueError):
+        flat = None
+    if flat is None or not np.all(np.isfinite(flat)):
+        raise ValueError(f"{source}: polygon coordinates must be finite numbers")
+    from evaluation import coco_kernels  # here: numba loads only when polygons are rasterized
+
+    # rleFrPoly's grid: C casts double -> int by truncation toward zero, as numpy's astype does
+    scaled = (POLYGON_SCALE * flat + 0.5).astype(np.int64)
+    return coco_kernels.polygon_masks(np.ascontiguousarray(scaled[0::2]), np.ascontiguousarray(scaled[1::2]),
+                                      vertex_counts, parts_per_entry, heights, widths)
+
+
+def _entry_error(index: int, segmentation, height, width, source: str) -> str | None:
+    """Message for the structural problem of one segmentation, ``None`` if it has none."""
+    where = f"{source}[{index}]"
+    if isinstance(segmentation, dict):
+        size, counts = segmentation.get("size"), segmentation.get("counts")
+        if (not isinstance(size, (list, tuple)) or len(size) != 2 or counts is None
+                or not all(type(s) is int and s > 0 for s in size)):
+            return (f"{where}: expected an RLE dict with 'size': [H, W] (positive integers) and 'counts' "
+                    "(string or list of integers)")
+        if height is not None and (size[0] != height or size[1] != width):
+            return f"{where}: RLE size {list(size)} differs from the image size [{height}, {width}]"
+        if not isinstance(counts, (str, bytes, list)):
+            return f"{where}: RLE 'counts' must be a string or a list of integers"
+        return None
+    if not isinstance(segmentation, list) or height is None:
+        return (f"{where}: expected a polygon list [[x0, y0, x1, y1, ...], ...] or an RLE dict with 'size' "
+                "and 'counts'")
+    if segmentation and not all(isinstance(p, list) for p in segmentation):
+        return f"{where}: polygon parts must be lists of numbers [x0, y0, x1, y1, ...]"
+    if segmentation and len(segmentation[0]) == 4 and not all(len(p) == 4 for p in segmentation):
+        return (f"{where}: first polygon part has 4 numbers (read as a box [x, y, w, h]), so every part "
+                "must be a box")
+    if segmentation and len(segmentation[0]) < 4:
+        return f"{where}: polygon needs at least 3 points (6 numbers), got {len(segmentation[0])} numbers"
+    return None
+
+
+def _raise_first_entry_error(segmentations: Sequence, heights: Sequence, widths: Sequence, source: str):
+    """Raises ``ValueError`` for the first malformed segmentation."""
+    for i, segmentation in enumerate(segmentations):
+        message = _entry_error(i, segmentation, heights[i], widths[i], source)
+        if message:
+            raise ValueError(message)
+    raise ValueError(f"{source}: malformed segmentations (expected polygon lists or RLE dicts with 'size' "
+                     "and 'counts')")
 
 
 # ----------------------------------------------------------------------------------------------
 # IoU
 # ----------------------------------------------------------------------------------------------
 
-def _intersections_query(base: MaskIntervals, query: MaskIntervals, base_index: np.ndarray,
-                         query_index: np.ndarray) -> np.ndarray:
-    """Pixels shared by ``base[base_index[p]]`` and ``query[query_index[p]]`` for every pair ``p``.
-
-    Walks the runs of the query mask and measures each run with the cumulative foreground count
-    of the base mask (a searchsorted into all base runs laid end to end).
-    """
-    base_area = base.heights * base.widths
-    key_offsets = np.concatenate([[0], np.cumsum(base_area + 1)[:-1]]).astype(np.int64)
-    base_owner = base.owners()
-    keyed_starts = base.starts + key_offsets[base_owner]
-    keyed_ends = base.ends + key_offsets[base_owner]
-    below = np.concatenate([[0], np.cumsum(base.ends - base.starts)])  # foreground before run i
-    run_counts = query.offsets[query_index + 1] - query.offsets[query_index]
-    runs = concatenated_ranges(query.offsets[query_index], run_counts)
-    pair_of_run = _segment_ids(run_counts)
-    shift = key_offsets[base_index][pair_of_run]
-
-    def foreground_before(points: np.ndarray) -> np.ndarray:
-        run = np.searchsorted(keyed_starts, points, side="right") - 1
-        safe = np.maximum(run, 0)
-        partial = np.minimum(points, keyed_ends[safe]) - keyed_starts[safe]
-        return np.where(run >= 0, below[safe] + partial, 0)
-
-    covered = foreground_before(query.ends[runs] + shift) - foreground_before(query.starts[runs] + shift)
-    return np.bincount(pair_of_run, weights=covered, minlength=len(base_index)).astype(np.int64)
-
-
 def pair_intersections(first: MaskIntervals, second: MaskIntervals, first_index: np.ndarray,
                        second_index: np.ndarray) -> np.ndarray:
     """(P,) int64 pixel counts of ``first[first_index[p]] & second[second_index[p]]``.
 
-    Masks of a pair must have the same size. Each pair walks the mask with fewer runs.
+    Masks of a pair must have the same size; each pair is one merge walk over both run lists
+    (:func:`evaluation.coco_kernels.pair_intersections`).
     """
-    first_index = np.asarray(first_index, dtype=np.int64)
-    second_index = np.asarray(second_index, dtype=np.int64)
-    result = np.zeros(len(first_index), dtype=np.int64)
-    if len(first_index) == 0:
-        return result
-    first_runs = np.diff(first.offsets)[first_index]
-    second_runs = np.diff(second.offsets)[second_index]
-    walk_second = second_runs <= first_runs
-    if np.any(walk_second):
-        result[walk_second] = _intersections_query(first, second, first_index[walk_second],
-                                                   second_index[walk_second])
-    if np.any(~walk_second):
-        result[~walk_second] = _intersections_query(second, first, second_index[~walk_second],
-                                                    first_index[~walk_second])
-    return result
+    from evaluation import coco_kernels  # here: numba loads only when masks are compared
+
+    return coco_kernels.pair_intersections(first.starts, first.ends, first.offsets, second.starts, second.ends,
+                                           second.offsets, np.asarray(first_index, dtype=np.int64),
+                                           np.asarray(second_index, dtype=np.int64))
 
 
 def iou_from_intersections(intersection: np.ndarray, detection_area: np.ndarray, truth_area: np.ndarray,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import gc
 import io
 import json
 
@@ -336,3 +337,27 @@ def test_cli_registers_and_dispatches_bop_when_its_module_exists(monkeypatch):
     cli.configure(parser)
     with pytest.raises(SystemExit):  # no bop subcommand without evaluation.bop_cli
         parser.parse_args(["bop", "--results-csv", "r.csv"])
+
+
+def test_recall_thresholds_reached_equals_searchsorted():
+    rng = np.random.default_rng(31)
+    thresholds = coco.RECALL_THRESHOLDS
+    recalls = np.concatenate([rng.integers(0, 400, 20000) / rng.integers(1, 400, 20000), thresholds,
+                              np.nextafter(thresholds, 2.0), np.nextafter(thresholds, -1.0), np.arange(301) / 300,
+                              [5.0]])
+    recalls = recalls[(recalls >= 0) & np.isfinite(recalls)]
+    np.testing.assert_array_equal(coco._recall_thresholds_reached(recalls),
+                                  np.searchsorted(thresholds, recalls, side="right"))
+
+
+def test_evaluate_files_restores_the_garbage_collector(shared_data):
+    folder = shared_data / "coco"
+    assert gc.isenabled()
+    coco.evaluate_files(folder / "instances_val2014_100.json", folder / RESULT_FILES["bbox"], "bbox")
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        coco.evaluate_files(folder / "instances_val2014_100.json", folder / RESULT_FILES["bbox"], "bbox")
+        assert not gc.isenabled()
+    finally:
+        gc.enable()

@@ -74,6 +74,51 @@ def test_polygon_rasterization_matches_pycocotools_pixel_for_pixel():
         np.testing.assert_array_equal(masks.boxes()[0], mask_utils.toBbox(expected))
 
 
+def test_long_and_steep_polygon_edges_match_pycocotools_in_one_batch():
+    """Edges far longer than a pixel (the kernel jumps between column centres instead of walking
+    every grid step), steep and shallow, partly outside the image, many masks in one call."""
+    rng = np.random.default_rng(12)
+    entries, sizes = [], []
+    for _ in range(150):
+        height, width = (int(v) for v in rng.integers(1, 700, 2))
+        parts = []
+        for _ in range(rng.integers(1, 4)):
+            points = rng.uniform(-0.2, 1.2, (int(rng.integers(3, 9)), 2)) * [width, height]
+            if rng.random() < 0.3:
+                points[:, 0] = points[0, 0] + (points[:, 0] - points[0, 0]) * 0.02  # nearly vertical edges
+            if rng.random() < 0.3:
+                points = np.round(points * 5) / 5 + rng.choice([0.0, 0.1, -0.1])  # on the 5x grid
+            parts.append(points.ravel().tolist())
+        entries.append(parts)
+        sizes.append((height, width))
+    masks = coco_masks.segmentations_to_intervals(entries, [h for h, _ in sizes], [w for _, w in sizes])
+    for index, (parts, (height, width)) in enumerate(zip(entries, sizes)):
+        expected = mask_utils.merge(mask_utils.frPyObjects(parts, height, width))
+        np.testing.assert_array_equal(coco_masks.mask_from_intervals(masks, index), mask_utils.decode(expected) > 0)
+        assert masks.areas()[index] == mask_utils.area(expected)
+        np.testing.assert_array_equal(masks.boxes()[index], mask_utils.toBbox(expected))
+
+
+def test_mixed_segmentation_kinds_keep_entry_order():
+    rng = np.random.default_rng(13)
+    entries, singles = [], []
+    for _ in range(60):
+        kind = rng.integers(0, 3)
+        mask = random_mask(rng, 21, 17)
+        if kind == 0:
+            entry = reference_rle(mask)
+        elif kind == 1:
+            entry = {"size": [21, 17], "counts": coco_masks.decode_counts_strings([reference_rle(mask)["counts"]])[0]
+                     .tolist()}
+        else:
+            entry = random_polygon_parts(rng, 21, 17)
+        entries.append(entry)
+        singles.append(coco_masks.mask_from_intervals(coco_masks.segmentations_to_intervals([entry], [21], [17]), 0))
+    masks = coco_masks.segmentations_to_intervals(entries, [21] * 60, [17] * 60)
+    for index, expected in enumerate(singles):
+        np.testing.assert_array_equal(coco_masks.mask_from_intervals(masks, index), expected)
+
+
 def test_four_number_polygons_are_boxes_like_pycocotools():
     rng = np.random.default_rng(3)
     for _ in range(50):
@@ -119,6 +164,22 @@ def test_bad_rle_and_polygons_raise_value_errors():
         coco_masks.segmentations_to_intervals([{"size": [4, 4], "counts": "a b"}], [None], [None], "gt")
     with pytest.raises(ValueError, match=r"gt\[0\]: RLE run lengths sum to 3"):
         coco_masks.segmentations_to_intervals([{"size": [4, 4], "counts": [1, 2]}], [None], [None], "gt")
+    with pytest.raises(ValueError, match=r"gt\[1\]: RLE run lengths sum to 3, expected height\*width = 4 \(2x2\)"):
+        coco_masks.segmentations_to_intervals([{"size": [2, 2], "counts": "04"}, {"size": [2, 2], "counts": "12"}],
+                                              [None, None], [None, None], "gt")
+    with pytest.raises(ValueError, match=r"gt\[2\]: compressed RLE decodes to negative"):  # before any sum
+        coco_masks.segmentations_to_intervals([{"size": [2, 2], "counts": "12"}, {"size": [2, 2], "counts": "04"},
+                                               {"size": [2, 2], "counts": "0O"}], [None] * 3, [None] * 3, "gt")
+    with pytest.raises(ValueError, match=r"gt\[1\]: RLE size \[2, 2\] differs from the image size \[3, 3\]"):
+        coco_masks.segmentations_to_intervals([[[0, 0, 1, 0, 1, 1]], {"size": [2, 2], "counts": "04"}], [3, 3],
+                                              [3, 3], "gt")
+    with pytest.raises(ValueError, match=r"gt\[1\]: expected an RLE dict with 'size'"):
+        coco_masks.segmentations_to_intervals([{"size": [2, 2], "counts": "04"}, {"size": [True, 2], "counts": "04"}],
+                                              [None] * 2, [None] * 2, "gt")
+    with pytest.raises(ValueError, match="polygon coordinates must be finite numbers"):
+        coco_masks.segmentations_to_intervals([[[0, 0, 1, None, 1, 1]]], [3], [3], "gt")
+    with pytest.raises(ValueError, match="polygon coordinates must be finite numbers"):
+        coco_masks.segmentations_to_intervals([[[0, 0, "a", 1]]], [3], [3], "gt")
     with pytest.raises(ValueError, match="truncated"):
         coco_masks.decode_counts_strings(["0P"], "gt")
     with pytest.raises(ValueError, match="at least 3 points"):
