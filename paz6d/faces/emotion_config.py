@@ -10,14 +10,21 @@ from paz6d.cli_options import option
 
 #: Largest side of the network's square input (pixels); FER-2013 faces are 48.
 MAX_INPUT_SIZE = 512
+#: FERPlus label modes (``paz6d.datasets.ferplus.LABEL_MODES``, kept here light).
+LABEL_MODES = ("majority", "probability")
 
 
 @dataclass(frozen=True)
 class EmotionTraining:
     """One ``paz6d train emotion`` run (each field is a flag, see :mod:`paz6d.cli_options`)."""
 
-    data: Path = option(help="FER-2013 CSV file or image folder DIR/<class>/*")
+    data: Path = option(help="FER-2013 CSV file (or the folder holding fer2013.csv) or image folder DIR/<class>/*")
     out: Path = option(help="run folder (created; an existing run resumes)")
+    ferplus: Path | None = option(None, "FERPlus votes (fer2013new.csv) for the rows of the --data CSV: trains "
+                                        "on the 8 FERPlus classes")
+    label_mode: str = option("majority", "FERPlus targets: majority (one label; ties, unknown and not-a-face "
+                                         "dropped) or probability (vote distributions, soft labels)",
+                             choices=LABEL_MODES)
     epochs: int = option(30, "passes over the training set")
     batch_size: int = option(32, "faces per step")
     learning_rate: float = option(1e-3, "Adam learning rate")
@@ -44,5 +51,7 @@ class EmotionTraining:
             raise ValueError(f"input_size: expected at most {MAX_INPUT_SIZE} pixels, got {self.input_size}")
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"val_fraction: expected a fraction in (0, 1), got {self.val_fraction}")
+        if self.label_mode not in LABEL_MODES:
+            raise ValueError(f"label_mode: expected one of {LABEL_MODES}, got {self.label_mode!r}")
         if self.seed < 0:
             raise ValueError(f"seed: expected a non-negative integer, got {self.seed}")

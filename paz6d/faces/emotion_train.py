@@ -7,6 +7,11 @@ Data (``--data``):
 * a FER-2013 CSV (``emotion,pixels,Usage``): ``Training`` rows train, ``PublicTest`` rows validate
   (``PrivateTest`` is left for testing); without ``PublicTest`` rows a ``--val-fraction`` of the
   training rows is held out;
+  (a folder holding ``fer2013.csv`` is read the same way);
+* a FER-2013 CSV with ``--ferplus fer2013new.csv``: the FERPlus votes of its rows (eight classes,
+  :mod:`paz6d.datasets.ferplus`) with ``--label-mode majority`` (one label per face) or
+  ``probability`` (the vote distribution is the soft target of the cross-entropy); ``Training``
+  rows train, ``PublicTest`` rows validate (scored against the most voted emotion);
 * a folder ``DIR/<class>/<image>``: a seeded ``--val-fraction`` per class is held out; or
   ``DIR/train/<class>/...`` with ``DIR/test/<class>/...`` used for validation.
 
@@ -29,7 +34,8 @@ from paz6d.abstract import SequentialProcessor
 from paz6d.abstract.processor import random_processors
 from paz6d.backend.files import (save_figure_atomically, save_keras_model_atomically, write_json_atomically,
                                  write_text_atomically)
-from paz6d.datasets.fer2013 import FER2013_CLASSES, load_fer2013_csv, load_image_folder
+from paz6d.datasets import ferplus as ferplus_data
+from paz6d.datasets.fer2013 import CSV_FILE, FER2013_CLASSES, load_fer2013_csv, load_image_folder
 from paz6d.faces.emotion_config import EmotionTraining
 from paz6d.processors.image import ConvertColorSpace
 from paz6d.synthesis.augment import RandomAffine, RandomBrightness, RandomContrast, RandomFlipLeftRight
@@ -50,15 +56,54 @@ def _split_per_class(labels: np.ndarray, fraction: float, seed: int) -> np.ndarr
     return validation
 
 
-def load_emotion_data(path, val_fraction: float = 0.1, seed: int = 0) -> dict:
-    """Loads training and validation faces from a FER-2013 CSV or image folder (see module doc).
+def _hard_labels(labels: np.ndarray) -> np.ndarray:
+    """Class index per face: ``labels`` itself, or the arg-max of ``(N, C)`` soft targets."""
+    return labels.argmax(axis=1) if labels.ndim == 2 else labels
 
+
+def _ferplus_data(path: Path, votes: Path, label_mode: str, val_fraction: float, seed: int) -> tuple:
+    """``(train, validation, class_names)`` of FERPlus votes on the FER-2013 CSV ``path``."""
+    samples = ferplus_data.load(votes, None, fer2013_csv=path, label_mode=label_mode)
+    if len(samples) == 0:
+        raise ValueError(f"ferplus: {votes} keeps no face in label mode {label_mode!r}")
+    faces = np.stack([sample.image for sample in samples])
+    targets = np.stack([sample.extras["target"] for sample in samples])
+    labels = targets if label_mode == "probability" else targets.argmax(axis=1)
+    usage = np.array([sample.extras["usage"] for sample in samples])
+    training, validation = usage == "Training", usage == "PublicTest"
+    if not training.any():
+        raise ValueError(f"ferplus: {votes} keeps no face with Usage 'Training'")
+    if not validation.any():
+        index = np.flatnonzero(training)
+        held_out = index[_split_per_class(_hard_labels(labels[training]), val_fraction, seed)]
+        validation[held_out], training[held_out] = True, False
+    return (faces[training], labels[training]), (faces[validation], labels[validation]), ferplus_data.FERPLUS_CLASSES
+
+
+def load_emotion_data(path, val_fraction: float = 0.1, seed: int = 0, ferplus: str | Path | None = None,
+                      label_mode: str = "majority") -> dict:
+    """Loads training and validation faces from a FER-2013 CSV (with optional FERPlus votes) or an
+    image folder (see module doc).
+
+    Args:
+        path: FER-2013 CSV, folder holding ``fer2013.csv``, or image folder.
+        val_fraction, seed: the held-out share when the data has no validation split.
+        ferplus: FERPlus ``fer2013new.csv`` for the rows of the CSV.
+        label_mode: FERPlus ``"majority"`` or ``"probability"``.
     Returns:
-        dict with ``train`` and ``validation`` ``(faces (N, H, W) uint8, labels (N,) int64)`` and
-        ``class_names``.
+        dict with ``train`` and ``validation`` ``(faces (N, H, W) uint8, labels)`` where labels are
+        ``(N,) int64`` class indices, or ``(N, C) float64`` vote distributions in FERPlus
+        ``probability`` mode; and ``class_names``.
     """
     path = Path(path)
-    if path.is_file():
+    if path.is_dir() and (path / CSV_FILE).is_file():
+        path = path / CSV_FILE
+    if ferplus is not None:
+        if not path.is_file():
+            raise ValueError(f"data: {path} is not a FER-2013 CSV file; --ferplus votes need the fer2013.csv "
+                             "their rows refer to")
+        train, valid, class_names = _ferplus_data(path, Path(ferplus), label_mode, val_fraction, seed)
+    elif path.is_file():
         faces, labels, usage = load_fer2013_csv(path)
         class_names = FER2013_CLASSES
         training = usage == "Training"
@@ -109,7 +154,8 @@ def resize_faces(faces: np.ndarray, size: int) -> np.ndarray:
 
 
 class BatchSampler:
-    """``sampler(step) -> (inputs (B, S, S, 1) float32, one-hot targets (B, C) float32)``, deterministic in ``step``.
+    """``sampler(step) -> (inputs (B, S, S, 1) float32, targets (B, C) float32)``, deterministic in ``step``;
+    targets are one-hot for ``(N,)`` class labels, or the rows of ``(N, C)`` soft labels.
 
     Each epoch visits the training faces in a seeded permutation; each sample's augmentation is
     reseeded from ``(seed, step, position)`` so a resumed run sees the same batches.
@@ -140,7 +186,10 @@ class BatchSampler:
                     processor.reseed(child)
                 augmented.append(self.augmentation(face))
             faces = np.stack(augmented)
-        targets = np.eye(self.num_classes, dtype=np.float32)[self.labels[index]]
+        if self.labels.ndim == 2:  # soft targets (FERPlus vote distributions)
+            targets = self.labels[index].astype(np.float32)
+        else:
+            targets = np.eye(self.num_classes, dtype=np.float32)[self.labels[index]]
         return preprocess_faces(faces), targets
 
 
@@ -210,7 +259,7 @@ def _append_validation_row(run_dir: Path, step: int, accuracy: float) -> None:
 def train_emotion(job: EmotionTraining) -> dict:
     """Trains (or resumes) ``job`` and writes ``model.keras``, ``classes.json``, ``metrics.json`` and
     ``confusion_matrix.png`` into ``job.out``; returns the metrics."""
-    data = load_emotion_data(job.data, job.val_fraction, job.seed)  # before TensorFlow: bad data fails fast
+    data = load_emotion_data(job.data, job.val_fraction, job.seed, job.ferplus, job.label_mode)  # before TF: fails fast
     from paz6d.backend.tensorflow_guard import import_keras
     from paz6d.faces.xception import mini_xception, preprocess_faces
     from paz6d.training.trainer import Trainer
@@ -221,7 +270,7 @@ def train_emotion(job: EmotionTraining) -> dict:
     train_faces = resize_faces(data["train"][0], job.input_size)
     validation_faces = resize_faces(data["validation"][0], job.input_size)
     validation_inputs = preprocess_faces(validation_faces)
-    validation_labels = data["validation"][1]
+    validation_labels = _hard_labels(data["validation"][1])
     sampler = BatchSampler(train_faces, data["train"][1], len(class_names), job.batch_size,
                            build_augmentation(job.seed) if job.augment else None, job.seed)
     model = mini_xception((job.input_size, job.input_size, 1), len(class_names))
