@@ -383,6 +383,7 @@ TRAIN_AAE = ("train", "aae", "--out", "{out}", "--mesh", "{world}/obj_000001.ply
 TRAIN_AAE_DATASET = ("train", "aae", "--out", "{out}", "--dataset", "{case}/bop", "--split", "test", "--no-progress")
 TRAIN_KEYPOINTNET = ("train", "keypointnet", "--out", "{out}", "--mesh", "{world}/obj_000001.ply", "--no-progress")
 TRAIN_EMOTION = ("train", "emotion", "--data", "{world}/fer.csv", "--out", "{out}", "--no-progress")
+TRAIN_SSD = ("train", "ssd", "--dataset", "{case}/data", "--out", "{out}", "--no-progress")
 DEMO = ("demo", "--out", "{out}")
 
 
@@ -976,12 +977,52 @@ def train_cases() -> list[Case]:
     for name, (content, expect) in fer.items():
         found.append(Case(f"train-emotion-data-{name}", replace_flag(TRAIN_EMOTION, "--data", "{case}/fer.csv"),
                           case_file("fer.csv", content), (expect,)))
+    found += dataset_format_cases()
     found += _flag_cases("demo-", DEMO, {
         "--out": [(("{world}/results.csv",), "results.csv"), (("/dev/null",), "/dev/null")],
         "--test-images": [(("0",), ""), (("-2",), "")],
         "--steps": [(("0",), "")],
         "--workers": [(("-1",), "")],
     })
+    return found
+
+
+def dataset_format_cases() -> list[Case]:
+    """Malformed VOC, COCO and Open Images folders for ``paz6d train ssd`` and FERPlus votes for
+    ``paz6d train emotion``: the message names the file (and the field)."""
+    box = "<bndbox><xmin>1</xmin><ymin>1</ymin><xmax>{}</xmax><ymax>4</ymax></bndbox>"
+    coco_file = {"images": [{"id": 1, "file_name": "a.jpg", "width": 8, "height": 6}],
+                 "categories": [{"id": 1, "name": "thing"}],
+                 "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [0, 0, 2, "x"]}]}
+    header = "ImageID,Source,LabelName,Confidence,XMin,XMax,YMin,YMax,IsOccluded,IsTruncated,IsGroupOf,IsDepiction,IsInside"
+    ssd = {
+        "no-format": ({"data/readme.txt": "nothing here"}, ("cannot tell the format",)),
+        "voc-bad-xml": ({"data/a.xml": "<annotation><object>"}, ("a.xml", "malformed XML")),
+        "voc-bad-number": ({"data/a.xml": f"<annotation><object><name>dog</name>{box.format('x')}</object></annotation>"},
+                           ("a.xml", "<xmax>")),
+        "voc-unknown-class": ({"data/a.xml": f"<annotation><object><name>dragon</name>{box.format(4)}</object></annotation>"},
+                              ("a.xml", "dragon")),
+        "coco-bad-bbox": ({"data/annotations/instances_train2017.json": coco_file}, ("instances_train2017.json", "'bbox'")),
+        "openimages-unknown-label": ({"data/train-annotations-bbox.csv": f"{header}\nab,x,/m/0zz,1,0,1,0,1,0,0,0,0,0\n",
+                                      "data/class-descriptions-boxable.csv": "/m/01yrx,Cat\n"},
+                                     ("train-annotations-bbox.csv", "LabelName")),
+    }
+    found = []
+    for name, (files, expect) in ssd.items():
+        def setup(world: World, folder: Path, files=files) -> None:
+            for relative, content in files.items():
+                put(folder / relative, content)
+
+        found.append(Case(f"train-ssd-{name}", TRAIN_SSD, setup, expect))
+    votes_header = "Usage,Image name,neutral,happiness,surprise,sadness,anger,disgust,fear,contempt,unknown,NF\n"
+    ferplus = {
+        "bad-vote": (votes_header + "Training,a.png,1,2,x,0,0,0,0,0,0,0\n", ("votes.csv", "surprise")),
+        "row-count": (votes_header + "Training,a.png,10,0,0,0,0,0,0,0,0,0\n", ("votes.csv", "vote rows")),
+        "not-csv": (NOT_UTF8, ("votes.csv",)),
+    }
+    for name, (content, expect) in ferplus.items():
+        found.append(Case(f"train-emotion-ferplus-{name}", TRAIN_EMOTION + ("--ferplus", "{case}/votes.csv"),
+                          case_file("votes.csv", content), expect))
     return found
 
 
