@@ -173,3 +173,44 @@ def test_corrupt_run_directories_are_reported_by_file(tiny_run, tmp_path):
         run_files.read_config(tiny_run)
     with pytest.raises(ValueError, match="covariance_scale"):
         run_files.write_keypoints(tiny_run, np.zeros((5, 3)), float("nan"))
+
+
+def test_command_line_errors_name_the_flag(tmp_path, capsys):
+    from paz6d import cli
+
+    assert cli.main(["train", "probabilistic-keypoints", "--mesh", "m.ply", "--out", str(tmp_path / "run"),
+                     "--mesh-scale", "-1"]) == 2
+    assert "--mesh-scale: expected a positive factor to metres, got -1.0" in capsys.readouterr().err
+    assert cli.main(["train", "probabilistic-keypoints", "--mesh", "m.ply", "--out", str(tmp_path / "run"),
+                     "--steps", "0"]) == 2
+    assert "--steps" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_render_train_evaluate_and_estimate_end_to_end(tmp_path):
+    """Renders a few views of the demo object, trains a tiny network, evaluates and runs the pipeline."""
+    from paz6d.assets.demo_object import write_demo_object
+    from paz6d.probabilistic_keypoints.config import ProbabilisticTraining
+    from paz6d.probabilistic_keypoints.pipeline import ProbabilisticKeypointPose6D
+    from paz6d.probabilistic_keypoints.train import train_probabilistic_keypoints
+
+    mesh = write_demo_object(tmp_path / "mesh")
+    out = tmp_path / "run"
+    overrides = {"views": 40, "validation_views": 16, "test_images": 8, "filters": 8, "input_size": 64,
+                 "num_keypoints": 6, "dilations": (1, 2), "pairs": 2, "checkpoint_every": 10, "sample_every": 10,
+                 "precision": "float32"}
+    job = ProbabilisticTraining(mesh=mesh, mesh_scale=0.001, out=out, steps=20, workers=1, progress=False,
+                                overrides=overrides)
+    summary = train_probabilistic_keypoints(job)
+    assert summary["steps"] == 20 and summary["covariance_scale"] > 0
+    evaluation = json.loads((out / run_files.EVALUATION_FILE).read_text())
+    for name in ("clean", "occluded"):
+        assert evaluation[name]["pnp"]["count"] == 8 and evaluation[name]["weighted_pnp"]["count"] == 8
+        assert 0.0 <= evaluation[name]["calibration_scaled"]["observed"]["1sigma"] <= 1.0
+    assert (out / run_files.CALIBRATION_PNG).stat().st_size > 0
+    estimator = ProbabilisticKeypointPose6D(out, np.array([[572.4, 0, 325.3], [0, 573.6, 242.0], [0, 0, 1]]))
+    keypoints, covariances = estimator.detect(np.zeros((480, 640, 3), np.uint8), (300, 200, 360, 260))
+    assert keypoints.points.shape == (6, 2) and np.all(np.linalg.eigvalsh(covariances) > 0)
+    with pytest.raises(ValueError, match="different run"):
+        train_probabilistic_keypoints(ProbabilisticTraining(mesh=mesh, mesh_scale=0.001, out=out, seed=1, steps=20,
+                                                            workers=1, progress=False, overrides=overrides))

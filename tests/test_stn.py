@@ -150,6 +150,8 @@ def test_digits_are_seeded_and_split_by_digit_sample():
     assert not np.array_equal(other, images)
     with pytest.raises(ValueError, match="scale"):
         DigitCanvas(canvas_size=20, scale=(10.0, 30.0))
+    with pytest.raises(ValueError, match="fragment_size"):
+        DigitCanvas(fragment_size=0)
     with pytest.raises(ValueError, match="images/labels"):
         ClutteredDigits(images=np.zeros((5, 7, 7)), labels=np.zeros(5))
 
@@ -213,3 +215,15 @@ def test_corrupt_run_directories_are_reported_by_file(tmp_path):
         with pytest.raises(ValueError, match=message):
             run_files.read_classifier(tmp_path)
     assert run_files.is_run_dir(tmp_path) and not run_files.is_run_dir(tmp_path / "nothing")
+
+
+def test_command_line_flags_and_errors(tmp_path, capsys):
+    from paz6d import cli
+
+    assert cli.main(["train", "stn", "--out", str(tmp_path / "run"), "--steps", "0"]) == 2
+    assert "paz6d train stn: error: --steps: expected a positive integer, got 0" in capsys.readouterr().err
+    (tmp_path / "file").write_text("x")
+    assert cli.main(["train", "stn", "--out", str(tmp_path / "file")]) == 2
+    assert "--out" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        cli.main(["train", "stn", "--out", str(tmp_path / "run"), "--config", "huge"])

@@ -2,8 +2,8 @@
 
 Each sample is a square grey canvas (values in [0, 1]) holding one 8×8 digit of ``load_digits``
 enlarged to a random side (``scale`` pixels, bilinear) at a random position, over ``clutter``
-fragments: random 4×4 windows of *other* digits, enlarged by the same kind of factor and placed
-anywhere (composited with ``max``). The 1,797 digits are split once into train and test digits
+fragments: random ``fragment_size``-pixel square windows of *other* digits enlarged the same way,
+placed anywhere (composited with ``max``), as in Jaderberg et al.'s cluttered MNIST (6×6 pieces). The 1,797 digits are split once into train and test digits
 (``test_fraction``, seeded), and a split's canvases draw both the digit and the clutter from that
 split only, so no test digit is ever seen in training.
 
@@ -21,7 +21,6 @@ import numpy as np
 
 CLASS_NAMES = tuple(str(digit) for digit in range(10))
 TRAIN, TEST = 0, 1
-FRAGMENT_SIDE = 4  # pixels of the 8×8 digit
 
 
 @dataclass(frozen=True)
@@ -32,6 +31,7 @@ class DigitCanvas:
         canvas_size: side of the square canvas in pixels.
         scale: range of the digit's side in pixels (the 8×8 digit enlarged to it).
         clutter: number of clutter fragments per canvas.
+        fragment_size: side of a clutter fragment in canvas pixels.
         test_fraction: share of the 1,797 digits kept for testing.
         split_seed: seed of the train/test split of the digits.
     """
@@ -39,6 +39,7 @@ class DigitCanvas:
     canvas_size: int = 48
     scale: tuple[float, float] = (12.0, 24.0)
     clutter: int = 6
+    fragment_size: int = 6
     test_fraction: float = 0.2
     split_seed: int = 0
 
@@ -51,6 +52,8 @@ class DigitCanvas:
                              f"got {self.scale}")
         if int(self.clutter) < 0:
             raise ValueError(f"clutter: expected a non-negative number of fragments, got {self.clutter}")
+        if not 1 <= int(self.fragment_size) <= low:
+            raise ValueError(f"fragment_size: expected 1 to the smallest digit side {low} pixels, got {self.fragment_size}")
         if not 0.0 < self.test_fraction < 1.0:
             raise ValueError(f"test_fraction: expected a fraction in (0, 1), got {self.test_fraction}")
 
@@ -120,14 +123,15 @@ class ClutteredDigits:
         size = int(self.settings.canvas_size)
         canvas = np.zeros((size, size), np.float32)
         digit = int(pool[rng.integers(len(pool))])
+        piece = int(self.settings.fragment_size)
         for _ in range(int(self.settings.clutter)):
             other = int(pool[rng.integers(len(pool))])
-            row, column = rng.integers(0, 8 - FRAGMENT_SIDE + 1, 2)
-            fragment = self.images[other, row:row + FRAGMENT_SIDE, column:column + FRAGMENT_SIDE]
-            side = max(2, int(round(rng.uniform(*self.settings.scale) * FRAGMENT_SIDE / 8)))
-            patch = cv2.resize(fragment, (side, side), interpolation=cv2.INTER_LINEAR)
-            top, left = rng.integers(0, size - side + 1, 2)
-            canvas[top:top + side, left:left + side] = np.maximum(canvas[top:top + side, left:left + side], patch)
+            side = int(round(rng.uniform(*self.settings.scale)))
+            enlarged = cv2.resize(self.images[other], (side, side), interpolation=cv2.INTER_LINEAR)
+            row, column = rng.integers(0, side - piece + 1, 2)
+            top, left = rng.integers(0, size - piece + 1, 2)
+            window = canvas[top:top + piece, left:left + piece]
+            canvas[top:top + piece, left:left + piece] = np.maximum(window, enlarged[row:row + piece, column:column + piece])
         side = int(round(rng.uniform(*self.settings.scale)))
         patch = cv2.resize(self.images[digit], (side, side), interpolation=cv2.INTER_LINEAR)
         top, left = rng.integers(0, size - side + 1, 2)

@@ -51,7 +51,8 @@ def _prepare_run_dir(job: STNTraining, settings: dict) -> None:
 
 def canvas_settings(settings: dict) -> DigitCanvas:
     """The :class:`DigitCanvas` of a run's settings."""
-    return DigitCanvas(int(settings["canvas_size"]), tuple(settings["scale"]), int(settings["clutter"]))
+    return DigitCanvas(int(settings["canvas_size"]), tuple(settings["scale"]), int(settings["clutter"]),
+                       int(settings["fragment_size"]))
 
 
 def _tile(image: np.ndarray) -> np.ndarray:
