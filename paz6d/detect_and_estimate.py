@@ -31,6 +31,7 @@ from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProces
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.draw import draw_box, draw_model_outline, draw_pose_axes, draw_projected_points, keypoint_colors
 from paz6d.backend.image import as_image
+from paz6d.keypointnet import run_dir as keypointnet_run_dir
 
 _BOP_CLASS = re.compile(r"^obj_(\d+)$")
 
@@ -94,9 +95,7 @@ def run_mesh(run_dir: str | Path) -> tuple[Path, float] | None:
         config = files.read_config(run_dir)
         return Path(config["mesh"]), float(config["mesh_scale"])
     if method == "keypointnet":
-        from paz6d.keypointnet import run_dir as files
-
-        config = files.read_config(run_dir)
+        config = keypointnet_run_dir.read_config(run_dir)
         if config.get("mesh_path"):
             return Path(config["mesh_path"]), float(config.get("mesh_scale", 1.0))
     return None

@@ -27,11 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.files import write_json_atomically
 from paz6d.backend.paths import check_output_file, check_outputs_apart, check_plain_name
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
-from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION
+from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION, read_targets
+from paz6d.ssd import run_dir as ssd_run_dir
 
 METHODS = ("aae", "keypoints", "keypointnet")
 #: ``--method`` value -> the method name of its run directories (:func:`paz6d.run_dirs.method_of`).
@@ -166,7 +168,6 @@ def check_detector(detector: Path, object_ids) -> tuple[str, ...]:
         ValueError: not a (valid) SSD run directory, or an object the detector was not trained on.
     """
     from paz6d.run_dirs import method_of
-    from paz6d.ssd import run_dir as ssd_run_dir
 
     if not detector.is_dir():
         raise ValueError(f"--detector: {detector} is not a directory")
@@ -372,8 +373,6 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
 def detector_targets(dataset: Path, images: list[tuple[int, int]], object_ids) -> list[Target]:
     """The entries of ``<dataset>/test_targets_bop19.json`` for the estimated images and objects (the BOP
     protocol's list of what to score; empty when the file is absent)."""
-    from paz6d.datasets.bop.targets import read_targets
-
     path = Path(dataset) / "test_targets_bop19.json"
     if not path.is_file():
         return []
@@ -415,7 +414,6 @@ def estimate(args: argparse.Namespace) -> dict:
     Raises:
         ValueError: bad flags or files, or nothing estimated (no file is written then).
     """
-    from paz6d.backend.files import write_json_atomically
     from paz6d.backend.tensorflow_guard import import_tensorflow
 
     runs = check_arguments(args)

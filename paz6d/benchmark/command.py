@@ -1,7 +1,7 @@
 """``paz6d benchmark lmo``: the real-data benchmark of :mod:`paz6d.benchmark.lmo` (flags: :class:`LmoOptions`).
 
-Light on purpose: building the parser imports only this module; the stages (TensorFlow, the renderers)
-load when the command runs.
+Light on purpose: building the parser imports only this module and :mod:`paz6d.benchmark.lmo`, whose
+stages load TensorFlow and the renderers when they run.
 """
 
 from __future__ import annotations
@@ -11,10 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from paz6d.backend.paths import check_output_folder
+from paz6d.benchmark.lmo import DEFAULT_LMO, Benchmark, run_benchmark
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
-
-#: ``../shared/data/bop_lmo`` next to this checkout.
-DEFAULT_LMO = Path(__file__).resolve().parents[3] / "shared" / "data" / "bop_lmo"
 
 
 @dataclass(frozen=True)
@@ -38,8 +36,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Runs (or resumes) the benchmark."""
-    from paz6d.benchmark.lmo import Benchmark, run_benchmark  # here: the stages load TensorFlow and the renderers
-
     options = config_from_args(LmoOptions, args)
     with flags_in_errors(LmoOptions):
         check_output_folder(options.out, "out")

@@ -32,9 +32,19 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
-from paz6d.benchmark.command import DEFAULT_LMO
+import numpy as np
 
+from paz6d.abstract import Box2D, Pose6D
+from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
+from paz6d.cli import build_parser
+from paz6d.datasets.bop import read_pose_results
+from paz6d.estimate import estimate
+from paz6d.keypointnet.config import KeypointTraining
+from paz6d.keypointnet.train import train_keypointnet
+from paz6d.ssd.config import SSDTraining
+
+#: The LM-O data this repository's checkout shares (``../shared/data/bop_lmo``).
+DEFAULT_LMO = Path(__file__).resolve().parents[3] / "shared" / "data" / "bop_lmo"
 #: LM-O's camera (``camera.json`` of the BOP data set): fx, fy, cx, cy.
 LMO_INTRINSICS = (572.4114, 573.57043, 325.2611, 242.04899)
 METHODS = ("aae", "keypointnet")
@@ -150,7 +160,6 @@ def _stage_synthetic(job: Benchmark) -> dict:
 
 
 def _stage_detector(job: Benchmark) -> dict:
-    from paz6d.ssd.config import SSDTraining
     from paz6d.ssd.train import train_ssd
 
     return train_ssd(SSDTraining(dataset=job.out / "synthetic", out=job.out / "detector",
@@ -170,8 +179,6 @@ def _stage_pose(job: Benchmark, obj_id: int) -> dict:
                          workers=job.settings.workers, progress=job.progress,
                          dataset=job.out / "synthetic" if crops else None, object_id=obj_id,
                          pair_fraction=job.settings.scene_crops if crops else 0.5)
-    from paz6d.keypointnet.config import KeypointTraining
-    from paz6d.keypointnet.train import train_keypointnet
 
     return train_keypointnet(KeypointTraining(job.pose_dir(obj_id), job.mesh(obj_id), mesh_scale=0.001,
                                               seed=job.seed, workers=job.settings.workers,
@@ -193,11 +200,9 @@ def _estimate_args(job: Benchmark, condition: str) -> list[str]:
 
 def _run_command(argv: list[str]) -> dict | int:
     """A ``paz6d`` command run in this process (its function, not a shell); errors propagate."""
-    from paz6d.cli import build_parser
 
     args = build_parser().parse_args(argv)
     if argv[0] == "estimate":
-        from paz6d.estimate import estimate
 
         return estimate(args)
     return args._run(args)
@@ -343,13 +348,10 @@ def score_table(report: dict) -> str:
 def _overlays(job: Benchmark, condition: str) -> list[Path]:
     """One PNG per real frame with the estimates' model outlines and axes, and a grid of all frames."""
     import cv2
-    import numpy as np
 
-    from paz6d.abstract import Box2D, Pose6D
     from paz6d.backend.draw import image_grid
     from paz6d.backend.image import load_image, save_image
     from paz6d.backend.mesh import load_mesh
-    from paz6d.datasets.bop import read_pose_results
     from paz6d.datasets.bop.camera import load_scene_camera
     from paz6d.datasets.bop.scene import find_image
     from paz6d.detect_and_estimate import draw_estimates
