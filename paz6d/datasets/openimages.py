@@ -146,17 +146,18 @@ def read_class_descriptions(path: str | Path) -> tuple[list[str], list[str]]:
     return labels, names
 
 
-def _column(path: Path, rows: list[list[str]], index: int, name: str, dtype, check=None, expected: str = "") -> np.ndarray:
-    values = [row[index] for row in rows]
+def _checked(path: Path, values: list[str], lines: list[int], name: str, dtype, check, expected: str) -> np.ndarray:
+    """``values`` (the text of one column) as an array; ``ValueError`` naming the line and field of
+    the first value that does not parse or fails ``check``."""
     try:
         array = np.array(values, dtype=dtype)
-        bad = ~check(array) if check is not None else np.zeros(len(array), dtype=bool)
+        bad = ~check(array)
     except ValueError:
         array, bad = None, None
     if bad is None or bad.any():
-        for line, value in enumerate(values, start=2):
+        for line, value in zip(lines, values):
             try:
-                if check is None or check(np.array([value], dtype=dtype))[0]:
+                if check(np.array([value], dtype=dtype))[0]:
                     continue
             except ValueError:
                 pass
@@ -164,50 +165,107 @@ def _column(path: Path, rows: list[list[str]], index: int, name: str, dtype, che
     return array
 
 
-def read_boxes(path: str | Path, label_index: dict[str, int]) -> dict[str, np.ndarray]:
-    """Columns of an Open Images box CSV, checked: ``image_ids``, ``class_ids``, ``label_names``,
-    ``source``, ``confidence``, ``normalized (R, 4)`` ``XMin, YMin, XMax, YMax`` and each flag."""
+def _fraction(values: np.ndarray) -> np.ndarray:
+    return np.isfinite(values) & (values >= 0) & (values <= 1)
+
+
+def _flag(values: np.ndarray) -> np.ndarray:
+    return np.isin(values, (-1, 0, 1))
+
+
+#: numeric columns: (dtype, check, what is expected)
+_NUMBERS = {**{name: (np.float64, _fraction, "a fraction of the image size in [0, 1]")
+               for name in ("XMin", "XMax", "YMin", "YMax")},
+            "Confidence": (np.float64, _fraction, "a number in [0, 1]"),
+            **{name: (np.int64, _flag, "0, 1 or -1 (unknown)") for name in FLAG_COLUMNS}}
+_ROWS_PER_CHUNK = 500_000  # rows whose numbers are converted together (the train split has 14.6 million)
+
+
+def read_boxes(path: str | Path, label_index: dict[str, int]) -> dict:
+    """Columns of an Open Images box CSV, checked, read as a stream (the train split's 14.6 million
+    rows are never all held as text).
+
+    Returns:
+        dict with ``image_codes (R,) int64`` indexing ``image_ids`` (unique, in order of first
+        appearance), ``class_ids (R,)``, ``source_codes (R,)`` indexing ``sources``, ``confidence (R,)``,
+        ``normalized (R, 4)`` ``XMin, YMin, XMax, YMax`` and each flag column ``(R,) int8`` (``-1``
+        where the file has no such column).
+    Raises:
+        ValueError: naming the file, the line and the field.
+    """
     path = Path(path)
-    rows = _rows(path, "Open Images box CSV")
-    if not rows:
-        raise ValueError(f"{path}: empty file; expected the header {','.join(BOX_COLUMNS)}")
-    header = [cell.strip() for cell in rows[0]]
-    missing = [column for column in BOX_COLUMNS if column not in header and column not in FLAG_COLUMNS]
-    if missing:
-        raise ValueError(f"{path}: header lacks {missing}; expected {','.join(BOX_COLUMNS)}")
-    rows = rows[1:]
-    for line, row in enumerate(rows, start=2):
-        if len(row) != len(header):
-            raise ValueError(f"{path}, line {line}: expected {len(header)} fields, got {len(row)}")
-    at = {name: header.index(name) for name in header}
-    labels = [row[at["LabelName"]] for row in rows]
-    for line, label in enumerate(labels, start=2):
-        if label not in label_index:
-            raise ValueError(f"{path}, line {line}, field LabelName: unknown class {label!r} (not in the "
-                             "class-description file)")
+    try:
+        handle = path.open(newline="", encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise ValueError(f"{path}: Open Images box CSV not found") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path}: expected an Open Images box CSV, found a folder") from None
+    except OSError as error:
+        raise ValueError(f"{path}: cannot read the Open Images box CSV ({error.strerror or error})") from None
+    image_codes, source_codes, image_ids, sources = {}, {}, [], []
+    rows_image, rows_class, rows_source = [], [], []
+    parts: dict[str, list[np.ndarray]] = {}
+    with handle:
+        reader = csv.reader(handle)
+        try:
+            header = [cell.strip() for cell in next(reader, [])]
+            missing = [column for column in BOX_COLUMNS if column not in header and column not in FLAG_COLUMNS]
+            if not header or missing:
+                raise ValueError(f"{path}: header lacks {missing or list(BOX_COLUMNS)}; expected {','.join(BOX_COLUMNS)}")
+            at = {name: header.index(name) for name in header}
+            numbers = [name for name in _NUMBERS if name in at]
+            parts = {name: [] for name in numbers}
+            text: dict[str, list[str]] = {name: [] for name in numbers}
+            lines: list[int] = []
 
-    def fraction(values):
-        return np.isfinite(values) & (values >= 0) & (values <= 1)
+            def flush() -> None:
+                for name in numbers:
+                    dtype, check, expected = _NUMBERS[name]
+                    parts[name].append(_checked(path, text[name], lines, name, dtype, check, expected))
+                    text[name].clear()
+                box = [parts[name][-1] for name in ("XMin", "YMin", "XMax", "YMax")]
+                inverted = np.flatnonzero((box[2] < box[0]) | (box[3] < box[1]))
+                if len(inverted):
+                    raise ValueError(f"{path}, line {lines[inverted[0]]}, field XMax/YMax: XMax < XMin or YMax < YMin")
+                lines.clear()
 
-    columns = {name: _column(path, rows, at[name], name, np.float64, fraction, "a fraction of the image size in [0, 1]")
-               for name in ("XMin", "YMin", "XMax", "YMax")}
-    normalized = np.stack([columns["XMin"], columns["YMin"], columns["XMax"], columns["YMax"]], axis=1).reshape(-1, 4)
-    inverted = np.flatnonzero((normalized[:, 2] < normalized[:, 0]) | (normalized[:, 3] < normalized[:, 1]))
-    if len(inverted):
-        raise ValueError(f"{path}, line {inverted[0] + 2}, field XMax/YMax: XMax < XMin or YMax < YMin")
-    result = {"image_ids": np.array([row[at["ImageID"]] for row in rows], dtype=object),
-              "label_names": np.array(labels, dtype=object),
-              "class_ids": np.array([label_index[label] for label in labels], dtype=np.int64),
-              "source": np.array([row[at["Source"]] for row in rows], dtype=object),
-              "confidence": _column(path, rows, at["Confidence"], "Confidence", np.float64,
-                                    lambda v: np.isfinite(v) & (v >= 0) & (v <= 1), "a number in [0, 1]"),
-              "normalized": normalized}
+            width, at_image, at_label, at_source = len(header), at["ImageID"], at["LabelName"], at["Source"]
+            for row in reader:
+                if not row:
+                    continue
+                if len(row) != width:
+                    raise ValueError(f"{path}, line {reader.line_num}: expected {width} fields, got {len(row)}")
+                class_id = label_index.get(row[at_label])
+                if class_id is None:
+                    raise ValueError(f"{path}, line {reader.line_num}, field LabelName: unknown class "
+                                     f"{row[at_label]!r} (not in the class-description file)")
+                image = image_codes.setdefault(row[at_image], len(image_codes))
+                if image == len(image_ids):
+                    image_ids.append(row[at_image])
+                source = source_codes.setdefault(row[at_source], len(source_codes))
+                if source == len(sources):
+                    sources.append(row[at_source])
+                rows_image.append(image)
+                rows_class.append(class_id)
+                rows_source.append(source)
+                lines.append(reader.line_num)
+                for name in numbers:
+                    text[name].append(row[at[name]])
+                if len(lines) == _ROWS_PER_CHUNK:
+                    flush()
+            flush()
+        except csv.Error as error:
+            raise ValueError(f"{path}, line {reader.line_num}: malformed CSV ({error})") from None
+        except UnicodeDecodeError as error:
+            raise ValueError(f"{path}: not UTF-8 text ({error.reason})") from None
+    columns = {name: np.concatenate(chunks) for name, chunks in parts.items()}
+    count = len(rows_image)
+    result = {"image_ids": image_ids, "sources": sources,
+              "image_codes": np.array(rows_image, dtype=np.int64), "class_ids": np.array(rows_class, dtype=np.int64),
+              "source_codes": np.array(rows_source, dtype=np.int64), "confidence": columns["Confidence"],
+              "normalized": np.stack([columns[name] for name in ("XMin", "YMin", "XMax", "YMax")], axis=1).reshape(-1, 4)}
     for name in FLAG_COLUMNS:
-        if name in at:
-            result[name] = _column(path, rows, at[name], name, np.int64, lambda v: np.isin(v, (-1, 0, 1)),
-                                   "0, 1 or -1 (unknown)").astype(np.int8)
-        else:
-            result[name] = np.full(len(rows), -1, dtype=np.int8)
+        result[name] = columns[name].astype(np.int8) if name in columns else np.full(count, -1, dtype=np.int8)
     return result
 
 
@@ -244,23 +302,22 @@ def load(root: str | Path, split: str = "train", boxes_csv: str | Path | None = 
     image_folder = Path(images) if images is not None else found["images"]
     label_names, display_names = read_class_descriptions(classes_path)
     table = read_boxes(boxes_path, {label: position for position, label in enumerate(label_names)})
-    keep = np.ones(len(table["image_ids"]), dtype=bool) if include_group_of else table["IsGroupOf"] != 1
-    order, first = np.unique(table["image_ids"], return_index=True)
-    order = order[np.argsort(first)]
-    rows_of: dict[str, list[int]] = {image_id: [] for image_id in order}
-    for row, (image_id, kept) in enumerate(zip(table["image_ids"], keep)):
-        if kept:
-            rows_of[image_id].append(row)
+    keep = np.ones(len(table["class_ids"]), dtype=bool) if include_group_of else table["IsGroupOf"] != 1
+    rows_by_image = np.argsort(table["image_codes"], kind="stable")
+    starts = np.searchsorted(table["image_codes"][rows_by_image], np.arange(len(table["image_ids"]) + 1))
+    order = table["image_ids"]
 
     def read(position: int) -> Sample:
         image_id = order[position]
-        rows = np.array(rows_of[image_id], dtype=np.int64)
+        rows = rows_by_image[starts[position]:starts[position + 1]]
+        rows = rows[keep[rows]]
         path = _find_image(image_folder, image_id)
         width, height = image_size_from_header(path)
         boxes = table["normalized"][rows] * np.array([width, height, width, height], dtype=np.float64)
         class_ids = table["class_ids"][rows]
         extras = {"image_id": image_id, "image_size": (width, height),
-                  "label_names": list(table["label_names"][rows]), "source": list(table["source"][rows]),
+                  "label_names": [label_names[i] for i in class_ids],
+                  "source": [table["sources"][i] for i in table["source_codes"][rows]],
                   "confidence": table["confidence"][rows]}
         extras.update({key: table[name][rows] for name, key in FLAG_EXTRAS.items()})
         return Sample(image=path, boxes=boxes.reshape(-1, 4), class_ids=class_ids,
