@@ -16,7 +16,7 @@ from paz6d.backend.pnp import PnPError
 from paz6d.backend.camera import transform_and_project
 from paz6d.backend.draw import draw_keypoints, image_grid
 from paz6d.backend.files import new_figure, save_figure_atomically
-from paz6d.backend.image import save_image
+from paz6d.backend.image import resize, save_image
 from paz6d.hrnet.heatmaps import DECODERS, decode_heatmaps
 from paz6d.keypointnet.pipeline import KeypointPnP
 
@@ -85,14 +85,18 @@ def score_poses(uv, K, T_model2cam, points_model, vertices, diameter: float, inp
             "median_translation_mm": 1000 * float(np.median(translations)) if translations else None}
 
 
-def save_keypoint_grid(path: str | Path, images, predicted, target, count: int = 16, columns: int = 4) -> Path:
-    """PNG of the first ``count`` crops with predicted keypoints (filled) and true ones (hollow rings),
-    keypoint ``i`` in colour ``i``."""
+def save_keypoint_grid(path: str | Path, images, predicted, target, count: int = 16, columns: int = 4,
+                       zoom: int = 2) -> Path:
+    """PNG of the first ``count`` crops, enlarged ``zoom`` times, with predicted keypoints (filled) and true
+    ones (hollow rings), keypoint ``i`` in colour ``i``; ``predicted``/``target`` are ``(V, N, 2)`` crop pixels."""
     tiles = []
     for image, guess, truth in list(zip(images, predicted, target))[:count]:
-        canvas = np.asarray(image, dtype=np.uint8)
-        canvas = draw_keypoints(canvas, truth, visible=[False] * len(truth), radius=4)
-        tiles.append(draw_keypoints(canvas, guess, radius=2))
+        image = np.asarray(image, dtype=np.uint8)
+        canvas = resize(image, (image.shape[1] * zoom, image.shape[0] * zoom), "nearest")
+        # pixel centres at integers: crop pixel u is at zoom * u + (zoom - 1) / 2 in the enlarged tile
+        offset = (zoom - 1) / 2.0
+        canvas = draw_keypoints(canvas, np.asarray(truth) * zoom + offset, visible=[False] * len(truth), radius=5)
+        tiles.append(draw_keypoints(canvas, np.asarray(guess) * zoom + offset, radius=3))
     return save_image(path, image_grid(tiles, columns=columns))
 
 

@@ -28,7 +28,7 @@ from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.image import as_image
 from paz6d.backend.pnp import PnPError
 from paz6d.hrnet import run_dir as run_files
-from paz6d.hrnet.heatmaps import DECODERS, decode_heatmaps
+from paz6d.hrnet.heatmaps import DECODERS, DEFAULT_DECODER, decode_heatmaps
 from paz6d.keypointnet.pipeline import KeypointPnP
 from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
@@ -46,7 +46,7 @@ class DecodeHeatmaps(Processor):
         sigma: the training Gaussian's width in cells (scales log-domain scores to about 1 at best).
     """
 
-    def __init__(self, stride: int, domain: str, method: str = "quadratic", sigma: float | None = None,
+    def __init__(self, stride: int, domain: str, method: str = DEFAULT_DECODER, sigma: float | None = None,
                  name: str | None = None):
         super().__init__(name)
         if method not in DECODERS:
@@ -81,14 +81,15 @@ class HRNetKeypoints2D(SequentialProcessor):
 
     Args:
         run_dir: HRNet run directory.
-        decode: heatmap decoder (default ``"quadratic"``: peak + Newton step on the log-map).
+        decode: heatmap decoder (default ``"soft_argmax"``: expectation over the 5×5 cells around the peak;
+            ``"quadratic"``: peak + Newton step on the log-map; see :mod:`paz6d.hrnet.heatmaps`).
         batch_size: crops per network call.
         class_name: written into the messages (default: the run's ``class_name``).
     Raises:
         ValueError: the run directory is missing a file or a file is malformed (named in the message).
     """
 
-    def __init__(self, run_dir: str | Path, decode: str = "quadratic", batch_size: int = 32,
+    def __init__(self, run_dir: str | Path, decode: str = DEFAULT_DECODER, batch_size: int = 32,
                  class_name: str | None = None, name: str = "HRNetKeypoints2D"):
         super().__init__(name=name)
         from paz6d.hrnet.model import inference_function
@@ -151,7 +152,7 @@ class HRNetPose6D(HRNetKeypoints2D):
     """
 
     def __init__(self, run_dir: str | Path, camera: Camera | np.ndarray | None = None, ransac_threshold: float = 5.0,
-                 decode: str = "quadratic", batch_size: int = 32, class_name: str | None = None):
+                 decode: str = DEFAULT_DECODER, batch_size: int = 32, class_name: str | None = None):
         super().__init__(run_dir, decode, batch_size, class_name, name="HRNetPose6D")
         self.camera = camera
         self.add(KeyedStep(KeypointPnP(self.points_model, ransac_threshold, self.input_size, 4, self.class_name),

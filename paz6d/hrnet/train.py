@@ -29,7 +29,7 @@ from paz6d.hrnet import run_dir as run_files
 from paz6d.hrnet.config import FIXED_SETTINGS, MARGIN, STRIDE, HRNetTraining
 from paz6d.hrnet.evaluate import (HEADLINE_ALPHA, save_keypoint_grid, save_pck_plot, score_keypoints, score_poses,
                                   true_keypoints)
-from paz6d.hrnet.heatmaps import decode_heatmaps
+from paz6d.hrnet.heatmaps import DEFAULT_DECODER, decode_heatmaps
 from paz6d.keypointnet.config import resolve_precision
 from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
 from paz6d.processors.predict import predict_in_batches
@@ -101,7 +101,7 @@ def _sample_drawer(images: np.ndarray, targets: np.ndarray, settings: dict):
 
     def draw(model, step, path):
         heatmaps = np.asarray(model(images.astype(np.float32), training=False)["heatmaps"])
-        uv, _ = decode_heatmaps(heatmaps, STRIDE, "quadratic", domain, settings["sigma"])
+        uv, _ = decode_heatmaps(heatmaps, STRIDE, DEFAULT_DECODER, domain, settings["sigma"])
         save_keypoint_grid(path, images, uv, targets, count=len(images))
 
     return draw
@@ -150,13 +150,13 @@ def evaluate_run(model, crops, points_model: np.ndarray, settings: dict, out: Pa
     scores, decoded = score_keypoints(heatmaps, target, settings["input_size"], STRIDE, domain, settings["sigma"])
     evaluation = {"held_out_crops": len(images), "input_size": settings["input_size"], "alpha": HEADLINE_ALPHA,
                   "threshold_px": HEADLINE_ALPHA * settings["input_size"],
-                  f"pck@{HEADLINE_ALPHA}": scores["quadratic"][f"pck@{HEADLINE_ALPHA}"], "decoder": "quadratic",
+                  f"pck@{HEADLINE_ALPHA}": scores[DEFAULT_DECODER][f"pck@{HEADLINE_ALPHA}"], "decoder": DEFAULT_DECODER,
                   "decoders": scores, "inference_ms_per_crop": round(1000 * seconds / max(len(images), 1), 2)}
     if vertices is not None:
-        evaluation["pnp"] = score_poses(decoded["quadratic"], K, T, points_model, vertices,
+        evaluation["pnp"] = score_poses(decoded[DEFAULT_DECODER], K, T, points_model, vertices,
                                         diameter(np.asarray(vertices)), settings["input_size"])
     run_files.write_evaluation(out, evaluation)
-    save_keypoint_grid(out / run_files.KEYPOINTS_PLOT, images, decoded["quadratic"], target)
+    save_keypoint_grid(out / run_files.KEYPOINTS_PLOT, images, decoded[DEFAULT_DECODER], target)
     save_pck_plot(out / run_files.PCK_PLOT, scores, settings["input_size"], len(images))
     return evaluation
 
@@ -236,7 +236,7 @@ def train_hrnet(job: HRNetTraining) -> dict:
                "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1),
                "held_out_crops": evaluation["held_out_crops"],
                f"pck@{HEADLINE_ALPHA}": evaluation[f"pck@{HEADLINE_ALPHA}"],
-               "median_px": evaluation["decoders"]["quadratic"]["median_px"],
+               "median_px": evaluation["decoders"][DEFAULT_DECODER]["median_px"],
                "add_recall_0.1d": evaluation["pnp"]["add_recall_0.1d"]}
     run_files.write_metrics(out, summary)
     return summary
