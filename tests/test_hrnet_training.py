@@ -63,6 +63,9 @@ def test_tiny_training_lowers_the_loss_writes_a_scored_run_and_resumes(trained, 
     resumed = train_hrnet(HRNetTraining(job.out, mesh_path, mesh_scale=1e-3, workers=0, steps=50, progress=False,
                                         overrides=TINY))
     assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
+    again = train_hrnet(HRNetTraining(job.out, mesh_path, mesh_scale=1e-3, workers=0, steps=50, progress=False,
+                                      overrides=TINY))  # finished: re-scored, the training record kept
+    assert again["final_losses"] == resumed["final_losses"] and again["train_seconds"] == resumed["train_seconds"]
     with pytest.raises(ValueError, match="different network"):
         train_hrnet(HRNetTraining(job.out, mesh_path, mesh_scale=1e-3, workers=0, steps=50, progress=False,
                                   overrides={**TINY, "widths": (8, 12)}))

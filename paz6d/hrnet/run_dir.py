@@ -149,6 +149,12 @@ def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
     return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
 
 
+def read_metrics(run_dir: str | Path) -> dict[str, Any] | None:
+    """The training summary ``metrics.json`` (a JSON object), ``None`` when there is none yet."""
+    path = Path(run_dir) / METRICS_FILE
+    return load_json_object(path) if path.exists() else None
+
+
 def write_evaluation(run_dir: str | Path, evaluation: dict[str, Any]) -> Path:
     """Writes ``evaluation.json`` (PCK on held-out renders)."""
     return write_json_atomically(Path(run_dir) / EVALUATION_FILE, evaluation, indent=2)

@@ -37,6 +37,9 @@ from paz6d.processors.predict import predict_in_batches
 #: Seed offsets of the validation views and of the held-out test images (the training views use ``seed``).
 VALIDATION_SEED_OFFSET = 10_000
 TEST_SEED_OFFSET = 20_000
+#: Summary fields that describe the training itself (kept in ``metrics.json`` when a finished run is re-run).
+TRAINING_RECORD = ("render_seconds", "train_seconds", "final_losses", "loader_samples_per_second",
+                   "model_samples_per_second")
 
 
 def _jsonable(settings: dict) -> dict:
@@ -238,5 +241,9 @@ def train_hrnet(job: HRNetTraining) -> dict:
                f"pck@{HEADLINE_ALPHA}": evaluation[f"pck@{HEADLINE_ALPHA}"],
                "median_px": evaluation["decoders"][DEFAULT_DECODER]["median_px"],
                "add_recall_0.1d": evaluation["pnp"]["add_recall_0.1d"]}
+    previous = run_files.read_metrics(out)
+    if training.final_step == training.start_step and previous is not None:
+        # a finished run re-run (e.g. to re-score it): keep the numbers of the run that trained
+        summary.update({key: previous[key] for key in TRAINING_RECORD if key in previous})
     run_files.write_metrics(out, summary)
     return summary
