@@ -22,7 +22,9 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import itertools
 import math
+import operator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -139,7 +141,7 @@ class CocoGroundTruth:
         if len(image_ids) and len(category_ids):  # COCOeval only looks at listed images and categories
             known = (image_ids[image_row] == columns["image_id"]) & (category_ids[category_row] == columns["category_id"])
         keep = np.flatnonzero(known)
-        segmentations = [a.get("segmentation") for a in data["annotations"]]
+        segmentations = list(map(dict.get, data["annotations"], itertools.repeat("segmentation")))
         return cls(source=source, image_ids=image_ids, image_heights=heights, image_widths=widths,
                    category_ids=category_ids, category_names=tuple(names[c] for c in category_ids.tolist()),
                    annotation_ids=columns["id"][keep], image_index=image_row[keep], category_index=category_row[keep],
@@ -160,6 +162,11 @@ def _finite_numbers(values: list, shape: tuple[int, ...]) -> np.ndarray | None:
     if array.dtype.kind not in "iuf" or array.shape != shape or not np.all(np.isfinite(array)):
         return None
     return array.astype(np.float64)
+
+
+def _field(entries: list, key: str) -> list:
+    """``[entry[key] for entry in entries]`` (KeyError/TypeError as that would raise), at C speed."""
+    return list(map(operator.itemgetter(key), entries))
 
 
 def _annotation_error(index: int, annotation, source: str) -> str | None:
@@ -185,16 +192,16 @@ def _annotation_columns(annotations: list, source: str) -> dict[str, np.ndarray]
     columns: dict[str, np.ndarray | None] = {}
     try:
         for key in ("id", "image_id", "category_id"):
-            columns[key] = _integers([a[key] for a in annotations])
-        columns["area"] = _finite_numbers([a["area"] for a in annotations], (n,))
-        crowd = [a.get("iscrowd", 0) for a in annotations]
-        boxes = [a.get("bbox") for a in annotations]
+            columns[key] = _integers(_field(annotations, key))
+        columns["area"] = _finite_numbers(_field(annotations, "area"), (n,))
+        crowd = list(map(dict.get, annotations, itertools.repeat("iscrowd"), itertools.repeat(0)))
+        boxes = list(map(dict.get, annotations, itertools.repeat("bbox")))
+        crowd_valid = set(crowd) <= {0, 1}
     except (KeyError, TypeError, AttributeError):
         columns["id"] = None
     else:
-        columns["iscrowd"] = np.array([c in (0, 1) and c for c in crowd], dtype=bool) \
-            if all(c in (0, 1) for c in crowd) else None
-        present = [i for i, b in enumerate(boxes) if b is not None]
+        columns["iscrowd"] = np.array(crowd, dtype=bool) if crowd_valid else None
+        present = range(n) if None not in boxes else [i for i, b in enumerate(boxes) if b is not None]
         box_array = np.full((n, 4), np.nan)
         found = _finite_numbers([boxes[i] for i in present], (len(present), 4))
         if found is not None:
@@ -253,11 +260,11 @@ class CocoDetections:
         has_boxes, has_masks = "bbox" in first, "segmentation" in first
         n = len(results)
         try:
-            image_id = _integers([r["image_id"] for r in results])
-            category_ids = _integers([r["category_id"] for r in results])
-            scores = _finite_numbers([r["score"] for r in results], (n,))
-            boxes = _finite_numbers([r["bbox"] for r in results], (n, 4)) if has_boxes else np.zeros((n, 4))
-            segmentations = [r["segmentation"] for r in results] if has_masks else None
+            image_id = _integers(_field(results, "image_id"))
+            category_ids = _integers(_field(results, "category_id"))
+            scores = _finite_numbers(_field(results, "score"), (n,))
+            boxes = _finite_numbers(_field(results, "bbox"), (n, 4)) if has_boxes else np.zeros((n, 4))
+            segmentations = _field(results, "segmentation") if has_masks else None
         except (KeyError, TypeError, AttributeError):
             image_id = None
         if image_id is None or category_ids is None or scores is None or boxes is None or not (has_boxes or has_masks):

@@ -21,6 +21,7 @@ bounding boxes and intersections of many masks are computed with a handful of nu
 from __future__ import annotations
 
 import itertools
+import operator
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Sequence
@@ -28,6 +29,7 @@ from typing import Sequence
 import numpy as np
 
 POLYGON_SCALE = 5.0  # rleFrPoly upsampling factor
+_SIZE, _COUNTS = operator.itemgetter("size"), operator.itemgetter("counts")
 _CHAR_OFFSET = 48  # compressed RLE characters are 48 + 6-bit group
 _MAX_CHARS_PER_COUNT = 12  # 60 bits: far beyond any image size, safe in int64
 
@@ -324,7 +326,7 @@ def segmentations_to_intervals(segmentations: Sequence, heights: Sequence, width
         ValueError: naming ``source`` and the entry index for malformed input.
     """
     n = len(segmentations)
-    is_rle = np.array([isinstance(s, dict) for s in segmentations], dtype=bool)
+    is_rle = np.fromiter(map(isinstance, segmentations, itertools.repeat(dict)), dtype=bool, count=n)
     groups = [np.flatnonzero(is_rle), np.flatnonzero(~is_rle)]
     rle_rows, polygon_rows = groups
     # every entry's structure is checked before anything is decoded, so the first bad entry is named
@@ -363,9 +365,10 @@ def _gather(heights: np.ndarray, widths: np.ndarray, pieces: list) -> MaskInterv
 
 def _given_sizes(rows: np.ndarray, heights: Sequence, widths: Sequence) -> np.ndarray:
     """(k, 2) image sizes of ``rows``, -1 where not given."""
-    sizes = np.array([[-1 if heights[i] is None else heights[i], -1 if widths[i] is None else widths[i]]
-                      for i in rows.tolist()], dtype=np.int64).reshape(-1, 2)
-    return sizes
+    if None not in heights and None not in widths:
+        return np.stack([np.asarray(heights, dtype=np.int64)[rows], np.asarray(widths, dtype=np.int64)[rows]], axis=1)
+    return np.array([[-1 if heights[i] is None else heights[i], -1 if widths[i] is None else widths[i]]
+                     for i in rows.tolist()], dtype=np.int64).reshape(-1, 2)
 
 
 def _rle_fields(entries: list, rows: np.ndarray, heights: Sequence, widths: Sequence) -> tuple | None:
@@ -374,9 +377,9 @@ def _rle_fields(entries: list, rows: np.ndarray, heights: Sequence, widths: Sequ
     if not entries:
         return np.zeros((0, 2), dtype=np.int64), []
     try:
-        sizes = np.array([entry["size"] for entry in entries], dtype=object).reshape(len(entries), -1)
-        counts = [entry["counts"] for entry in entries]
-        if sizes.shape[1] != 2 or not all(type(value) is int for value in sizes.ravel().tolist()):
+        sizes = np.array(list(map(_SIZE, entries)), dtype=object).reshape(len(entries), -1)
+        counts = list(map(_COUNTS, entries))
+        if sizes.shape[1] != 2 or not set(map(type, sizes.ravel().tolist())) <= {int}:
             return None
         sizes = sizes.astype(np.int64)
     except (KeyError, TypeError, ValueError, OverflowError):
@@ -384,7 +387,7 @@ def _rle_fields(entries: list, rows: np.ndarray, heights: Sequence, widths: Sequ
     given = _given_sizes(rows, heights, widths)
     if np.any(sizes <= 0) or np.any((given >= 0) & (given != sizes)):
         return None
-    if not all(isinstance(value, (str, bytes, list)) for value in counts):
+    if not all(map(isinstance, counts, itertools.repeat((str, bytes, list)))):
         return None
     return sizes, counts
 
@@ -393,7 +396,7 @@ def _rle_runs(counts: list, rows: np.ndarray, heights: np.ndarray, widths: np.nd
     """Runs of RLE entries: one piece ``(rows, starts, ends, runs per row)`` for the compressed
     strings and one for the uncompressed lists."""
     pieces = []
-    is_string = np.array([not isinstance(value, list) for value in counts], dtype=bool)
+    is_string = ~np.fromiter(map(isinstance, counts, itertools.repeat(list)), dtype=bool, count=len(counts))
     strings = np.flatnonzero(is_string)
     if len(strings):
         pieces.append((rows[strings], *_string_runs([counts[k] for k in strings.tolist()], heights[strings],
@@ -417,19 +420,19 @@ def _rle_runs(counts: list, rows: np.ndarray, heights: np.ndarray, widths: np.nd
 
 def _polygon_fields(entries: list, rows: np.ndarray, heights: Sequence, widths: Sequence,
                     source: str) -> tuple | None:
-    """``(heights, widths, parts, parts per entry)`` of polygon entries with boxes turned into
-    4-vertex polygons and empty parts dropped, or ``None`` when one is malformed (not a list of lists,
-    no image size, a first part of fewer than 4 numbers, boxes mixed with polygons)."""
-    if not all(type(entry) is list for entry in entries):
+    """``(heights, widths, parts, numbers per part, parts per entry)`` of polygon entries with boxes
+    turned into 4-vertex polygons and empty parts dropped, or ``None`` when one is malformed (not a
+    list of lists, no image size, a first part of fewer than 4 numbers, boxes mixed with polygons)."""
+    if not set(map(type, entries)) <= {list}:
         return None
     sizes = _given_sizes(rows, heights, widths)
     if np.any(sizes < 0):
         return None
-    parts = [part for entry in entries for part in entry]
-    if not all(type(part) is list for part in parts):
+    parts = list(itertools.chain.from_iterable(entries))
+    if not set(map(type, parts)) <= {list}:
         return None
-    parts_per_entry = np.array([len(entry) for entry in entries], dtype=np.int64)
-    lengths = np.array([len(part) for part in parts], dtype=np.int64)
+    parts_per_entry = np.fromiter(map(len, entries), dtype=np.int64, count=len(entries))
+    lengths = np.fromiter(map(len, parts), dtype=np.int64, count=len(parts))
     first_lengths = lengths[np.cumsum(parts_per_entry)[parts_per_entry > 0] - parts_per_entry[parts_per_entry > 0]]
     if np.any(first_lengths < 4):
         return None
@@ -437,13 +440,14 @@ def _polygon_fields(entries: list, rows: np.ndarray, heights: Sequence, widths: 
         parts, parts_per_entry = _boxes_as_polygons(entries, source)
         if parts is None:
             return None
-        lengths = np.array([len(part) for part in parts], dtype=np.int64)
+        lengths = np.fromiter(map(len, parts), dtype=np.int64, count=len(parts))
     empty = lengths < 2
     if np.any(empty):
         parts = [part for part, drop in zip(parts, empty.tolist()) if not drop]
         parts_per_entry -= np.bincount(np.repeat(np.arange(len(entries)), parts_per_entry)[empty],
                                        minlength=len(entries))
-    return np.ascontiguousarray(sizes[:, 0]), np.ascontiguousarray(sizes[:, 1]), parts, parts_per_entry
+        lengths = lengths[~empty]
+    return np.ascontiguousarray(sizes[:, 0]), np.ascontiguousarray(sizes[:, 1]), parts, lengths, parts_per_entry
 
 
 def _boxes_as_polygons(entries: list, source: str) -> tuple:
@@ -463,12 +467,12 @@ def _boxes_as_polygons(entries: list, source: str) -> tuple:
     return parts, np.array(parts_per_entry, dtype=np.int64)
 
 
-def _polygon_runs(heights: np.ndarray, widths: np.ndarray, parts: list, parts_per_entry: np.ndarray,
-                  source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Foreground runs ``(starts, ends, runs per entry)`` of polygon entries, rasterized as pycocotools
-    does (:func:`evaluation.coco_kernels.polygon_masks`)."""
-    vertex_counts = np.array([len(part) // 2 for part in parts], dtype=np.int64)
-    if np.any(vertex_counts * 2 != [len(part) for part in parts]):  # an odd last number is ignored
+def _polygon_runs(heights: np.ndarray, widths: np.ndarray, parts: list, lengths: np.ndarray,
+                  parts_per_entry: np.ndarray, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Foreground runs ``(starts, ends, runs per entry)`` of polygon entries (``lengths``: numbers per
+    part), rasterized as pycocotools does (:func:`evaluation.coco_kernels.polygon_masks`)."""
+    vertex_counts = lengths // 2
+    if np.any(lengths % 2):  # an odd last number is ignored
         parts = [part[:2 * count] for part, count in zip(parts, vertex_counts.tolist())]
     try:
         flat = np.fromiter(itertools.chain.from_iterable(parts), dtype=np.float64, count=2 * int(vertex_counts.sum()))
