@@ -385,6 +385,7 @@ TRAIN_KEYPOINTNET = ("train", "keypointnet", "--out", "{out}", "--mesh", "{world
 TRAIN_EMOTION = ("train", "emotion", "--data", "{world}/fer.csv", "--out", "{out}", "--no-progress")
 TRAIN_SSD = ("train", "ssd", "--dataset", "{case}/data", "--out", "{out}", "--no-progress")
 DEMO = ("demo", "--out", "{out}")
+BENCHMARK_LMO = ("benchmark", "lmo", "--out", "{out}", "--quick", "--no-progress")
 
 
 def replace_flag(argv: tuple[str, ...], flag: str, *values: str) -> tuple[str, ...]:
@@ -826,6 +827,13 @@ def estimate_cases() -> list[Case]:
         "--min-visible": [(("2",), ""), (("nan",), ""), (("-1",), "")],
         "--out": [(("{world}/bop",), "bop"), (("/dev/null",), "/dev/null")],
         "--method": [(("keypoints",), "")],
+        "--score-threshold": [(("2",), ""), (("nan",), "")],
+        "--detector": [(("{case}/none",), "none"), (("{world}/runs/aae",), "aae run directory")],
+        "--detections-out": [(("{out}/d.json",), "only with --detector")],
+    })
+    found += _flag_cases("estimate-run-id-", ESTIMATE, {
+        "--run": [(("0={world}/runs/aae",), "expected a BOP object id"),
+                  (("2={world}/runs/aae",), "trained on object 1, not 2")],
     })
     run_files = {
         "config-garbage": ("config.json", "{", "config.json"),
@@ -983,6 +991,11 @@ def train_cases() -> list[Case]:
         "--test-images": [(("0",), ""), (("-2",), "")],
         "--steps": [(("0",), "")],
         "--workers": [(("-1",), "")],
+    })
+    found += _flag_cases("benchmark-lmo-", BENCHMARK_LMO, {  # every case fails before any stage runs
+        "--lmo": [(("{case}/none",), "none")],
+        "--method": [(("pvnet",), "")],
+        "--out": [(("{world}/results.csv",), "results.csv")],
     })
     return found
 
