@@ -880,8 +880,8 @@ TRAIN_AAE_YCB = ("train", "aae", "--out", "{out}", "--dataset", "{case}/ycb_vide
 TRAIN_KEYPOINTNET_YCB = ("train", "keypointnet", "--out", "{out}", "--dataset", "{case}/ycb_video", "--object-id", "2",
                          "--no-progress")
 TRAIN_KEYPOINTNET_FAT = ("train", "keypointnet", "--out", "{out}", "--dataset", "{case}/fat", "--object-class",
-                         "003_cracker_box", "--dataset-mesh", "{case}/fat/ycb_models/003_cracker_box/google_16k/textured.obj",
-                         "--no-progress")
+                         "003_cracker_box", "--dataset-mesh",
+                         "{case}/fat/ycb_models/003_cracker_box/google_16k/textured.obj", "--no-progress")
 
 
 def pose_copy(name: str, relative: str | None = None, content=None) -> Callable[[World, Path], None]:
@@ -916,8 +916,8 @@ def pose_dataset_cases() -> list[Case]:
         Case("train-keypointnet-fat-no-quaternion", TRAIN_KEYPOINTNET_FAT,
              pose_copy("fat", "mixed/kitchen_0/000000.left.json", drop_quaternion),
              ("000000.left.json", "objects[0]", "quaternion_xyzw")),
-        Case("train-keypointnet-fat-without-mesh", replace_flag(TRAIN_KEYPOINTNET_FAT, "--dataset-mesh"), pose_copy("fat"),
-             ("--dataset-mesh",)),
+        Case("train-keypointnet-fat-without-mesh", replace_flag(TRAIN_KEYPOINTNET_FAT, "--dataset-mesh"),
+             pose_copy("fat"), ("--dataset-mesh",)),
         Case("train-keypointnet-fat-split-outside", TRAIN_KEYPOINTNET_FAT + ("--split", "../.."), pose_copy("fat"),
              ("--split",)),
     ]

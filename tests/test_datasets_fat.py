@@ -107,7 +107,8 @@ def test_conventions_on_a_record_written_by_ndds(tmp_path):
     scene.mkdir()
     (scene / "_object_settings.json").write_text(json.dumps({"exported_object_classes": ["productobj"],
         "exported_objects": [{"class": "productobj", "segmentation_class_id": 1, "cuboid_dimensions": [19.8, 9.0, 17.7],
-                              "fixed_model_transform": [[100, 0, 0, 0], [0, 100, 0, 0], [0, 0, 100, 0], [0, 0, 0, 1]]}]}))
+                              "fixed_model_transform": [[100, 0, 0, 0], [0, 100, 0, 0], [0, 0, 100, 0],
+                                                        [0, 0, 0, 1]]}]}))
     (scene / "_camera_settings.json").write_text(json.dumps({"camera_settings": [{"name": "Viewpoint",
         "intrinsic_settings": {"fx": 924.2764, "fy": 924.2774, "cx": 640.0004, "cy": 359.9999, "s": 0},
         "captured_image_size": {"width": 1280, "height": 720}}]}))
@@ -128,7 +129,8 @@ def test_splits_cameras_and_scene_folders():
     assert len(fat.load(ROOT, "single")) == 1 and len(fat.load(ROOT, "mixed/kitchen_0", camera="right")) == 2
     assert fat.load(ROOT, "single").class_names == ["003_cracker_box_16k"]
     assert [s.extras["frame"] for s in fat.load(ROOT, ".")] == [
-        "mixed/kitchen_0/000000.left", "mixed/kitchen_0/000001.left", "single/003_cracker_box_16k/kitchen_0/000000.left"]
+        "mixed/kitchen_0/000000.left", "mixed/kitchen_0/000001.left",
+        "single/003_cracker_box_16k/kitchen_0/000000.left"]
     with pytest.raises(ValueError, match=r"split: .*/fat/test is not a folder \(folders in .*\['mixed', 'single'"):
         fat.load(ROOT, "test")
     with pytest.raises(ValueError, match="split: expected a folder under the FAT root"):

@@ -167,7 +167,9 @@ def read_camera_settings(folder: str | Path, camera: str = "left") -> tuple[np.n
         values[name] = float(required_field(intrinsics, name, f"{where} intrinsic_settings", size=1)[0])
     if values["fx"] <= 0 or values["fy"] <= 0:
         raise ValueError(f"{where}: intrinsic_settings fx and fy must be positive, got {values['fx']}, {values['fy']}")
-    skew = float(required_field(intrinsics, "s", f"{where} intrinsic_settings", size=1)[0]) if "s" in intrinsics else 0.0
+    skew = 0.0
+    if "s" in intrinsics:
+        skew = float(required_field(intrinsics, "s", f"{where} intrinsic_settings", size=1)[0])
     size = required_field(entry, "captured_image_size", where)
     width, height = (int(required_field(size, name, f"{where} captured_image_size", size=1)[0])
                      for name in ("width", "height"))
@@ -186,7 +188,8 @@ def _object_record(entry, path: Path, number: int, settings: dict[str, dict]) ->
     q = required_field(entry, "quaternion_xyzw", where, size=4)
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > QUATERNION_TOLERANCE:
-        raise ValueError(f"{where}: field 'quaternion_xyzw' must be a unit quaternion (x, y, z, w), got norm {norm:.6g}")
+        raise ValueError(f"{where}: field 'quaternion_xyzw' must be a unit quaternion (x, y, z, w), "
+                         f"got norm {norm:.6g}")
     box = required_field(entry, "bounding_box", where)
     corners = [required_field(box, name, f"{where} bounding_box", size=2) for name in ("top_left", "bottom_right")]
     (y_min, x_min), (y_max, x_max) = corners
@@ -277,11 +280,12 @@ def load(root: str | Path, split: str = "mixed", camera: str = "left", masks: bo
             seg = read_label_image(seg_path, "segmentation image")
             ids = np.array([settings[record["class"]]["segmentation_class_id"] for record in records], dtype=np.int64)
             instance_masks = seg[None] == ids[:, None, None]
+        def stacked(key: str, shape: tuple[int, ...]) -> np.ndarray:
+            return np.array([record[key] for record in records], dtype=np.float64).reshape((count,) + shape)
+
         extras = {"frame": str(prefix.relative_to(root)), "image_size": size, "camera": camera,
-                  "visibility": np.array([record["visibility"] for record in records]),
-                  "projected_centroid": np.array([record["projected_centroid"] for record in records]).reshape(count, 2),
-                  "cuboid": np.array([record["cuboid"] for record in records]).reshape(count, 8, 3),
-                  "cuboid_centroid": np.array([record["cuboid_centroid"] for record in records]).reshape(count, 3),
+                  "visibility": stacked("visibility", ()), "projected_centroid": stacked("projected_centroid", (2,)),
+                  "cuboid": stacked("cuboid", (8, 3)), "cuboid_centroid": stacked("cuboid_centroid", (3,)),
                   "depth_path": Path(f"{prefix}.depth.png"), "seg_path": seg_path}
         if depth:
             extras["depth"] = read_depth(extras["depth_path"], DEPTH_UNITS_PER_METRE)

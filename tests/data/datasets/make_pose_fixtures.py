@@ -269,7 +269,8 @@ def make_fat(root: Path = FAT) -> None:
         exported = []
         for name in names:
             _, stored, dimensions = fat_model_transform(name)
-            exported.append({"class": f"{name}_16k", "segmentation_class_id": FAT_OBJECTS[name]["segmentation_class_id"],
+            exported.append({"class": f"{name}_16k",
+                             "segmentation_class_id": FAT_OBJECTS[name]["segmentation_class_id"],
                              "fixed_model_transform": stored, "cuboid_dimensions": dimensions.round(4).tolist()})
         folder = root / scene
         write_text_atomically(folder / "_object_settings.json", json.dumps(
