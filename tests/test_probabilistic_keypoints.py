@@ -196,7 +196,7 @@ def test_render_train_evaluate_and_estimate_end_to_end(tmp_path):
 
     mesh = write_demo_object(tmp_path / "mesh")
     out = tmp_path / "run"
-    overrides = {"views": 40, "validation_views": 16, "test_images": 8, "filters": 8, "input_size": 64,
+    overrides = {"views": 40, "validation_views": 16, "test_images": 8, "lift_images": 6, "filters": 8, "input_size": 64,
                  "num_keypoints": 6, "dilations": (1, 2), "pairs": 2, "checkpoint_every": 10, "sample_every": 10,
                  "precision": "float32"}
     job = ProbabilisticTraining(mesh=mesh, mesh_scale=0.001, out=out, steps=20, workers=1, progress=False,
@@ -207,7 +207,9 @@ def test_render_train_evaluate_and_estimate_end_to_end(tmp_path):
     for name in ("clean", "occluded"):
         assert evaluation[name]["pnp"]["count"] == 8 and evaluation[name]["weighted_pnp"]["count"] == 8
         assert 0.0 <= evaluation[name]["calibration_scaled"]["observed"]["1sigma"] <= 1.0
-    assert (out / run_files.CALIBRATION_PNG).stat().st_size > 0
+    assert (out / run_files.CALIBRATION_PNG).stat().st_size > 0 and (out / run_files.EXAMPLES_PNG).stat().st_size > 0
+    saved = json.loads((out / run_files.KEYPOINTS_FILE).read_text())
+    assert saved["method"] == "triangulate" and np.asarray(saved["targets"]).shape == (6, 3)
     estimator = ProbabilisticKeypointPose6D(out, np.array([[572.4, 0, 325.3], [0, 573.6, 242.0], [0, 0, 1]]))
     keypoints, covariances = estimator.detect(np.zeros((480, 640, 3), np.uint8), (300, 200, 360, 260))
     assert keypoints.points.shape == (6, 2) and np.all(np.linalg.eigvalsh(covariances) > 0)

@@ -182,8 +182,9 @@ def test_tiny_training_lowers_the_loss_and_the_pipeline_reads_the_run(tmp_path):
     assert prediction.theta.shape == (2, 3)
     with pytest.raises(ValueError, match="image"):
         classify(np.zeros((4, 4, 2), np.uint8))
-    # the same settings resume (nothing left to do); different ones are refused
-    train_stn(STNTraining(out=out, steps=60, batch_size=32, progress=False, overrides=overrides))
+    # the same settings resume (nothing left to do, the training figures are kept); different ones are refused
+    again = train_stn(STNTraining(out=out, steps=60, batch_size=32, progress=False, overrides=overrides))
+    assert again["final_losses"] == summary["final_losses"] and again["test_accuracy"] == summary["test_accuracy"]
     with pytest.raises(ValueError, match="transformer"):
         train_stn(STNTraining(out=out, steps=60, transformer=False, progress=False, overrides=overrides))
 

@@ -15,10 +15,12 @@ _OCCLUSION = {"train_occlusion": 0.5, "test_occluders": 3, "occluder_size": (0.3
 CONFIGS: dict[str, dict] = {
     # About 15 minutes on 2 CPU cores (docs/probabilistic_keypoints.md): KeypointNet's quick network,
     # fewer views and steps.
-    "quick": {**_NETWORK, **_OCCLUSION, "views": 2000, "validation_views": 200, "test_images": 200, "steps": 2500,
+    "quick": {**_NETWORK, **_OCCLUSION, "views": 2000, "validation_views": 200, "test_images": 200, "lift_images": 200,
+              "lifting": "triangulate", "steps": 2500,
               "pairs": 8, "learning_rate": 5e-3, "nll_weight": 0.1, "checkpoint_every": 500, "sample_every": 500},
     # KeypointNet's quick schedule (5,000 steps, 4,000 views) with the Gaussian head.
-    "full": {**_NETWORK, **_OCCLUSION, "views": 4000, "validation_views": 300, "test_images": 400, "steps": 5000,
+    "full": {**_NETWORK, **_OCCLUSION, "views": 4000, "validation_views": 300, "test_images": 400, "lift_images": 300,
+             "lifting": "triangulate", "steps": 5000,
              "pairs": 8, "learning_rate": 5e-3, "nll_weight": 0.1, "checkpoint_every": 500, "sample_every": 500},
 }
 #: Settings that must not change when a run is resumed.

@@ -6,11 +6,13 @@
     RUN_DIR/config.json        input_size, margin (crop side = margin x longer box side), downsample, mesh, settings
     RUN_DIR/model.keras        the network (loaded in Keras safe mode)
     RUN_DIR/gaussian_keypoints.json
-                               points_model (N, 3) metres (object frame; the farthest-point keypoints),
-                               covariance_scale (the factor fitted on validation views, >= 0)
+                               points_model (N, 3) metres (object frame; triangulated, or the targets),
+                               targets (N, 3) the farthest-point keypoints trained on, method,
+                               covariance_scale (the factor fitted on validation views, > 0)
     RUN_DIR/metrics.json       training summary
     RUN_DIR/evaluation.json    calibration and PnP (plain vs covariance-weighted) on held-out clean and occluded views
     RUN_DIR/calibration.png    observed vs expected coverage of the k-sigma ellipses
+    RUN_DIR/occluded_examples.png  occluded test crops with the keypoints and their 2-sigma ellipses
     RUN_DIR/views_*.npz        rendered views (training, validation) and test crops, reused on resume
 
 Every reader raises ``ValueError`` naming the file and what is missing or malformed.
@@ -32,6 +34,7 @@ KEYPOINTS_FILE = "gaussian_keypoints.json"
 METRICS_FILE = "metrics.json"
 EVALUATION_FILE = "evaluation.json"
 CALIBRATION_PNG = "calibration.png"
+EXAMPLES_PNG = "occluded_examples.png"
 #: Keys of ``config.json`` that the pipeline reads.
 PIPELINE_CONFIG_KEYS = ("input_size", "margin", "downsample")
 #: Files that mark a directory as a probabilistic-keypoints run.
@@ -84,12 +87,15 @@ def read_config(run_dir: str | Path) -> dict[str, Any]:
     return data
 
 
-def write_keypoints(run_dir: str | Path, points_model, covariance_scale: float = 1.0) -> Path:
-    """Writes ``gaussian_keypoints.json``: ``points_model (N, 3)`` metres and the covariance scale."""
+def write_keypoints(run_dir: str | Path, points_model, covariance_scale: float = 1.0, targets=None,
+                    method: str = "targets") -> Path:
+    """Writes ``gaussian_keypoints.json``: ``points_model (N, 3)`` metres (what PnP uses), the covariance
+    scale, optionally the ``targets (N, 3)`` the network was trained on, and how the points were obtained."""
     points_model = as_array(points_model, "points_model", (3,))
     if not (np.isfinite(covariance_scale) and covariance_scale > 0):
         raise ValueError(f"covariance_scale: expected a positive factor, got {covariance_scale}")
-    data = {"points_model": points_model.tolist(), "units": "metres", "covariance_scale": float(covariance_scale)}
+    data = {"points_model": points_model.tolist(), "units": "metres", "covariance_scale": float(covariance_scale),
+            "method": str(method), "targets": None if targets is None else as_array(targets, "targets", (3,)).tolist()}
     return write_json_atomically(path_of(run_dir, KEYPOINTS_FILE), data, indent=2)
 
 
@@ -111,6 +117,13 @@ def write_json(run_dir: str | Path, name: str, data: dict[str, Any]) -> Path:
     if name not in (METRICS_FILE, EVALUATION_FILE):
         raise ValueError(f"name: expected {METRICS_FILE} or {EVALUATION_FILE}, got {name!r}")
     return write_json_atomically(path_of(run_dir, name), data, indent=2)
+
+
+def read_metrics(run_dir: str | Path) -> dict[str, Any] | None:
+    """``metrics.json`` of an earlier invocation, ``None`` when there is none (``ValueError`` naming the
+    file when it is not a JSON object)."""
+    path = path_of(run_dir, METRICS_FILE)
+    return load_json_object(path) if path.is_file() else None
 
 
 def read_model(run_dir: str | Path):

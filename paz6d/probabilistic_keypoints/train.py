@@ -10,7 +10,9 @@ coordinate loss + depth-code loss, plus ``nll_weight`` × the Gaussian NLL (:fun
 crop pixels) of the projected farthest-point keypoints.
 
 After training, one scale factor of the covariances is fitted on held-out validation views (the
-median squared Mahalanobis distance made ``2 ln 2``, that of a calibrated 2D Gaussian), and
+median squared Mahalanobis distance made ``2 ln 2``, that of a calibrated 2D Gaussian), the 3D keypoints
+PnP uses are triangulated from the network's keypoints on unseen whole images cut as at inference (as
+KeypointNet does: ``lifting="triangulate"``; ``"targets"`` uses the farthest-point keypoints), and
 :func:`evaluate_run` scores held-out whole test images, clean and occluded: calibration (the fraction of
 true keypoints inside the 1σ/2σ ellipses, :mod:`evaluation.calibration`) and ADD recall at 0.1 d with
 plain RANSAC-EPnP + LM and with covariance-weighted PnP (:func:`paz6d.backend.pnp.solve_pnp_weighted`).
@@ -30,6 +32,7 @@ from evaluation.calibration import ellipse_coverage, mahalanobis_squared, plot_c
 from evaluation.pose_errors import add_error, rotation_error_deg, translation_error
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.keypointnet.config import resolve_precision
+from paz6d.keypointnet.keypoints import triangulate_keypoints
 from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
 from paz6d.probabilistic_keypoints import run_dir as run_files
 from paz6d.probabilistic_keypoints.config import (FIXED_SETTINGS, RANSAC_THRESHOLD, ROBUST_SCALE, SUPERVISED_WEIGHTS,
@@ -38,9 +41,13 @@ from paz6d.processors.predict import predict_in_batches
 from paz6d.synthesis.augment import share_generator
 from paz6d.synthesis.occluders import PolygonOccluders
 
-#: Seed offsets of the validation views and of the test images (disjoint from the training views).
+#: Seed offsets of the validation views, of the lifting images and of the test images (disjoint from the
+#: training views and from each other).
 VALIDATION_SEED_OFFSET = 10_000
+LIFT_SEED_OFFSET = 20_000
 TEST_SEED_OFFSET = 30_000
+LIFTINGS = ("triangulate", "targets")
+EXAMPLE_COUNT = 8  # occluded test crops drawn in occluded_examples.png
 
 
 def _canonical(value):
@@ -171,23 +178,27 @@ def score_poses(poses, T_gt: np.ndarray, vertices: np.ndarray, object_diameter: 
             "failures": int((~found).sum()), "count": len(poses)}
 
 
-def evaluate_run(model, points_model: np.ndarray, covariance_scale: float, crops: dict, settings: dict,
-                 vertices: np.ndarray, object_diameter: float, seed: int, margin: float,
-                 png: Path | None = None) -> dict:
+def evaluate_run(model, points_model: np.ndarray, targets: np.ndarray, covariance_scale: float, crops: dict,
+                 settings: dict, vertices: np.ndarray, object_diameter: float, seed: int, margin: float,
+                 png: Path | None = None, examples: Path | None = None) -> dict:
     """Calibration and plain vs covariance-weighted PnP on test crops, clean and occluded.
 
     Args:
+        points_model: ``(N, 3)`` metres, the 3D keypoints PnP uses.
+        targets: ``(N, 3)`` metres, the keypoints the network was trained on: their projections are the
+            true keypoints of the calibration.
         crops: ``{"images": (V, S, S, 3) uint8, "K": (V, 3, 3), "T_model2cam": (V, 4, 4)}`` cut from
             whole test images as at inference (:func:`paz6d.keypointnet.train.inference_crops`).
         covariance_scale: factor applied to the predicted covariances (fitted on validation views).
-        png: where to draw the calibration curves.
+        png: where to draw the calibration curves; examples: where to draw occluded test crops with
+            their keypoints and 2σ ellipses.
     """
     clean = crops["images"]
     occluded = occlude(clean, occluder(settings, 1.0, margin), seed, 2)
     report, curves = {"covariance_scale": round(covariance_scale, 4), "test_views": len(clean)}, {}
     for name, images in (("clean", clean), ("occluded", occluded)):
         means, covariances = predict_gaussians(model, images.astype(np.float32))
-        truth = projected_keypoints(points_model, crops["K"], crops["T_model2cam"])
+        truth = projected_keypoints(targets, crops["K"], crops["T_model2cam"])
         raw = ellipse_coverage(truth, means, covariances)
         scaled = ellipse_coverage(truth, means, covariance_scale * covariances)
         curves[f"{name}, raw"], curves[f"{name}, scaled ×{covariance_scale:.2f}"] = raw, scaled
@@ -202,6 +213,9 @@ def evaluate_run(model, points_model: np.ndarray, covariance_scale: float, crops
                                vertices, object_diameter),
             "weighted_pnp": score_poses(pnp_poses(points_model, means, covariance_scale * covariances, crops["K"], True),
                                         crops["T_model2cam"], vertices, object_diameter)}
+        if examples is not None and name == "occluded":
+            draw_gaussians(images[:EXAMPLE_COUNT], means[:EXAMPLE_COUNT], covariance_scale * covariances[:EXAMPLE_COUNT],
+                           examples)
     if png is not None:
         plot_calibration(curves, png, "probabilistic keypoints: held-out test crops")
     return report
@@ -223,30 +237,49 @@ def _cached_views(path: Path, render):
     return views
 
 
+def _cached_test_crops(path: Path, job: ProbabilisticTraining, settings: dict, sampling, count: int, seed: int) -> dict:
+    """Crops of ``count`` freshly rendered whole images cut as at inference (``images``, ``K``,
+    ``T_model2cam``), cached in ``path``."""
+    from paz6d.keypointnet.views import render_test_images
+
+    crops = read_cache(path, ("images", "K", "T_model2cam"))
+    if crops is None:
+        whole = render_test_images(job.mesh, count, seed, sampling, job.mesh_scale, job.workers, progress=job.progress)
+        images, K, T = inference_crops(whole, sampling.camera.K, sampling.margin, settings["input_size"])
+        save_npz_atomically(path, images=images, K=K, T_model2cam=T)
+        crops = {"images": images, "K": K, "T_model2cam": T}
+    return crops
+
+
+def draw_gaussians(images: np.ndarray, means: np.ndarray, covariances: np.ndarray, path: Path) -> Path:
+    """A PNG of crops ``(V, S, S, 3)`` (enlarged ×2) with each keypoint's mean and 2σ ellipse, 4 per row."""
+    import cv2
+
+    from paz6d.backend.draw import image_grid, keypoint_colors
+    from paz6d.backend.image import save_image
+
+    colours = keypoint_colors(means.shape[1])
+    tiles = []
+    for picture, uv, covariance in zip(np.asarray(images, np.uint8), means, covariances):
+        picture = cv2.resize(picture, None, fx=2, fy=2, interpolation=cv2.INTER_LINEAR)
+        for point, matrix, colour in zip(uv, covariance, colours):
+            values, vectors = np.linalg.eigh(matrix)
+            axes = tuple(min(500, int(round(2 * 2 * math.sqrt(max(value, 1e-6))))) for value in values[::-1])
+            angle = math.degrees(math.atan2(vectors[1, -1], vectors[0, -1]))
+            centre = tuple(int(round(2 * value)) for value in point)
+            colour = tuple(int(c) for c in colour)
+            cv2.ellipse(picture, centre, axes, angle, 0, 360, colour, 1)
+            cv2.circle(picture, centre, 2, colour, -1)
+        tiles.append(picture)
+    return save_image(path, image_grid(tiles, columns=4))
+
+
 def _sample_drawer(images: np.ndarray):
-    """``sample_callback(model, step, path)``: predicted keypoints with their 2σ ellipses (scaled ×4 crops)."""
+    """``sample_callback(model, step, path)``: predicted keypoints with their 2σ ellipses (unscaled)."""
 
     def draw(model, step, path):
-        import cv2
-
-        from paz6d.backend.draw import image_grid, keypoint_colors
-        from paz6d.backend.image import save_image
-
         means, covariances = predict_gaussians(model, images.astype(np.float32))
-        colours = keypoint_colors(means.shape[1])
-        tiles = []
-        for picture, uv, covariance in zip(images.astype(np.uint8), means, covariances):
-            picture = cv2.resize(picture, None, fx=2, fy=2, interpolation=cv2.INTER_LINEAR)
-            for point, matrix, colour in zip(uv, covariance, colours):
-                values, vectors = np.linalg.eigh(matrix)
-                axes = tuple(int(round(2 * 2 * math.sqrt(max(value, 1e-6)))) for value in values[::-1])
-                angle = math.degrees(math.atan2(vectors[1, -1], vectors[0, -1]))
-                centre = tuple(int(round(2 * value)) for value in point)
-                cv2.ellipse(picture, centre, (min(axes[0], 500), min(axes[1], 500)), angle, 0, 360,
-                            tuple(int(c) for c in colour), 1)
-                cv2.circle(picture, centre, 2, tuple(int(c) for c in colour), -1)
-            tiles.append(picture)
-        save_image(path, image_grid(tiles, columns=4))
+        draw_gaussians(images, means, covariances, path)
 
     return draw
 
@@ -261,7 +294,7 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
 
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
-    from paz6d.keypointnet.views import ViewSampling, render_test_images, render_views, training_batch
+    from paz6d.keypointnet.views import ViewSampling, render_views, training_batch
     from paz6d.probabilistic_keypoints import model as pk
     from paz6d.training.trainer import Trainer
 
@@ -282,14 +315,8 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
     train_views = _cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
     validation_views = _cached_views(run_files.views_path(out, "val"),
                                      render(settings["validation_views"], job.seed + VALIDATION_SEED_OFFSET))
-    test_path = run_files.views_path(out, "test")
-    test = read_cache(test_path, ("images", "K", "T_model2cam"))
-    if test is None:
-        whole = render_test_images(job.mesh, settings["test_images"], job.seed + TEST_SEED_OFFSET, sampling,
-                                   job.mesh_scale, job.workers, progress=job.progress)
-        images, K, T = inference_crops(whole, sampling.camera.K, sampling.margin, settings["input_size"])
-        save_npz_atomically(test_path, images=images, K=K, T_model2cam=T)
-        test = {"images": images, "K": K, "T_model2cam": T}
+    test = _cached_test_crops(run_files.views_path(out, "test"), job, settings, sampling, settings["test_images"],
+                              job.seed + TEST_SEED_OFFSET)
     render_seconds = time.perf_counter() - started
 
     keypoints_model = supervised_keypoints(mesh, settings["num_keypoints"], job.seed)
@@ -311,6 +338,7 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
     trainer = Trainer(model, optimizer, _loss_function(settings, keypoints_model, object_diameter), make_batch, out, settings["steps"],
                       checkpoint_every=settings["checkpoint_every"], log_every=10, sample_every=settings["sample_every"],
                       sample_callback=_sample_drawer(sample_images), progress=job.progress, prefetch=1)
+    previous_metrics = run_files.read_metrics(out)
     training = trainer.fit()
     pk.save_model(model, run_files.path_of(out, run_files.MODEL_FILE))
     train_seconds = time.perf_counter() - started - render_seconds
@@ -319,15 +347,26 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
     images = occlude(images, training_occluders, job.seed, 3)  # occluded as often as in training
     means, covariances = predict_gaussians(model, images.astype(np.float32))
     scale = fit_covariance_scale(projected_keypoints(keypoints_model, K, T), means, covariances)
-    run_files.write_keypoints(out, keypoints_model, scale)
-    evaluation = evaluate_run(model, keypoints_model, scale, test, settings, vertices, object_diameter, job.seed,
-                              sampling.margin, run_files.path_of(out, run_files.CALIBRATION_PNG))
+    if settings["lifting"] not in LIFTINGS:
+        raise ValueError(f"lifting: expected one of {LIFTINGS}, got {settings['lifting']!r}")
+    points_model = keypoints_model
+    if settings["lifting"] == "triangulate":  # as KeypointNet: absorbs the network's 2D biases into the 3D model
+        lift = _cached_test_crops(run_files.views_path(out, "lift"), job, settings, sampling,
+                                  settings["lift_images"], job.seed + LIFT_SEED_OFFSET)
+        lift_means, _ = predict_gaussians(model, lift["images"].astype(np.float32))
+        points_model, _ = triangulate_keypoints(lift_means, lift["K"], lift["T_model2cam"])
+    run_files.write_keypoints(out, points_model, scale, keypoints_model, settings["lifting"])
+    evaluation = evaluate_run(model, points_model, keypoints_model, scale, test, settings, vertices, object_diameter,
+                              job.seed, sampling.margin, run_files.path_of(out, run_files.CALIBRATION_PNG),
+                              run_files.path_of(out, run_files.EXAMPLES_PNG))
     run_files.write_json(out, run_files.EVALUATION_FILE, evaluation)
-    summary = {"config": job.config, "steps": training.final_step, "precision": precision,
-               "render_seconds": round(render_seconds, 1), "train_seconds": round(train_seconds, 1),
-               "total_seconds": round(time.perf_counter() - started, 1), "final_losses": training.metrics,
+    training_figures = {"render_seconds": round(render_seconds, 1), "train_seconds": round(train_seconds, 1),
+                        "total_seconds": round(time.perf_counter() - started, 1), "final_losses": training.metrics,
+                        "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1)}
+    if training.final_step == training.start_step and previous_metrics:  # a finished run re-run: evaluation only
+        training_figures = {key: previous_metrics.get(key) for key in training_figures}
+    summary = {"config": job.config, "steps": training.final_step, "precision": precision, **training_figures,
                "covariance_scale": round(scale, 4),
-               "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1),
                "evaluation": {name: {"calibration_scaled": evaluation[name]["calibration_scaled"]["observed"],
                                      "calibration_raw": evaluation[name]["calibration_raw"]["observed"],
                                      "pnp_add_recall_0.1d": evaluation[name]["pnp"]["add_recall_0.1d"],

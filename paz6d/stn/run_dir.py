@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from paz6d.backend.checks import integer_field
-from paz6d.backend.files import load_json, load_json_object, write_json_atomically
+from paz6d.backend.files import load_json_object, write_json_atomically
 
 CLASSIFIER_FILE = "classifier.json"
 MODEL_FILE = "model.keras"
@@ -102,12 +102,11 @@ def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
     return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
 
 
-def read_metrics(run_dir: str | Path) -> dict[str, Any]:
-    """The training summary (raises ``ValueError`` naming the file when missing or corrupt)."""
+def read_metrics(run_dir: str | Path) -> dict[str, Any] | None:
+    """The training summary of an earlier invocation, ``None`` when there is none (``ValueError`` naming
+    the file when it is not a JSON object)."""
     path = Path(run_dir) / METRICS_FILE
-    if not path.is_file():
-        raise ValueError(f"{path}: file not found (the run has not finished)")
-    return load_json(path)
+    return load_json_object(path) if path.is_file() else None
 
 
 def validate(run_dir: str | Path) -> dict[str, Any]:

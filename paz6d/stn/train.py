@@ -55,28 +55,29 @@ def canvas_settings(settings: dict) -> DigitCanvas:
                        int(settings["fragment_size"]))
 
 
-def _tile(image: np.ndarray) -> np.ndarray:
-    """``(h, w)`` values in [0, 1] -> an enlarged RGB uint8 tile."""
+def _tile(image: np.ndarray, factor: int) -> np.ndarray:
+    """``(h, w)`` values in [0, 1] -> an RGB uint8 tile enlarged ``factor`` times (nearest neighbour)."""
     grey = np.round(np.clip(image, 0.0, 1.0) * 255.0).astype(np.uint8)
-    grey = np.kron(grey, np.ones((PREVIEW_SCALE, PREVIEW_SCALE), np.uint8))
+    grey = np.kron(grey, np.ones((factor, factor), np.uint8))
     return np.repeat(grey[..., None], 3, axis=2)
 
 
 def draw_crops(model, images: np.ndarray, labels: np.ndarray, path: Path) -> Path:
-    """A PNG of canvases (left) and what the classifier saw (right: the transformer's crop), the
-    predicted class in the corner (green when right, red when wrong), 4 pairs per row."""
+    """A PNG of canvases (left) and what the classifier saw (right: the transformer's crop, enlarged to
+    the canvas's size), the predicted class in the corner (green when right, red when wrong), 4 pairs per row."""
     import cv2
 
     outputs = predict_in_batches(lambda batch: model(batch, training=False), images)
     crops = outputs["crop"][..., 0] if "crop" in outputs else images[..., 0]
     predicted = np.argmax(outputs["probabilities"], axis=-1)
-    canvas_side, crop_side = images.shape[1] * PREVIEW_SCALE, crops.shape[1] * PREVIEW_SCALE
+    crop_factor = max(1, round(PREVIEW_SCALE * images.shape[1] / crops.shape[1]))  # both about the same size
+    canvas_side, crop_side = images.shape[1] * PREVIEW_SCALE, crops.shape[1] * crop_factor
     side = max(canvas_side, crop_side)
     tiles = []
     for image, crop, label, guess in zip(images[..., 0], crops, labels, predicted):
         pair = np.full((side, 2 * side + 4, 3), 255, np.uint8)
-        pair[:canvas_side, :canvas_side] = _tile(image)
-        pair[:crop_side, side + 4:side + 4 + crop_side] = _tile(crop)
+        pair[:canvas_side, :canvas_side] = _tile(image, PREVIEW_SCALE)
+        pair[:crop_side, side + 4:side + 4 + crop_side] = _tile(crop, crop_factor)
         colour = (0, 200, 0) if guess == label else (230, 0, 0)
         cv2.putText(pair, CLASS_NAMES[int(guess)], (side + 8, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.6, colour, 2)
         tiles.append(pair)
@@ -147,14 +148,17 @@ def train_stn(job: STNTraining, digits: ClutteredDigits | None = None) -> dict:
                       checkpoint_every=settings["checkpoint_every"], log_every=10,
                       sample_every=settings["sample_every"], sample_callback=sample, progress=job.progress,
                       prefetch=2)
+    previous = run_files.read_metrics(job.out)
     training = trainer.fit()
     train_seconds = time.perf_counter() - started
     save_classifier(model, run_files.model_path(job.out))
     draw_crops(model, preview_images, preview_labels, run_files.crops_path(job.out))
-    summary = {"config": job.config, "transformer": job.transformer, "steps": training.final_step,
-               "batch_size": batch_size, "train_seconds": round(train_seconds, 1), "final_losses": training.metrics,
-               "parameters": int(model.count_params()),
-               **test_accuracy(model, data, int(settings["test_samples"]), job.seed),
+    figures = {"train_seconds": round(train_seconds, 1), "final_losses": training.metrics,
                "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1)}
+    if training.final_step == training.start_step and previous:  # a finished run re-run: keep its training figures
+        figures = {key: previous.get(key) for key in figures}
+    summary = {"config": job.config, "transformer": job.transformer, "steps": training.final_step,
+               "batch_size": batch_size, **figures, "parameters": int(model.count_params()),
+               **test_accuracy(model, data, int(settings["test_samples"]), job.seed)}
     run_files.write_metrics(job.out, summary)
     return summary
