@@ -31,6 +31,7 @@ from __future__ import annotations
 import csv
 import io
 import struct
+from array import array
 from pathlib import Path
 
 import numpy as np
@@ -203,7 +204,7 @@ def read_boxes(path: str | Path, label_index: dict[str, int]) -> dict:
     except OSError as error:
         raise ValueError(f"{path}: cannot read the Open Images box CSV ({error.strerror or error})") from None
     image_codes, source_codes, image_ids, sources = {}, {}, [], []
-    rows_image, rows_class, rows_source = [], [], []
+    rows_image, rows_class, rows_source = array("q"), array("q"), array("q")  # 8 bytes a row, not a Python int
     parts: dict[str, list[np.ndarray]] = {}
     with handle:
         reader = csv.reader(handle)
@@ -261,8 +262,8 @@ def read_boxes(path: str | Path, label_index: dict[str, int]) -> dict:
     columns = {name: np.concatenate(chunks) for name, chunks in parts.items()}
     count = len(rows_image)
     result = {"image_ids": image_ids, "sources": sources,
-              "image_codes": np.array(rows_image, dtype=np.int64), "class_ids": np.array(rows_class, dtype=np.int64),
-              "source_codes": np.array(rows_source, dtype=np.int64), "confidence": columns["Confidence"],
+              "image_codes": np.frombuffer(rows_image, dtype=np.int64), "class_ids": np.frombuffer(rows_class, dtype=np.int64),
+              "source_codes": np.frombuffer(rows_source, dtype=np.int64), "confidence": columns["Confidence"],
               "normalized": np.stack([columns[name] for name in ("XMin", "YMin", "XMax", "YMax")], axis=1).reshape(-1, 4)}
     for name in FLAG_COLUMNS:
         result[name] = columns[name].astype(np.int8) if name in columns else np.full(count, -1, dtype=np.int8)
