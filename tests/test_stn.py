@@ -226,5 +226,10 @@ def test_command_line_flags_and_errors(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
     assert cli.main(["train", "stn", "--out", str(tmp_path / "file")]) == 2
     assert "--out" in capsys.readouterr().err
+    assert cli.main(["train", "stn", "--out", str(tmp_path / "run"), "--crop-size", "8"]) == 2
+    assert "--crop-size: expected at least 16 pixels, got 8" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         cli.main(["train", "stn", "--out", str(tmp_path / "run"), "--config", "huge"])
+    from paz6d.stn.config import STNTraining
+
+    assert STNTraining(out=tmp_path, crop_size=48).settings()["crop_size"] == 48

@@ -35,6 +35,8 @@ class STNTraining:
     seed: int = option(0, "seed of the initialisation and of every canvas")
     steps: int | None = option(None, "training steps (default: the config's)")
     batch_size: int | None = option(None, "canvases per step (default: the config's)")
+    crop_size: int | None = option(None, "side in pixels of the transformer's output, what the classifier sees "
+                                         "(default: the config's)")
     progress: bool = option(True, "progress bar")
     overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny run in tests)
 
@@ -43,7 +45,7 @@ class STNTraining:
         self.settings()
 
     def settings(self) -> dict:
-        """The config's settings with ``overrides``, ``steps`` and ``batch_size`` applied."""
+        """The config's settings with ``overrides``, ``steps``, ``batch_size`` and ``crop_size`` applied."""
         if self.config not in CONFIGS:
             raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
         unknown = sorted(set(self.overrides) - set(CONFIGS[self.config]))
@@ -56,4 +58,8 @@ class STNTraining:
                 if int(value) <= 0:
                     raise ValueError(f"{name}: expected a positive integer, got {value}")
                 settings[name] = int(value)
+        if self.crop_size is not None:
+            if int(self.crop_size) < 16:
+                raise ValueError(f"crop_size: expected at least 16 pixels, got {self.crop_size}")
+            settings["crop_size"] = int(self.crop_size)
         return settings
