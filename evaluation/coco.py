@@ -29,9 +29,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import orjson
 
 from evaluation import coco_masks
-from paz6d.backend.files import load_json
+from paz6d.backend.files import load_json, read_input_bytes
 
 STAT_NAMES = ("AP", "AP50", "AP75", "AP_small", "AP_medium", "AP_large",
               "AR1", "AR10", "AR100", "AR_small", "AR_medium", "AR_large")
@@ -55,10 +56,21 @@ def _is_box(value) -> bool:
     return isinstance(value, list) and len(value) == 4 and all(_is_number(v) for v in value)
 
 
+def _parse_json(path: Path):
+    """The file's JSON, parsed by ``orjson`` (half the time of the standard parser on a large COCO
+    file); a file orjson refuses (malformed, a byte-order mark, NaN, integers beyond 64 bits) is read
+    again by :func:`paz6d.backend.files.load_json`, which takes what the standard parser takes and
+    names any problem."""
+    try:
+        return orjson.loads(read_input_bytes(path))
+    except orjson.JSONDecodeError:
+        return load_json(path)
+
+
 def _read_json(path: str | Path, expected: type, what: str):
     path = Path(path)
     try:
-        data = load_json(path)
+        data = _parse_json(path)
     except ValueError as error:  # missing, a folder, not UTF-8, malformed, nested too deeply, huge numbers
         raise ValueError(f"{error}; expected {what}") from None
     if not isinstance(data, expected):
@@ -664,4 +676,6 @@ def evaluate_files(ground_truth_path: str | Path, results_path: str | Path, iou_
     with _cyclic_collector_paused():
         ground_truth = CocoGroundTruth.from_file(ground_truth_path)
         detections = CocoDetections.from_file(results_path, ground_truth)
-        return evaluate(ground_truth, detections, iou_type)
+        evaluation = evaluate(ground_truth, detections, iou_type)
+        del ground_truth, detections  # freed before the collector resumes, so it does not walk them once more
+    return evaluation

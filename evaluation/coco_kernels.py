@@ -444,18 +444,24 @@ def areas_and_boxes(heights, starts, ends, offsets):
     areas = np.zeros(n, np.int64)
     boxes = np.zeros((n, 4))
     for i in range(n):
-        if offsets[i + 1] == offsets[i]:
+        first, stop = offsets[i], offsets[i + 1]
+        if stop == first:
             continue
         height = heights[i]
-        x_min, y_min, x_max, y_max = np.int64(1) << 62, np.int64(1) << 62, np.int64(-1), np.int64(-1)
         area = 0
-        for r in range(offsets[i], offsets[i + 1]):
+        for r in range(first, stop):
             area += ends[r] - starts[r]
-            x_first, y_first = starts[r] // height, starts[r] % height
-            x_last, y_last = (ends[r] - 1) // height, (ends[r] - 1) % height
-            if x_last > x_first:
-                y_first, y_last = 0, height - 1
-            x_min, x_max = min(x_min, x_first), max(x_max, x_last)
+        # runs are sorted: the columns span from the first run's to the last run's; rows need every run
+        # until one wraps into the next column (then they span the full height)
+        x_min, x_max = starts[first] // height, (ends[stop - 1] - 1) // height
+        y_min, y_max = height - 1, 0
+        for r in range(first, stop):
+            x_first = starts[r] // height
+            y_first = starts[r] - x_first * height
+            y_last = y_first + (ends[r] - 1 - starts[r])
+            if y_last >= height:
+                y_min, y_max = 0, height - 1
+                break
             y_min, y_max = min(y_min, y_first), max(y_max, y_last)
         areas[i] = area
         boxes[i, 0], boxes[i, 1] = x_min, y_min

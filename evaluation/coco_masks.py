@@ -154,7 +154,7 @@ def _string_runs(strings: Sequence[str | bytes], heights: np.ndarray, widths: np
 def _characters(strings: Sequence[str | bytes], source: str) -> tuple[np.ndarray, np.ndarray]:
     """The strings' characters laid end to end (uint8) and where each string ends (exclusive)."""
     try:
-        if all(type(s) is str for s in strings):
+        if set(map(type, strings)) <= {str}:
             text = "".join(strings).encode("ascii")
             lengths = np.fromiter(map(len, strings), dtype=np.int64, count=len(strings))
         else:
@@ -377,11 +377,12 @@ def _rle_fields(entries: list, rows: np.ndarray, heights: Sequence, widths: Sequ
     if not entries:
         return np.zeros((0, 2), dtype=np.int64), []
     try:
-        sizes = np.array(list(map(_SIZE, entries)), dtype=object).reshape(len(entries), -1)
+        size_list = list(map(_SIZE, entries))
         counts = list(map(_COUNTS, entries))
-        if sizes.shape[1] != 2 or not set(map(type, sizes.ravel().tolist())) <= {int}:
+        if not (set(map(type, size_list)) <= {list, tuple} and set(map(len, size_list)) == {2}
+                and set(map(type, itertools.chain.from_iterable(size_list))) <= {int}):
             return None
-        sizes = sizes.astype(np.int64)
+        sizes = np.array(size_list, dtype=np.int64)
     except (KeyError, TypeError, ValueError, OverflowError):
         return None
     given = _given_sizes(rows, heights, widths)
