@@ -14,6 +14,7 @@ from paz6d.backend.tensorflow_guard import import_tensorflow
 from paz6d.hrnet import run_dir as run_files
 from paz6d.hrnet.config import HRNetTraining
 from paz6d.hrnet.heatmaps import gaussian_heatmaps
+from paz6d.run_dirs import is_run_dir
 
 import_tensorflow()  # the renderer shares this process with TensorFlow (workers=0)
 
@@ -157,7 +158,7 @@ def test_corrupt_run_directories_are_clear_errors(trained, tmp_path):
     (run / "config.json").write_text(json.dumps({"seed": 0}))
     with pytest.raises(ValueError, match="config.json: missing field 'mesh_path'"):
         run_files.read_config(run)
-    assert run_files.is_run_dir(job.out) and not run_files.is_run_dir(tmp_path)
+    assert is_run_dir(job.out, "hrnet") and not is_run_dir(tmp_path, "hrnet")
 
 
 def test_settings_and_cli_errors(mesh_path, tmp_path, capsys):

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from paz6d.probabilistic_keypoints import run_dir as run_files
+from paz6d.run_dirs import is_run_dir
 from paz6d.probabilistic_keypoints.model import (CholeskyFromMaps, ProbabilisticKeypointsError,
                                                  build_probabilistic_keypointnet, covariance_from_cholesky,
                                                  gaussian_nll, gaussian_nll_terms, inverse_softplus, load_model,
@@ -151,7 +152,7 @@ def test_pipeline_steps_covariances_in_image_pixels_and_a_pose(tiny_run):
 
 
 def test_corrupt_run_directories_are_reported_by_file(tiny_run, tmp_path):
-    assert run_files.validate(tiny_run) == tiny_run and run_files.is_run_dir(tiny_run)
+    assert run_files.validate(tiny_run) == tiny_run and is_run_dir(tiny_run, "probabilistic-keypoints")
     with pytest.raises(ValueError, match="is not a directory"):
         run_files.validate(tmp_path / "absent")
     (tmp_path / "empty").mkdir()

@@ -10,7 +10,7 @@ import pytest
 from paz6d.aae import run_dir as aae_run
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run
-from paz6d.run_dirs import method_of
+from paz6d.run_dirs import RUN_DIR_MODULES, is_run_dir, method_of
 
 HULL = np.array([[x, y, z] for x in (-0.04, 0.04) for y in (-0.03, 0.03) for z in (-0.02, 0.02)])
 
@@ -46,7 +46,7 @@ def test_aae_run_directory_round_trip(tmp_path):
     assert geometry["diameter"] == 0.1
     assert len(aae_run.read_codebook(folder)) == 2
     assert aae_run.validate(folder) == folder
-    assert aae_run.is_run_dir(folder) and not keypointnet_run.is_run_dir(folder)
+    assert is_run_dir(folder, "aae") and not is_run_dir(folder, "keypointnet")
 
 
 def test_aae_run_directory_errors_name_the_file(tmp_path):
@@ -107,3 +107,11 @@ def test_method_of_tells_the_run_directories_apart(tmp_path):
     both = write_keypointnet_run(tmp_path / "aae")
     with pytest.raises(ValueError, match="matches several methods"):
         method_of(both)
+
+
+@pytest.mark.parametrize("method", sorted(RUN_DIR_MODULES))
+def test_each_method_is_recognised_by_its_own_marker_files_only(tmp_path, method):
+    for name in RUN_DIR_MODULES[method].MARKER_FILES:
+        (tmp_path / name).write_text("{}")
+    assert method_of(tmp_path) == method
+    assert [other for other in RUN_DIR_MODULES if is_run_dir(tmp_path, other)] == [method]

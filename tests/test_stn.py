@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from paz6d.run_dirs import is_run_dir
 from paz6d.stn import run_dir as run_files
 from paz6d.stn.model import (IDENTITY, AffineFromParameters, BilinearSampler, STNModelError, affine_sample,
                              build_classifier, load_classifier, save_classifier, tf, theta_to_pixel_matrix)
@@ -215,7 +216,7 @@ def test_corrupt_run_directories_are_reported_by_file(tmp_path):
         path.write_text(text)
         with pytest.raises(ValueError, match=message):
             run_files.read_classifier(tmp_path)
-    assert run_files.is_run_dir(tmp_path) and not run_files.is_run_dir(tmp_path / "nothing")
+    assert is_run_dir(tmp_path, "stn") and not is_run_dir(tmp_path / "nothing", "stn")
 
 
 def test_command_line_flags_and_errors(tmp_path, capsys):

@@ -42,10 +42,6 @@ OBJECT_KEYS = ("hull_points", "surface_points", "diameter", "vertices")
 MARKER_FILES = (CONFIG_FILE, CODEBOOK_FILE)
 
 
-def is_run_dir(run_dir: str | Path) -> bool:
-    """True when ``run_dir`` holds an AAE run's configuration and codebook."""
-    return all((Path(run_dir) / name).is_file() for name in MARKER_FILES)
-
 
 def _directory(run_dir: str | Path) -> Path:
     run_dir = Path(run_dir)

@@ -39,10 +39,6 @@ REQUIRED_FILES = (CONFIG_FILE, MODEL_FILE, KEYPOINTS_FILE)
 MARKER_FILES = (CONFIG_FILE, KEYPOINTS_FILE)
 
 
-def is_run_dir(run_dir: str | Path) -> bool:
-    """True when ``run_dir`` holds a KeypointNet run's configuration and 3D keypoints."""
-    return all((Path(run_dir) / name).is_file() for name in MARKER_FILES)
-
 
 def _read_json(path: Path, fields: tuple[str, ...]) -> dict:
     if not path.is_file():

@@ -43,10 +43,6 @@ MARKER_FILES = (CONFIG_FILE, KEYPOINTS_FILE)
 REQUIRED_FILES = (CONFIG_FILE, MODEL_FILE, KEYPOINTS_FILE)
 
 
-def is_run_dir(run_dir: str | Path) -> bool:
-    """True when ``run_dir`` holds a probabilistic-keypoints run's configuration and keypoints."""
-    return all((Path(run_dir) / name).is_file() for name in MARKER_FILES)
-
 
 def path_of(run_dir: str | Path, name: str) -> Path:
     """``run_dir / name`` for one of this module's file names."""

@@ -32,10 +32,6 @@ MARKER_FILES = (DETECTOR_FILE,)
 REQUIRED_FILES = (DETECTOR_FILE, MODEL_FILE)
 
 
-def is_run_dir(run_dir: str | Path) -> bool:
-    """True when ``run_dir`` holds an SSD run's ``detector.json``."""
-    return all((Path(run_dir) / name).is_file() for name in MARKER_FILES)
-
 
 def model_path(run_dir: str | Path) -> Path:
     """Where the network is (or will be) saved."""

@@ -33,10 +33,6 @@ MARKER_FILES = (CLASSIFIER_FILE,)
 REQUIRED_FILES = (CLASSIFIER_FILE, MODEL_FILE)
 
 
-def is_run_dir(run_dir: str | Path) -> bool:
-    """True when ``run_dir`` holds a spatial-transformer run's ``classifier.json``."""
-    return all((Path(run_dir) / name).is_file() for name in MARKER_FILES)
-
 
 def model_path(run_dir: str | Path) -> Path:
     """Where the network is (or will be) saved."""
