@@ -21,6 +21,7 @@ COMMANDS = {
                "emotion": ("paz6d.faces.emotion_command", "mini-Xception emotion classifier"),
                "ssd": ("paz6d.ssd.command", "SSD single-shot object detector"),
                "hrnet": ("paz6d.hrnet.command", "HRNet 2D keypoint heatmaps (keypoints of one object in a box)"),
+               "segmentation": ("paz6d.segmentation.command", "instance masks inside detection boxes (crop-then-segment U-Net)"),
                "stn": ("paz6d.stn.command", "spatial transformer digit classifier (cluttered digits)"),
                "probabilistic-keypoints": ("paz6d.probabilistic_keypoints.command",
                                            "KeypointNet keypoints with 2D Gaussian uncertainty (NLL), weighted PnP")},

@@ -8,6 +8,7 @@ from paz6d.aae import run_dir as aae_run_dir
 from paz6d.hrnet import run_dir as hrnet_run_dir
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.probabilistic_keypoints import run_dir as probabilistic_keypoints_run_dir
+from paz6d.segmentation import run_dir as segmentation_run_dir
 from paz6d.ssd import run_dir as ssd_run_dir
 from paz6d.stn import run_dir as stn_run_dir
 
@@ -15,7 +16,7 @@ from paz6d.stn import run_dir as stn_run_dir
 #: each names the files that mark its run directories in ``MARKER_FILES``.
 RUN_DIR_MODULES = {"aae": aae_run_dir, "keypointnet": keypointnet_run_dir, "ssd": ssd_run_dir,
                    "hrnet": hrnet_run_dir, "probabilistic-keypoints": probabilistic_keypoints_run_dir,
-                   "stn": stn_run_dir}
+                   "stn": stn_run_dir, "segmentation": segmentation_run_dir}
 
 
 def is_run_dir(run_dir: str | Path, method: str) -> bool:

@@ -18,6 +18,8 @@ from paz6d.faces.head_pose import HeadPose6D, draw_axes, yaw_pitch_roll_degrees
 from paz6d.hrnet.pipeline import HRNetKeypoints2D, HRNetPose6D
 from paz6d.keypointnet.pipeline import KeypointPose6D
 from paz6d.probabilistic_keypoints.pipeline import ProbabilisticKeypointPose6D
+from paz6d.segmentation.masks import blank_background
+from paz6d.segmentation.pipeline import DetectAndSegment, SegmentInstances
 from paz6d.ssd.pipeline import DetectSingleShot
 from paz6d.stn.pipeline import ClassifyDigit
 
@@ -25,3 +27,4 @@ __all__ = ["DetectAndEstimatePose6D", "DetectEmotion", "DetectSingleShot", "Emot
            "ImplicitPose6D",
            "KeypointPose6D", "available_cascades", "draw_axes", "yaw_pitch_roll_degrees"]
 __all__ += ["ClassifyDigit", "ProbabilisticKeypointPose6D"]
+__all__ += ["DetectAndSegment", "SegmentInstances", "blank_background"]

@@ -1,0 +1,119 @@
+"""The mask-head run directory: the only module that knows its file names and formats.
+
+``paz6d train segmentation`` writes, and :class:`~paz6d.segmentation.pipeline.SegmentInstances` reads::
+
+    RUN_DIR/segmenter.json   input_size (crop side S, pixels), margin (window side / longer box side),
+                             class_names (output channel i is class_names[i]), threshold (probability)
+    RUN_DIR/model.keras      the U-Net (loaded in Keras safe mode)
+    RUN_DIR/config.json      the training settings (dataset, seed, schedule)
+    RUN_DIR/metrics.json     training summary
+
+plus the shared trainer's ``checkpoints/``, ``log.csv``, ``tensorboard/`` and ``samples/``.
+Every reader raises ``ValueError`` naming the file and what is missing or malformed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from paz6d.backend.files import load_json, write_json_atomically
+
+SEGMENTER_FILE = "segmenter.json"
+MODEL_FILE = "model.keras"
+CONFIG_FILE = "config.json"
+METRICS_FILE = "metrics.json"
+#: Fields of ``segmenter.json``.
+SEGMENTER_KEYS = ("input_size", "margin", "class_names", "threshold")
+#: Files that mark a directory as a mask-head run (see :func:`paz6d.run_dirs.method_of`).
+MARKER_FILES = (SEGMENTER_FILE,)
+#: Files without which a run directory cannot segment.
+REQUIRED_FILES = (SEGMENTER_FILE, MODEL_FILE)
+
+
+def model_path(run_dir: str | Path) -> Path:
+    """Where the network is (or will be) saved."""
+    return Path(run_dir) / MODEL_FILE
+
+
+def write_segmenter(run_dir: str | Path, input_size: int, margin: float, class_names, threshold: float = 0.5) -> Path:
+    """Writes ``segmenter.json``: what the pipeline needs besides the weights."""
+    class_names = [str(name) for name in class_names]
+    if not class_names or len(set(class_names)) != len(class_names):
+        raise ValueError(f"class_names: expected distinct names, got {class_names}")
+    Path(run_dir).mkdir(parents=True, exist_ok=True)
+    data = {"input_size": int(input_size), "margin": float(margin), "class_names": class_names,
+            "threshold": float(threshold)}
+    return write_json_atomically(Path(run_dir) / SEGMENTER_FILE, data, indent=2)
+
+
+def read_segmenter(run_dir: str | Path) -> dict[str, Any]:
+    """``segmenter.json`` checked field by field."""
+    path = Path(run_dir) / SEGMENTER_FILE
+    if not path.is_file():
+        raise ValueError(f"{path}: file not found (is {Path(run_dir)} a segmentation run directory?)")
+    try:
+        data = load_json(path)
+    except ValueError as error:
+        raise ValueError(f"{path}: corrupt segmenter description ({error})") from error
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    missing = [key for key in SEGMENTER_KEYS if key not in data]
+    if missing:
+        raise ValueError(f"{path}: missing field(s) {missing}")
+    size = data["input_size"]
+    if not isinstance(size, int) or isinstance(size, bool) or size <= 0:
+        raise ValueError(f"{path}: input_size: expected a positive integer (pixels), got {size!r}")
+    for key, low, high in (("margin", 0.0, float("inf")), ("threshold", 0.0, 1.0)):
+        value = data[key]
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not low < value < high:
+            raise ValueError(f"{path}: {key}: expected a number in ({low}, {high}), got {value!r}")
+    names = data["class_names"]
+    if not isinstance(names, list) or not names or not all(isinstance(name, str) for name in names):
+        raise ValueError(f"{path}: class_names: expected a non-empty list of names, got {names!r}")
+    return data
+
+
+def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
+    """Writes the training settings ``config.json``."""
+    return write_json_atomically(Path(run_dir) / CONFIG_FILE, config, indent=2)
+
+
+def read_config(run_dir: str | Path) -> dict[str, Any] | None:
+    """The training settings, ``None`` when the run has none yet."""
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.is_file():
+        return None
+    data = load_json(path)
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    return data
+
+
+def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
+    """Writes the training summary ``metrics.json``."""
+    return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
+
+
+def validate(run_dir: str | Path) -> dict[str, Any]:
+    """Checks that ``run_dir`` is a directory with ``segmenter.json`` and ``model.keras``; returns the
+    segmenter description."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise ValueError(f"run_dir: {run_dir} is not a directory")
+    for name in REQUIRED_FILES:
+        if not (run_dir / name).is_file():
+            raise ValueError(f"{run_dir / name}: file not found (is {run_dir} a segmentation run directory?)")
+    return read_segmenter(run_dir)
+
+
+def read_model(run_dir: str | Path):
+    """``(model, segmenter)``: the trained network (imports TensorFlow) and ``segmenter.json``.
+
+    Raises:
+        ValueError: missing or corrupt files, or a model that does not fit ``segmenter.json``.
+    """
+    from paz6d.segmentation.model import load_segmenter
+
+    segmenter = validate(run_dir)
+    return load_segmenter(model_path(run_dir), segmenter["input_size"], len(segmenter["class_names"])), segmenter
