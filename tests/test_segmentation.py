@@ -195,3 +195,21 @@ def test_command_reports_a_bad_data_set(tmp_path, capsys):
     assert main(["train", "segmentation", "--dataset", str(tmp_path / "none"), "--out", str(tmp_path / "run"),
                  "--no-progress"]) == 2
     assert "paz6d train segmentation: error:" in capsys.readouterr().err
+
+
+def test_rendered_masks_match_the_generated_ones(generated, tmp_path):
+    from paz6d.datasets.bop.reader import BOPDataset
+    from paz6d.segmentation.real_masks import write_rendered_masks
+
+    summary = write_rendered_masks(generated, "train", tmp_path / "copy", progress=False)
+    assert summary["images"] == 6
+    ious = []
+    for original, rendered in zip(BOPDataset(generated, "train"), BOPDataset(tmp_path / "copy", "train")):
+        assert rendered.image is not None and len(rendered.objects) == len(original.objects)
+        for a, b in zip(original.objects, rendered.objects):
+            ious.append((a.mask_visib & b.mask_visib).sum() / max((a.mask_visib | b.mask_visib).sum(), 1))
+            assert b.info["bbox_visib"][2] > 0 or not b.mask_visib.any()
+    # the generated masks also account for the unannotated distractor; the rendered ones cannot
+    assert np.median(ious) > 0.9
+    with pytest.raises(ValueError, match="lies inside the data set"):
+        write_rendered_masks(generated, "train", generated / "copy", progress=False)

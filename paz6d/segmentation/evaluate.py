@@ -117,3 +117,29 @@ def evaluate_split(segment, root: str | Path, split: str, out: str | Path, progr
               "segm": stats}
     write_json_atomically(Path(out) / EVALUATION_FILE, report, indent=2)
     return report
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m paz6d.segmentation.evaluate RUN_DIR DATASET SPLIT OUT``: the files and scores above."""
+    import argparse
+    import json
+
+    from paz6d.segmentation.pipeline import SegmentInstances
+
+    parser = argparse.ArgumentParser(description="mask quality of a segmentation run on a BOP split "
+                                                 "(ground-truth boxes as the detections, score 1)")
+    parser.add_argument("run_dir", type=Path, help="segmentation run directory")
+    parser.add_argument("dataset", type=Path, help="BOP data set with mask_visib/ (e.g. a `paz6d generate` output)")
+    parser.add_argument("split", help="split folder")
+    parser.add_argument("out", type=Path, help="folder for ground_truth.json, results.json, segm_eval.json, masks.png")
+    parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    args = parser.parse_args(argv)
+    report = evaluate_split(SegmentInstances(args.run_dir), args.dataset, args.split, args.out, args.progress)
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())
