@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from paz6d.cli_options import option
+from paz6d.training.presets import apply_steps, preset_settings
 from paz6d.training.source import checked_mesh_scale
 
 CONFIGS: dict[str, dict] = {
@@ -58,16 +59,7 @@ class HRNetTraining:
 
     def settings(self) -> dict:
         """The config's settings with ``overrides`` and ``steps`` applied (checked)."""
-        if self.config not in CONFIGS:
-            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
-        unknown = sorted(set(self.overrides) - set(CONFIGS[self.config]))
-        if unknown:
-            raise ValueError(f"overrides: unknown setting(s) {unknown}; known: {sorted(CONFIGS[self.config])}")
-        settings = {**CONFIGS[self.config], **self.overrides}
-        if self.steps is not None:
-            if self.steps <= 0:
-                raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
-            settings["steps"] = int(self.steps)
+        settings = apply_steps(preset_settings(CONFIGS, self.config, self.overrides, known="known:"), self.steps)
         if settings["loss"] not in LOSSES:
             raise ValueError(f"loss: expected one of {LOSSES}, got {settings['loss']!r}")
         if settings["batch_size"] < 2 or settings["batch_size"] % 2:

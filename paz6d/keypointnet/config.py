@@ -8,6 +8,7 @@ from pathlib import Path
 
 from paz6d.cli_options import option
 from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
+from paz6d.training.presets import apply_steps, preset_settings
 from paz6d.training.source import checked_mesh_scale
 
 CONFIGS: dict[str, dict] = {
@@ -85,16 +86,10 @@ class KeypointTraining:
 
     def settings(self) -> dict:
         """The config's settings with ``overrides`` and ``steps`` applied."""
-        if self.config not in CONFIGS:
-            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
+        settings = preset_settings(CONFIGS, self.config, self.overrides, check_overrides=False)
         if self.mode not in MODES:
             raise ValueError(f"mode: expected one of {MODES}, got {self.mode!r}")
-        settings = {**CONFIGS[self.config], **self.overrides}
-        if self.steps is not None:
-            if self.steps <= 0:
-                raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
-            settings["steps"] = int(self.steps)
-        return settings
+        return apply_steps(settings, self.steps)
 
 
 def resolve_precision(precision: str) -> str:

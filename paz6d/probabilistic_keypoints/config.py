@@ -3,11 +3,12 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from paz6d.cli_options import option
+from paz6d.training.presets import apply_steps, preset_settings
+from paz6d.training.source import checked_mesh_scale
 
 _NETWORK = {"num_keypoints": 16, "input_size": 128, "filters": 48, "downsample": 4, "context_stride": 8,
             "dilations": (1, 2, 4, 1, 2, 4), "precision": "auto"}
@@ -49,24 +50,9 @@ class ProbabilisticTraining:
 
     def __post_init__(self):
         self.mesh, self.out = Path(self.mesh), Path(self.out)
-        if not math.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
-            raise ValueError(f"mesh_scale: expected a positive factor to metres, got {self.mesh_scale}")
-        if self.seed < 0:
-            raise ValueError(f"seed: expected a non-negative integer, got {self.seed}")
-        if self.workers < 0:
-            raise ValueError(f"workers: expected 0 (render in this process) or a number of processes, got {self.workers}")
+        self.mesh_scale = checked_mesh_scale(self.mesh, None, self.mesh_scale, self.seed, self.workers, None, None)
         self.settings()
 
     def settings(self) -> dict:
         """The config's settings with ``overrides`` and ``steps`` applied."""
-        if self.config not in CONFIGS:
-            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
-        unknown = sorted(set(self.overrides) - set(CONFIGS[self.config]))
-        if unknown:
-            raise ValueError(f"overrides: unknown setting(s) {unknown}; settings are {sorted(CONFIGS[self.config])}")
-        settings = {**CONFIGS[self.config], **self.overrides}
-        if self.steps is not None:
-            if self.steps <= 0:
-                raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
-            settings["steps"] = int(self.steps)
-        return settings
+        return apply_steps(preset_settings(CONFIGS, self.config, self.overrides), self.steps)

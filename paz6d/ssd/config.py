@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from paz6d.cli_options import option
+from paz6d.training.presets import apply_positive_integers, preset_settings
 
 CONFIGS: dict[str, dict] = {
     # CPU budget: generation + training within 30 minutes on 2 cores (docs/ssd.md).
@@ -46,13 +47,5 @@ class SSDTraining:
 
     def settings(self) -> dict:
         """The config's settings with ``overrides``, ``steps`` and ``batch_size`` applied."""
-        if self.config not in CONFIGS:
-            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
-        settings = {**CONFIGS[self.config], **self.overrides}
-        for name in ("steps", "batch_size"):
-            value = getattr(self, name)
-            if value is not None:
-                if int(value) <= 0:
-                    raise ValueError(f"{name}: expected a positive integer, got {value}")
-                settings[name] = int(value)
-        return settings
+        return apply_positive_integers(preset_settings(CONFIGS, self.config, self.overrides, check_overrides=False),
+                                       {"steps": self.steps, "batch_size": self.batch_size})

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from paz6d.cli_options import option
+from paz6d.training.presets import apply_positive_integers, preset_settings
 
 CONFIGS: dict[str, dict] = {
     # A few minutes per run on 2 CPU cores (docs/stn.md): 48x48 canvases, 6 clutter fragments; the
@@ -46,18 +47,8 @@ class STNTraining:
 
     def settings(self) -> dict:
         """The config's settings with ``overrides``, ``steps``, ``batch_size`` and ``crop_size`` applied."""
-        if self.config not in CONFIGS:
-            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
-        unknown = sorted(set(self.overrides) - set(CONFIGS[self.config]))
-        if unknown:
-            raise ValueError(f"overrides: unknown setting(s) {unknown}; settings are {sorted(CONFIGS[self.config])}")
-        settings = {**CONFIGS[self.config], **self.overrides}
-        for name in ("steps", "batch_size"):
-            value = getattr(self, name)
-            if value is not None:
-                if int(value) <= 0:
-                    raise ValueError(f"{name}: expected a positive integer, got {value}")
-                settings[name] = int(value)
+        settings = apply_positive_integers(preset_settings(CONFIGS, self.config, self.overrides),
+                                           {"steps": self.steps, "batch_size": self.batch_size})
         if self.crop_size is not None:
             if int(self.crop_size) < 16:
                 raise ValueError(f"crop_size: expected at least 16 pixels, got {self.crop_size}")
