@@ -39,10 +39,13 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import json
 import types
 import typing
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Literal, Union
+from typing import Any, Callable, Iterable, Iterator, Literal, Union
+
+from paz6d.backend.paths import check_output_folder
 
 _SCALAR_TYPES = (int, float, str, Path)
 
@@ -178,3 +181,21 @@ def config_from_args(config_class: type, args: argparse.Namespace, exclude: Iter
             values[field.name] = tuple(value) if isinstance(value, list) else value
     with flags_in_errors(config_class):
         return config_class(**values)
+
+
+def run_training(config_class: type, args: argparse.Namespace, train: Callable[[Any], dict],
+                 check_out: bool = True) -> int:
+    """The ``run`` of a ``paz6d train <method>`` command: the run's settings from the flags (every field
+    but ``overrides``), ``--out`` checked (``check_out``), ``train(settings)`` and its summary printed as
+    JSON; returns the exit status 0.
+
+    Raises:
+        ValueError: bad settings or a failed run, naming the flag (:func:`flags_in_errors`).
+    """
+    job = config_from_args(config_class, args, exclude=("overrides",))
+    with flags_in_errors(config_class):
+        if check_out:
+            check_output_folder(job.out, "out")
+        summary = train(job)
+    print(json.dumps(summary, indent=2))
+    return 0

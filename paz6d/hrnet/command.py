@@ -7,10 +7,8 @@ Light on purpose: building the parser imports only this module and the settings;
 from __future__ import annotations
 
 import argparse
-import json
 
-from paz6d.backend.paths import check_output_folder
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.cli_options import add_config_arguments, run_training
 from paz6d.hrnet.config import HRNetTraining
 
 
@@ -23,9 +21,4 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of ``paz6d train hrnet``."""
     from paz6d.hrnet.train import train_hrnet  # here: it loads OpenCV (then TensorFlow and the renderers)
 
-    job = config_from_args(HRNetTraining, args, exclude=("overrides",))
-    with flags_in_errors(HRNetTraining):
-        check_output_folder(job.out, "out")
-        summary = train_hrnet(job)
-    print(json.dumps(summary, indent=2))
-    return 0
+    return run_training(HRNetTraining, args, train_hrnet)

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import json
 
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.cli_options import add_config_arguments, run_training
 from paz6d.ssd.config import SSDTraining
 
 
@@ -18,8 +17,4 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of ``paz6d train ssd``."""
     from paz6d.ssd.train import train_ssd  # here: it loads OpenCV and TensorFlow
 
-    job = config_from_args(SSDTraining, args, exclude=("overrides",))
-    with flags_in_errors(SSDTraining):
-        summary = train_ssd(job)
-    print(json.dumps(summary, indent=2))
-    return 0
+    return run_training(SSDTraining, args, train_ssd, check_out=False)

@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import json
 
-from paz6d.backend.paths import check_output_folder
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.cli_options import add_config_arguments, run_training
 from paz6d.stn.config import STNTraining
 
 
@@ -19,9 +17,4 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of ``paz6d train stn``."""
     from paz6d.stn.train import train_stn  # here: it loads TensorFlow
 
-    job = config_from_args(STNTraining, args, exclude=("overrides",))
-    with flags_in_errors(STNTraining):
-        check_output_folder(job.out, "out")
-        summary = train_stn(job)
-    print(json.dumps(summary, indent=2))
-    return 0
+    return run_training(STNTraining, args, train_stn)
