@@ -32,6 +32,7 @@ import numpy as np
 import orjson
 
 from evaluation import coco_masks
+from paz6d.backend import rle
 from paz6d.backend.files import load_json, read_input_bytes
 
 STAT_NAMES = ("AP", "AP50", "AP75", "AP_small", "AP_medium", "AP_large",
@@ -517,7 +518,7 @@ def _accumulate(det_category: np.ndarray, det_score: np.ndarray, det_image: np.n
             before = np.concatenate([zero, reached[:, :-1]], axis=1)
             before[:, first] = 0
             served = (reached - before).ravel()
-            recall_index = coco_masks.concatenated_ranges(before.ravel(), served)
+            recall_index = rle.concatenated_ranges(before.ravel(), served)
             target = np.repeat(base.ravel(), served) + recall_index * (n_categories * n_areas * n_limits)
             precision[t].reshape(-1)[target] = np.repeat(pr.ravel(), served)
     recall = recall.reshape(n_thresholds, n_areas, n_limits, n_categories).transpose(0, 3, 1, 2).copy()
@@ -558,7 +559,7 @@ def _detection_masks(detections: CocoDetections, rows: np.ndarray, ground_truth:
     if detections.segmentations is None:
         raise ValueError(f"{detections.source}: segm evaluation needs a 'segmentation' in every detection")
     images = detections.image_index[rows]
-    return coco_masks.segmentations_to_intervals(
+    return rle.segmentations_to_intervals(
         [detections.segmentations[i] for i in rows.tolist()], ground_truth.image_heights[images].tolist(),
         ground_truth.image_widths[images].tolist(), f"{detections.source}: segmentation of kept detection")
 
@@ -570,7 +571,7 @@ def _truth_masks(ground_truth: CocoGroundTruth, rows: np.ndarray):
     missing = [int(ground_truth.annotation_ids[r]) for r in rows.tolist() if ground_truth.segmentations[r] is None]
     if missing:
         raise ValueError(f"{ground_truth.source}: annotation id {missing[0]} has no 'segmentation'")
-    return coco_masks.segmentations_to_intervals(
+    return rle.segmentations_to_intervals(
         [ground_truth.segmentations[r] for r in rows.tolist()], ground_truth.image_heights[images].tolist(),
         ground_truth.image_widths[images].tolist(), f"{ground_truth.source}: annotation segmentation")
 
@@ -611,7 +612,7 @@ def evaluate(ground_truth: CocoGroundTruth, detections: CocoDetections, iou_type
     gt_key_sorted = gt_key[gt_order]
     starts, counts = _group_ranges(gt_key_sorted, det_key)
     pair_det = np.repeat(np.arange(len(rows)), counts)
-    pair_gt = coco_masks.concatenated_ranges(starts, counts)  # rows of gt_order
+    pair_gt = rle.concatenated_ranges(starts, counts)  # rows of gt_order
     gt_rows = gt_order[pair_gt]
     crowd = ground_truth.is_crowd[gt_order]
     if iou_type == "bbox":

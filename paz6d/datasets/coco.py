@@ -18,9 +18,9 @@ Conversion rules:
   expanded in column-major order;
 * ``keypoints`` ``[x1, y1, v1, ...]`` become ``Sample.keypoints (N, K, 3)`` when present.
 
-The mask decoding here works one annotation at a time in numpy; ``evaluation.coco_masks`` has the
-batched numba version for scoring, which this package cannot import (``evaluation`` reads BOP files
-through ``paz6d.datasets``, so the reverse import would be a package cycle).
+The records are checked here, one annotation at a time (messages name the file, record and field);
+the decoding itself is :mod:`paz6d.backend.rle`, the same (numba) code that COCO scoring
+(:mod:`evaluation.coco_masks`) uses.
 
 Example:
     >>> samples = load("coco", "val2017", masks=False)  # doctest: +SKIP
@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend import rle
 from paz6d.backend.files import load_json_object
 from paz6d.datasets.sample import Sample, SampleSequence
 
-POLYGON_SCALE = 5  # rleFrPoly's upsampling of vertices
 _RLE_OFFSET = 48  # compressed RLE characters are chr(48 + 6-bit group)
 
 
@@ -96,29 +96,21 @@ def _records(data: dict, key: str, path: Path, fields: tuple[str, ...]) -> list[
 
 
 def counts_from_string(counts: str | bytes, where: str = "counts") -> np.ndarray:
-    """Run lengths of a compressed COCO RLE string (``rleFrString``): 5 data bits per character
-    (offset 48), continuation bit 0x20, sign extension from 0x10, counts after the second stored as
-    a difference to the count two places before."""
+    """Run lengths of a compressed COCO RLE string (``rleFrString``; decoded by
+    :func:`paz6d.backend.rle.decode_counts_strings`): 5 data bits per character (offset 48),
+    continuation bit 0x20, sign extension from 0x10, counts after the second stored as a difference
+    to the count two places before."""
     data = counts.encode("ascii") if isinstance(counts, str) else bytes(counts)
-    values, position = [], 0
-    while position < len(data):
-        value, shift, more = 0, 0, True
-        while more:
-            if position >= len(data):
-                raise ValueError(f"{where}: compressed RLE string ends inside a value")
-            code = data[position] - _RLE_OFFSET
-            if not 0 <= code < 64:
-                raise ValueError(f"{where}: character {chr(data[position])!r} outside '0'..'o' in a compressed RLE")
-            value |= (code & 0x1F) << shift
-            more = bool(code & 0x20)
-            position += 1
-            shift += 5
-            if not more and code & 0x10:
-                value -= 1 << shift
-        if len(values) > 2:
-            value += values[-2]
-        values.append(value)
-    return np.array(values, dtype=np.int64)
+    codes = np.frombuffer(data, dtype=np.uint8)
+    bad = np.flatnonzero((codes < _RLE_OFFSET) | (codes >= _RLE_OFFSET + 64))
+    if len(bad):
+        raise ValueError(f"{where}: character {chr(data[bad[0]])!r} outside '0'..'o' in a compressed RLE")
+    if len(codes) and (codes[-1] - _RLE_OFFSET) & 0x20:
+        raise ValueError(f"{where}: compressed RLE string ends inside a value")
+    try:
+        return rle.decode_counts_strings([data], where)[0]
+    except ValueError as error:  # a value of more than 60 bits, or negative run lengths
+        raise ValueError(f"{where}: {str(error).removeprefix(f'{where}[0]: ')}") from None
 
 
 def mask_from_counts(counts, height: int, width: int, where: str = "counts") -> np.ndarray:
@@ -127,39 +119,18 @@ def mask_from_counts(counts, height: int, width: int, where: str = "counts") -> 
     if np.any(counts < 0) or counts.sum() != height * width:
         raise ValueError(f"{where}: RLE counts must be non-negative and sum to height * width = {height * width}, "
                          f"got sum {int(counts.sum())}")
-    flat = np.repeat(np.arange(len(counts)) % 2 == 1, counts)
-    return flat.reshape(width, height).T
+    return rle.mask_from_intervals(rle.intervals_from_counts([counts], [height], [width], where), 0)
 
 
 def mask_from_polygon(coordinates, height: int, width: int) -> np.ndarray:
     """``(H, W) bool`` mask of one polygon ``[x0, y0, x1, y1, ...]`` (pixels), pixel for pixel as
-    pycocotools' ``rleFrPoly``."""
-    xy = np.asarray(coordinates, dtype=np.float64).reshape(-1, 2)
-    grid = np.trunc(POLYGON_SCALE * xy + 0.5).astype(np.int64)  # C's (int) cast truncates toward zero
-    x_start, y_start = grid[:, 0], grid[:, 1]
-    x_end, y_end = np.roll(x_start, -1), np.roll(y_start, -1)
-    dx, dy = np.abs(x_end - x_start), np.abs(y_start - y_end)
-    flip = ((dx >= dy) & (x_start > x_end)) | ((dx < dy) & (y_start > y_end))
-    xs, xe = np.where(flip, x_end, x_start), np.where(flip, x_start, x_end)
-    ys, ye = np.where(flip, y_end, y_start), np.where(flip, y_start, y_end)
-    along_x = dx >= dy
-    steps = np.where(along_x, dx, dy)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        slope = np.where(along_x, (ye - ys) / np.where(dx > 0, dx, 1), (xe - xs) / np.where(dy > 0, dy, 1))
-    edge = np.repeat(np.arange(len(steps)), steps + 1)
-    d = np.arange(len(edge)) - np.repeat(np.cumsum(steps + 1) - (steps + 1), steps + 1)
-    t = np.where(flip[edge], steps[edge] - d, d)
-    rounded = np.trunc(np.where(along_x[edge], ys[edge], xs[edge]) + slope[edge] * t + 0.5).astype(np.int64)
-    u = np.where(along_x[edge], t + xs[edge], rounded)
-    v = np.where(along_x[edge], rounded, t + ys[edge])
-    change = np.flatnonzero(u[1:] != u[:-1]) + 1
-    xd = (np.where(u[change] < u[change - 1], u[change], u[change] - 1) + 0.5) / POLYGON_SCALE - 0.5
-    keep = (np.floor(xd) == xd) & (xd >= 0) & (xd <= width - 1)
-    yd = (np.minimum(v[change], v[change - 1]) + 0.5) / POLYGON_SCALE - 0.5
-    yd = np.ceil(np.clip(yd, 0, height))
-    toggles = xd[keep].astype(np.int64) * height + yd[keep].astype(np.int64)
-    parity = np.cumsum(np.bincount(toggles, minlength=height * width + 1)[:height * width]) % 2 == 1
-    return parity.reshape(width, height).T
+    pycocotools' ``rleFrPoly`` (:func:`paz6d.backend.rle.segmentations_to_intervals`)."""
+    return _mask_from_polygons([list(coordinates)], height, width)
+
+
+def _mask_from_polygons(parts: list, height: int, width: int) -> np.ndarray:
+    """``(H, W) bool`` union of checked polygons (each ``[x0, y0, ...]``, >= 3 points)."""
+    return rle.mask_from_intervals(rle.segmentations_to_intervals([parts], [height], [width]), 0)
 
 
 def mask_from_segmentation(segmentation, height: int, width: int, where: str = "segmentation") -> np.ndarray:
@@ -177,7 +148,6 @@ def mask_from_segmentation(segmentation, height: int, width: int, where: str = "
     if not isinstance(segmentation, list) or not all(isinstance(part, list) for part in segmentation):
         raise ValueError(f"{where}: expected a polygon list [[x0, y0, x1, y1, ...], ...] or an RLE dict "
                          "with 'size' and 'counts'")
-    mask = np.zeros((height, width), dtype=bool)
     parts = segmentation
     if parts and len(parts[0]) == 4:  # pycocotools reads 4-number parts as boxes [x, y, w, h]
         parts = [[x, y, x, y + h, x + w, y + h, x + w, y] for x, y, w, h in parts]
@@ -185,8 +155,9 @@ def mask_from_segmentation(segmentation, height: int, width: int, where: str = "
         if len(part) < 6 or len(part) % 2 or not all(_is_number(value) for value in part):
             raise ValueError(f"{where}: a polygon needs an even number (>= 6) of finite coordinates, got "
                              f"{len(part)} values")
-        mask |= mask_from_polygon(part, height, width)
-    return mask
+    if not parts:
+        return np.zeros((height, width), dtype=bool)
+    return _mask_from_polygons(parts, height, width)  # the parts united, as annToMask
 
 
 def load(root: str | Path, split: str | None = None, images: str | Path | None = None, masks: bool = True,

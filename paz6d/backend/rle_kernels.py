@@ -1,7 +1,8 @@
-"""numba kernels of COCO mask evaluation: compressed RLE strings to run lengths, and polygon
-boundaries (pycocotools' ``rleFrString`` and ``rleFrPoly``), written as the C code walks them so that
-every run length is the same. Imported by :mod:`evaluation.coco_masks` on first use (numba compiles
-them once and caches the machine code on disk).
+"""numba kernels of COCO masks: compressed RLE strings to run lengths, and polygon boundaries
+(pycocotools' ``rleFrString`` and ``rleFrPoly``), written as the C code walks them so that every run
+length is the same; run areas, boxes and pairwise intersections. Imported by :mod:`paz6d.backend.rle`
+and :mod:`evaluation.coco_masks` on first use (numba compiles them once and caches the machine code
+on disk).
 """
 
 from __future__ import annotations
