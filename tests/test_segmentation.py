@@ -157,6 +157,10 @@ def test_pipelines_segment_inside_the_boxes_and_score(trained, generated, tmp_pa
     assert main(["evaluate", "coco", "--gt", report["ground_truth"], "--results", report["results"], "--iou-type",
                  "segm", "--out", str(tmp_path / "coco.json")]) == 0
     assert json.loads((tmp_path / "coco.json").read_text())["stats"][0] == pytest.approx(report["segm"]["AP"], abs=1e-4)
+    detected = evaluate_split(segment, generated, "train", tmp_path / "detected",
+                              detector=lambda image: [Box2D(10, 10, 60, 60, score=0.5, class_name="obj_000005")])
+    assert detected["instances"] == 6 and detected["mean_iou"] is None
+    assert {result["score"] for result in json.loads(Path(detected["results"]).read_text())} == {0.5}
 
 
 def test_corrupt_run_directories_are_named(trained, tmp_path):

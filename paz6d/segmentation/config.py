@@ -9,9 +9,9 @@ from pathlib import Path
 from paz6d.cli_options import option
 
 CONFIGS: dict[str, dict] = {
-    # CPU budget: about 10 minutes of training on 2 shared CPU cores (docs/segmentation.md).
+    # CPU budget: about 12 minutes (reading the data set + training) on 2 shared CPU cores (docs/segmentation.md).
     "quick": {"input_size": 64, "widths": (16, 32, 64), "margin": 1.25, "jitter": 0.1, "batch_size": 32,
-              "steps": 700, "learning_rate": 3e-3, "checkpoint_every": 100, "sample_every": 100},
+              "steps": 1500, "learning_rate": 3e-3, "checkpoint_every": 250, "sample_every": 250},
     # Mask R-CNN's mask branch works at 28x28 on 14x14 RoI features; without a backbone to share, a wider
     # U-Net on 128x128 crops, for a GPU.
     "full": {"input_size": 128, "widths": (32, 64, 128, 256), "margin": 1.25, "jitter": 0.1, "batch_size": 64,

@@ -9,6 +9,9 @@ predicted mask per kept instance), which ``paz6d evaluate coco --iou-type segm``
 
 from __future__ import annotations
 
+import argparse
+import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -46,15 +49,18 @@ def draw_masks(image: np.ndarray, masks: np.ndarray, boxes=None, truth: np.ndarr
 
 
 def write_coco_files(segment, root: str | Path, split: str, out: str | Path, progress: bool = False,
-                     plot_images: int = 6) -> dict:
-    """Predicts a mask for every visible ground-truth box of ``root/split`` and writes the COCO files.
+                     plot_images: int = 6, detector=None) -> dict:
+    """Predicts a mask for every visible ground-truth box of ``root/split`` (or, with ``detector``, for every
+    detected box) and writes the COCO files.
 
     Args:
         segment: a :class:`~paz6d.segmentation.pipeline.SegmentInstances`.
         out: folder for ``ground_truth.json``, ``results.json`` and ``masks.png``.
+        detector: ``image -> list[Box2D]`` with ``obj_XXXXXX`` class names (e.g. ``DetectSingleShot``); its
+            boxes and scores replace the ground-truth boxes (detection and masks scored together).
     Returns:
-        ``{"images", "instances", "mean_iou", "ground_truth", "results"}`` (IoU of each kept instance's
-        predicted and true visible mask, averaged).
+        ``{"images", "instances", "mean_iou", "ground_truth", "results"}`` (``mean_iou``: IoU of each kept
+        instance's predicted and true visible mask, averaged; ``None`` with a detector).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -85,15 +91,25 @@ def write_coco_files(segment, root: str | Path, split: str, out: str | Path, pro
                 names.append(category_name(obj.obj_id))
                 truths.append(obj.mask_visib)
                 kept.append(obj.obj_id)
+        if detector is not None:
+            detections = detector(sample.image)
+            boxes = [detection.to_array().tolist() for detection in detections]
+            names, scores = [d.class_name for d in detections], [float(d.score) for d in detections]
+            kept = [int(name.removeprefix("obj_")) for name in names]
+        else:
+            scores = [1.0] * len(boxes)
         masks = segment(sample.image, np.asarray(boxes, np.float64).reshape(-1, 4), names)
-        for obj_id, box, mask, truth in zip(kept, boxes, masks, truths):
-            results.append({"image_id": image_id, "category_id": obj_id, "score": 1.0,
+        for obj_id, box, mask, score in zip(kept, boxes, masks, scores):
+            results.append({"image_id": image_id, "category_id": obj_id, "score": score,
                             "bbox": [box[0], box[1], box[2] - box[0], box[3] - box[1]],
                             "segmentation": rle_from_mask(mask)})
-            union = np.logical_or(mask, truth).sum()
-            ious.append(float(np.logical_and(mask, truth).sum() / union) if union else 1.0)
+        if detector is None:
+            for mask, truth in zip(masks, truths):
+                union = np.logical_or(mask, truth).sum()
+                ious.append(float(np.logical_and(mask, truth).sum() / union) if union else 1.0)
         if len(tiles) < plot_images:
-            tiles.append(draw_masks(sample.image, masks, boxes, np.asarray(truths).reshape(masks.shape)))
+            tiles.append(draw_masks(sample.image, masks, boxes, None if detector is not None
+                                    else np.asarray(truths).reshape(masks.shape)))
     categories = [{"id": obj_id, "name": category_name(obj_id)} for obj_id in sorted(obj_ids)]
     ground_truth = {"images": images, "annotations": annotations, "categories": categories}
     write_json_atomically(out / GROUND_TRUTH_FILE, ground_truth)
@@ -106,14 +122,17 @@ def write_coco_files(segment, root: str | Path, split: str, out: str | Path, pro
             "ground_truth": str(out / GROUND_TRUTH_FILE), "results": str(out / RESULTS_FILE)}
 
 
-def evaluate_split(segment, root: str | Path, split: str, out: str | Path, progress: bool = False) -> dict:
+def evaluate_split(segment, root: str | Path, split: str, out: str | Path, progress: bool = False,
+                   detector=None) -> dict:
     """:func:`write_coco_files`, then COCO segm AP (:func:`evaluation.coco.evaluate_files`); writes
     ``out/segm_eval.json`` and returns it (``AP``, ``AP50``, ``AP75``, ``mean_iou``, ...)."""
-    summary = write_coco_files(segment, root, split, out, progress)
+    summary = write_coco_files(segment, root, split, out, progress, detector=detector)
     evaluation = coco.evaluate_files(summary["ground_truth"], summary["results"], "segm")
     stats = {name: round(float(value), 4) for name, value in zip(coco.STAT_NAMES, evaluation.stats)}
     report = {"dataset": str(Path(root).resolve()), "split": split,
-              "detections": "ground-truth visible boxes, score 1 (mask quality only)", **summary,
+              "detections": ("ground-truth visible boxes, score 1 (mask quality only)" if detector is None
+                             else f"detector {getattr(detector, 'run_dir', detector)} (detection and masks together)"),
+              **summary,
               "segm": stats}
     write_json_atomically(Path(out) / EVALUATION_FILE, report, indent=2)
     return report
@@ -121,9 +140,6 @@ def evaluate_split(segment, root: str | Path, split: str, out: str | Path, progr
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m paz6d.segmentation.evaluate RUN_DIR DATASET SPLIT OUT``: the files and scores above."""
-    import argparse
-    import json
-
     from paz6d.segmentation.pipeline import SegmentInstances
 
     parser = argparse.ArgumentParser(description="mask quality of a segmentation run on a BOP split "
@@ -132,14 +148,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("dataset", type=Path, help="BOP data set with mask_visib/ (e.g. a `paz6d generate` output)")
     parser.add_argument("split", help="split folder")
     parser.add_argument("out", type=Path, help="folder for ground_truth.json, results.json, segm_eval.json, masks.png")
+    parser.add_argument("--detector", type=Path, help="SSD run directory: its detections (score >= 0.05) replace "
+                                                      "the ground-truth boxes")
     parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     args = parser.parse_args(argv)
-    report = evaluate_split(SegmentInstances(args.run_dir), args.dataset, args.split, args.out, args.progress)
+    detector = None
+    if args.detector is not None:
+        from paz6d.ssd.pipeline import DetectSingleShot
+
+        detector = DetectSingleShot(args.detector, score_threshold=0.05)
+    report = evaluate_split(SegmentInstances(args.run_dir), args.dataset, args.split, args.out, args.progress,
+                            detector)
     print(json.dumps(report, indent=2))
     return 0
 
 
 if __name__ == "__main__":
-    import sys
-
     sys.exit(main())
