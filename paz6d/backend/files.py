@@ -171,6 +171,39 @@ def load_json_object(path: str | Path) -> dict:
     return data
 
 
+def load_run_json(path: str | Path, fields: tuple[str, ...], kind: str) -> dict:
+    """A run directory's JSON object file that must hold ``fields``; ``kind`` names the method's run
+    directories in the message of a missing file (``"an HRNet"``: "is DIR an HRNet run directory?").
+
+    Raises:
+        ValueError: the file is missing, not a JSON object or lacks fields (naming the file).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: file not found (is {path.parent} {kind} run directory?)")
+    data = load_json_object(path)
+    missing = [name for name in fields if name not in data]
+    if missing:
+        raise ValueError(f"{path}: missing field(s) {missing}")
+    return data
+
+
+def check_run_files(run_dir: str | Path, names: tuple[str, ...], kind: str) -> Path:
+    """``run_dir`` as a Path, checked to be a directory holding every file of ``names`` (``kind`` as in
+    :func:`load_run_json`).
+
+    Raises:
+        ValueError: not a directory, or the first missing file.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise ValueError(f"run_dir: {run_dir} is not a directory")
+    for name in names:
+        if not (run_dir / name).is_file():
+            raise ValueError(f"{run_dir / name}: file not found (is {run_dir} {kind} run directory?)")
+    return run_dir
+
+
 def load_npz(path: str | Path, what: str = "arrays") -> dict[str, np.ndarray]:
     """Every array of an ``.npz`` file (no pickled objects); ``ValueError`` naming the file when it is
     missing, a folder, truncated or not an ``.npz`` archive (``what`` says what it should hold)."""

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from paz6d.backend.checks import as_array
-from paz6d.backend.files import load_json_object, write_json_atomically
+from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
 
 DESCRIPTION_FILE = "hrnet.json"
 MODEL_FILE = "model.keras"
@@ -45,6 +45,8 @@ DESCRIPTION_KEYS = ("input_size", "margin", "stride", "num_keypoints", "domain",
 MARKER_FILES = (DESCRIPTION_FILE,)
 #: Files without which a run directory cannot predict keypoints.
 REQUIRED_FILES = (DESCRIPTION_FILE, MODEL_FILE)
+#: How messages name these run directories.
+KIND = "an HRNet"
 
 
 
@@ -98,12 +100,7 @@ def read_description(run_dir: str | Path) -> dict[str, Any]:
     ``margin``/``sigma``, a known ``domain``, ``points_model`` finite ``(num_keypoints, 3)`` (returned
     as an array), ``input_size`` divisible by ``stride``."""
     path = Path(run_dir) / DESCRIPTION_FILE
-    if not path.is_file():
-        raise ValueError(f"{path}: file not found (is {Path(run_dir)} an HRNet run directory?)")
-    data = load_json_object(path)
-    missing = [key for key in DESCRIPTION_KEYS if key not in data]
-    if missing:
-        raise ValueError(f"{path}: missing field(s) {missing}")
+    data = load_run_json(path, DESCRIPTION_KEYS, KIND)
     for name in ("input_size", "stride", "num_keypoints"):
         _positive(data, name, path, integer=True)
     for name in ("margin", "sigma"):
@@ -178,10 +175,4 @@ def read_model(run_dir: str | Path, description: dict[str, Any] | None = None):
 
 def validate(run_dir: str | Path) -> dict[str, Any]:
     """Checks that ``run_dir`` is a directory with ``hrnet.json`` and ``model.keras``; returns the description."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise ValueError(f"run_dir: {run_dir} is not a directory")
-    for name in REQUIRED_FILES:
-        if not (run_dir / name).is_file():
-            raise ValueError(f"{run_dir / name}: file not found (is {run_dir} an HRNet run directory?)")
-    return read_description(run_dir)
+    return read_description(check_run_files(run_dir, REQUIRED_FILES, KIND))

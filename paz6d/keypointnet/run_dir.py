@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from paz6d.backend.checks import as_array, integer_field, number_field
-from paz6d.backend.files import load_json_object, write_json_atomically
+from paz6d.backend.files import check_run_files, load_run_json, write_json_atomically
 
 CONFIG_FILE = "config.json"
 MODEL_FILE = "model.keras"
@@ -37,17 +37,9 @@ PIPELINE_CONFIG_KEYS = ("input_size", "margin", "downsample")
 REQUIRED_FILES = (CONFIG_FILE, MODEL_FILE, KEYPOINTS_FILE)
 #: Files that mark a directory as a KeypointNet run (see :func:`paz6d.run_dirs.method_of`).
 MARKER_FILES = (CONFIG_FILE, KEYPOINTS_FILE)
+#: How messages name these run directories.
+KIND = "a KeypointNet"
 
-
-
-def _read_json(path: Path, fields: tuple[str, ...]) -> dict:
-    if not path.is_file():
-        raise ValueError(f"{path}: file not found (is {path.parent} a KeypointNet run directory?)")
-    data = load_json_object(path)
-    missing = [name for name in fields if name not in data]
-    if missing:
-        raise ValueError(f"{path}: missing field(s) {missing}")
-    return data
 
 
 def _numeric_array(value, path: Path, name: str) -> np.ndarray:
@@ -84,7 +76,7 @@ def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
 def read_config(run_dir: str | Path) -> dict[str, Any]:
     """``config.json``, checked for ``input_size``, ``margin`` and ``downsample``."""
     path = config_path(run_dir)
-    data = _read_json(path, PIPELINE_CONFIG_KEYS)
+    data = load_run_json(path, PIPELINE_CONFIG_KEYS, KIND)
     for name in ("input_size", "downsample"):
         integer_field(data, name, str(path), minimum=1)
     number_field(data, "margin", str(path), positive=True)
@@ -113,7 +105,7 @@ def write_keypoints(run_dir: str | Path, points_model, usable, method: str, erro
 def read_keypoints(run_dir: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """``points_model (N, 3)`` metres and ``usable (N,)`` flags from a run's ``keypoints.json``."""
     path = Path(run_dir) / KEYPOINTS_FILE
-    data = _read_json(path, ("points_model", "usable"))
+    data = load_run_json(path, ("points_model", "usable"), KIND)
     points = _numeric_array(data["points_model"], path, "points_model")
     if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
         raise ValueError(f"{path}: points_model: expected finite (N, 3) metres, got shape {points.shape}")
@@ -133,7 +125,7 @@ def write_object(run_dir: str | Path, diameter: float, hull_points) -> Path:
 def read_object(run_dir: str | Path) -> dict:
     """``{"diameter": float, "hull_points": (M, 3)}`` (metres) from a run's ``object.json``."""
     path = Path(run_dir) / OBJECT_FILE
-    data = _read_json(path, ("diameter", "hull_points"))
+    data = load_run_json(path, ("diameter", "hull_points"), KIND)
     hull = _numeric_array(data["hull_points"], path, "hull_points")
     if hull.ndim != 2 or hull.shape[1] != 3 or len(hull) < 4 or not np.all(np.isfinite(hull)):
         raise ValueError(f"{path}: hull_points: expected finite (M >= 4, 3) metres, got shape {hull.shape}")
@@ -160,12 +152,7 @@ def evaluation_path(run_dir: str | Path) -> Path:
 def validate(run_dir: str | Path) -> Path:
     """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable
     configuration and keypoints; returns it as a Path."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise ValueError(f"run_dir: {run_dir} is not a directory")
-    for name in REQUIRED_FILES:
-        if not (run_dir / name).is_file():
-            raise ValueError(f"{run_dir / name}: file not found (is {run_dir} a KeypointNet run directory?)")
+    run_dir = check_run_files(run_dir, REQUIRED_FILES, KIND)
     read_config(run_dir)
     read_keypoints(run_dir)
     return run_dir

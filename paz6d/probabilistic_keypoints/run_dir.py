@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from paz6d.backend.checks import as_array, integer_field, number_field
-from paz6d.backend.files import load_json_object, write_json_atomically
+from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
 
 CONFIG_FILE = "config.json"
 MODEL_FILE = "model.keras"
@@ -41,6 +41,8 @@ PIPELINE_CONFIG_KEYS = ("input_size", "margin", "downsample")
 MARKER_FILES = (CONFIG_FILE, KEYPOINTS_FILE)
 #: Files without which a run directory cannot estimate poses.
 REQUIRED_FILES = (CONFIG_FILE, MODEL_FILE, KEYPOINTS_FILE)
+#: How messages name these run directories.
+KIND = "a probabilistic-keypoints"
 
 
 
@@ -52,16 +54,6 @@ def path_of(run_dir: str | Path, name: str) -> Path:
 def views_path(run_dir: str | Path, name: str) -> Path:
     """The cache ``views_<name>.npz`` (``train``, ``val``, ``test``)."""
     return Path(run_dir) / f"views_{name}.npz"
-
-
-def _read(path: Path, fields: tuple[str, ...]) -> dict:
-    if not path.is_file():
-        raise ValueError(f"{path}: file not found (is {path.parent} a probabilistic-keypoints run directory?)")
-    data = load_json_object(path)
-    missing = [name for name in fields if name not in data]
-    if missing:
-        raise ValueError(f"{path}: missing field(s) {missing}")
-    return data
 
 
 def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
@@ -76,7 +68,7 @@ def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
 def read_config(run_dir: str | Path) -> dict[str, Any]:
     """``config.json``, checked for ``input_size``, ``margin`` and ``downsample``."""
     path = path_of(run_dir, CONFIG_FILE)
-    data = _read(path, PIPELINE_CONFIG_KEYS)
+    data = load_run_json(path, PIPELINE_CONFIG_KEYS, KIND)
     for name in ("input_size", "downsample"):
         integer_field(data, name, str(path), minimum=1)
     number_field(data, "margin", str(path), positive=True)
@@ -98,7 +90,7 @@ def write_keypoints(run_dir: str | Path, points_model, covariance_scale: float =
 def read_keypoints(run_dir: str | Path) -> tuple[np.ndarray, float]:
     """``points_model (N, 3)`` metres and ``covariance_scale`` from ``gaussian_keypoints.json``."""
     path = path_of(run_dir, KEYPOINTS_FILE)
-    data = _read(path, ("points_model", "covariance_scale"))
+    data = load_run_json(path, ("points_model", "covariance_scale"), KIND)
     try:
         points = np.asarray(data["points_model"], dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
@@ -132,12 +124,7 @@ def read_model(run_dir: str | Path):
 def validate(run_dir: str | Path) -> Path:
     """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable configuration
     and keypoints; returns it as a Path."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise ValueError(f"run_dir: {run_dir} is not a directory")
-    for name in REQUIRED_FILES:
-        if not (run_dir / name).is_file():
-            raise ValueError(f"{run_dir / name}: file not found (is {run_dir} a probabilistic-keypoints run directory?)")
+    run_dir = check_run_files(run_dir, REQUIRED_FILES, KIND)
     read_config(run_dir)
     read_keypoints(run_dir)
     return run_dir

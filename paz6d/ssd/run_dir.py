@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from paz6d.backend.boxes import SSD_VARIANCES
-from paz6d.backend.files import load_json, write_json_atomically
+from paz6d.backend.files import check_run_files, load_json, write_json_atomically
 
 DETECTOR_FILE = "detector.json"
 MODEL_FILE = "model.keras"
@@ -116,10 +116,4 @@ def read_model(run_dir: str | Path):
 def validate(run_dir: str | Path) -> dict[str, Any]:
     """Checks that ``run_dir`` is a directory with ``detector.json`` and ``model.keras``; returns the
     detector description."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise ValueError(f"run_dir: {run_dir} is not a directory")
-    for name in REQUIRED_FILES:
-        if not (run_dir / name).is_file():
-            raise ValueError(f"{run_dir / name}: file not found (is {run_dir} an SSD run directory?)")
-    return read_detector(run_dir)
+    return read_detector(check_run_files(run_dir, REQUIRED_FILES, "an SSD"))

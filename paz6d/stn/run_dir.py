@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from paz6d.backend.checks import integer_field
-from paz6d.backend.files import load_json_object, write_json_atomically
+from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
 
 CLASSIFIER_FILE = "classifier.json"
 MODEL_FILE = "model.keras"
@@ -31,6 +31,8 @@ CLASSIFIER_KEYS = ("canvas_size", "crop_size", "transformer", "class_names")
 MARKER_FILES = (CLASSIFIER_FILE,)
 #: Files without which a run directory cannot classify.
 REQUIRED_FILES = (CLASSIFIER_FILE, MODEL_FILE)
+#: How messages name these run directories.
+KIND = "a spatial-transformer"
 
 
 
@@ -60,12 +62,7 @@ def read_classifier(run_dir: str | Path) -> dict[str, Any]:
     """``classifier.json`` checked for its fields (sizes >= 16 pixels, a boolean ``transformer``,
     at least 2 distinct string ``class_names``)."""
     path = Path(run_dir) / CLASSIFIER_FILE
-    if not path.is_file():
-        raise ValueError(f"{path}: file not found (is {Path(run_dir)} a spatial-transformer run directory?)")
-    data = load_json_object(path)
-    missing = [key for key in CLASSIFIER_KEYS if key not in data]
-    if missing:
-        raise ValueError(f"{path}: missing field(s) {missing}")
+    data = load_run_json(path, CLASSIFIER_KEYS, KIND)
     for name in ("canvas_size", "crop_size"):
         integer_field(data, name, str(path), minimum=16)
     if not isinstance(data["transformer"], bool):
@@ -108,13 +105,7 @@ def read_metrics(run_dir: str | Path) -> dict[str, Any] | None:
 def validate(run_dir: str | Path) -> dict[str, Any]:
     """Checks that ``run_dir`` is a directory with ``classifier.json`` and ``model.keras``; returns the
     classifier description."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise ValueError(f"run_dir: {run_dir} is not a directory")
-    for name in REQUIRED_FILES:
-        if not (run_dir / name).is_file():
-            raise ValueError(f"{run_dir / name}: file not found (is {run_dir} a spatial-transformer run directory?)")
-    return read_classifier(run_dir)
+    return read_classifier(check_run_files(run_dir, REQUIRED_FILES, KIND))
 
 
 def read_model(run_dir: str | Path):
