@@ -25,7 +25,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow, load_keras_model
+from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
+                                            output_names)
 from paz6d.hrnet.config import STRIDE
 
 tf = import_tensorflow()
@@ -155,7 +156,7 @@ def load_hrnet(path: str | Path):
     """
     path = Path(path)
     model = load_keras_model(path, HRNetError)
-    names = set(model.output.keys()) if isinstance(model.output, dict) else set()
+    names = output_names(model)
     if names != {OUTPUT_NAME}:
         raise HRNetError(f"{path}: expected an HRNet with the output {OUTPUT_NAME!r}, got {sorted(names)}")
     return model
@@ -164,13 +165,7 @@ def load_hrnet(path: str | Path):
 def inference_function(model):
     """Compiled ``images (B, S, S, 3) float32 (0..255) -> heatmaps (B, S/4, S/4, N)`` numpy-ready tensor
     (one ``tf.function`` trace for any batch size)."""
-    size = model.input_shape[1]
-
-    @tf.function(input_signature=[tf.TensorSpec((None, size, size, 3), tf.float32)], reduce_retracing=True)
-    def infer(images):
-        return model(images, training=False)[OUTPUT_NAME]
-
-    return infer
+    return compiled_inference(model, OUTPUT_NAME)
 
 
 # --------------------------------------------------------------------------- losses (batched TF)

@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow, load_keras_model
+from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
+                                            output_names)
 
 tf = import_tensorflow()
 keras = import_keras()
@@ -197,7 +198,7 @@ def load_keypointnet(path: str | Path):
     """
     path = Path(path)
     model = load_keras_model(path, KeypointNetError)
-    names = set(model.output.keys()) if isinstance(model.output, dict) else set()
+    names = output_names(model)
     if names != set(OUTPUT_NAMES):
         raise KeypointNetError(f"{path}: expected a KeypointNet with outputs {OUTPUT_NAMES}, got {sorted(names)}")
     return model
@@ -206,13 +207,7 @@ def load_keypointnet(path: str | Path):
 def inference_function(model):
     """Compiled ``images (B, S, S, 3) float32 -> {"uv", "depth", "probabilities"}`` for inference
     (one ``tf.function`` trace for any batch size; several times faster than eager calls)."""
-    size = model.input_shape[1]
-
-    @tf.function(input_signature=[tf.TensorSpec((None, size, size, 3), tf.float32)], reduce_retracing=True)
-    def infer(images):
-        return model(images, training=False)
-
-    return infer
+    return compiled_inference(model)
 
 
 # --------------------------------------------------------------------------- geometry (batched TF)

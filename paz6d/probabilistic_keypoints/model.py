@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.backend.tensorflow_guard import load_keras_model
+from paz6d.backend.tensorflow_guard import compiled_inference, load_keras_model, output_names
 from paz6d.keypointnet.model import build_keypointnet, keras, tf
 
 PACKAGE = "paz6d"
@@ -142,7 +142,7 @@ def load_model(path: str | Path):
     """
     path = Path(path)
     model = load_keras_model(path, ProbabilisticKeypointsError)
-    names = set(model.output.keys()) if isinstance(model.output, dict) else set()
+    names = output_names(model)
     if names != set(OUTPUT_NAMES):
         raise ProbabilisticKeypointsError(f"{path}: expected a probabilistic KeypointNet with outputs {OUTPUT_NAMES}, "
                                           f"got {sorted(names)}")
@@ -151,10 +151,4 @@ def load_model(path: str | Path):
 
 def inference_function(model):
     """Compiled ``images (B, S, S, 3) float32 -> outputs`` (one trace for any batch size)."""
-    size = model.input_shape[1]
-
-    @tf.function(input_signature=[tf.TensorSpec((None, size, size, 3), tf.float32)], reduce_retracing=True)
-    def infer(images):
-        return model(images, training=False)
-
-    return infer
+    return compiled_inference(model)

@@ -28,7 +28,7 @@ import numpy as np
 from paz6d.backend.boxes import prior_boxes
 from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.image import normalize
-from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow, load_keras_model
+from paz6d.backend.tensorflow_guard import compiled_inference, import_keras, import_tensorflow, load_keras_model
 
 tf = import_tensorflow()
 keras = import_keras()
@@ -293,10 +293,4 @@ def load_ssd(path: str | Path, spec: PriorSpec, num_classes: int):
 
 def inference_function(model):
     """Compiled ``images (B, S, S, 3) float32 -> (B, P, 4 + C)`` (one trace for any batch size)."""
-    size = model.input_shape[1]
-
-    @tf.function(input_signature=[tf.TensorSpec((None, size, size, 3), tf.float32)], reduce_retracing=True)
-    def infer(images):
-        return model(images, training=False)
-
-    return infer
+    return compiled_inference(model)

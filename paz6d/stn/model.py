@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow, load_keras_model
+from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
+                                            output_names)
 
 tf = import_tensorflow()
 keras = import_keras()
@@ -256,7 +257,7 @@ def load_classifier(path: str | Path):
     """
     path = Path(path)
     model = load_keras_model(path, STNModelError)
-    names = set(model.output.keys()) if isinstance(model.output, dict) else set()
+    names = output_names(model)
     if names not in (set(OUTPUT_NAMES), set(OUTPUT_NAMES[:2])):
         raise STNModelError(f"{path}: expected a classifier with outputs {OUTPUT_NAMES} (or the first two), "
                             f"got {sorted(names)}")
@@ -265,10 +266,4 @@ def load_classifier(path: str | Path):
 
 def inference_function(model):
     """Compiled ``images (B, S, S, 1) float32 -> outputs`` (one trace for any batch size)."""
-    size = model.input_shape[1]
-
-    @tf.function(input_signature=[tf.TensorSpec((None, size, size, 1), tf.float32)], reduce_retracing=True)
-    def infer(images):
-        return model(images, training=False)
-
-    return infer
+    return compiled_inference(model)
