@@ -110,16 +110,6 @@ def _sample_drawer(images: np.ndarray, targets: np.ndarray, settings: dict):
     return draw
 
 
-def _cached_views(path: Path, render):
-    from paz6d.keypointnet.views import ViewSet
-
-    if path.exists():
-        return ViewSet.load(path)
-    views = render()
-    views.save(path)
-    return views
-
-
 def held_out_crops(job: HRNetTraining, settings: dict, sampling) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``images (V, S, S, 3) uint8``, ``K (V, 3, 3)``, ``T_model2cam (V, 4, 4)`` of ``settings["test_images"]``
     whole images rendered with seed ``seed + 20000`` and cut around their ground-truth boxes as the
@@ -176,7 +166,7 @@ def train_hrnet(job: HRNetTraining) -> dict:
 
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import load_mesh
-    from paz6d.keypointnet.views import ViewSampling, render_views
+    from paz6d.keypointnet.views import ViewSampling, cached_views, render_views
 
     settings = job.settings()
     precision = resolve_precision(settings["precision"])
@@ -193,9 +183,9 @@ def train_hrnet(job: HRNetTraining) -> dict:
     def render(count, seed):
         return lambda: render_views(job.mesh, count, seed, sampling, job.mesh_scale, job.workers, progress=job.progress)
 
-    train_views = _cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
-    validation_views = _cached_views(run_files.views_path(out, "val"),
-                                     render(settings["validation_views"], job.seed + VALIDATION_SEED_OFFSET))
+    train_views = cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
+    validation_views = cached_views(run_files.views_path(out, "val"),
+                                    render(settings["validation_views"], job.seed + VALIDATION_SEED_OFFSET))
     render_seconds = time.perf_counter() - started
 
     from paz6d.hrnet import model as hr

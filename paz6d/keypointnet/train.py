@@ -62,16 +62,6 @@ def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: flo
     return config
 
 
-def _cached_views(path: Path, render):
-    from paz6d.keypointnet.views import ViewSet
-
-    if path.exists():
-        return ViewSet.load(path)
-    views = render()
-    views.save(path)
-    return views
-
-
 # ------------------------------------------------------------------------------- losses
 
 def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_model: np.ndarray | None):
@@ -305,7 +295,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
     from paz6d.keypointnet.keypoints import DECODERS, decode_keypoints, keypoint_spread
-    from paz6d.keypointnet.views import ViewSampling, render_test_images, render_views, training_batch
+    from paz6d.keypointnet.views import ViewSampling, cached_views, render_test_images, render_views, training_batch
     from paz6d.synthesis.sampling import hull_points
 
     settings = job.settings()
@@ -322,8 +312,8 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         return lambda: render_views(job.mesh, count, seed, sampling, job.mesh_scale, job.workers,
                                     progress=job.progress)
 
-    train_views = views if views is not None else _cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
-    validation_views = _cached_views(run_files.views_path(out, "val"), render(settings["validation_views"], job.seed + 10_000))
+    train_views = views if views is not None else cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
+    validation_views = cached_views(run_files.views_path(out, "val"), render(settings["validation_views"], job.seed + 10_000))
     render_seconds = time.perf_counter() - started
 
     keypoints_model = None

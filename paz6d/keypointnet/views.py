@@ -259,6 +259,16 @@ def render_views(mesh_path: str | Path, count: int, seed: int, sampling: ViewSam
         raise ValueError(f"{mesh_path}: {error}") from error
 
 
+def cached_views(path: str | Path, render) -> ViewSet:
+    """The :class:`ViewSet` cached at ``path``, or ``render()``'s, saved there (a training cache of the
+    run directory: a resumed run renders nothing)."""
+    if Path(path).exists():
+        return ViewSet.load(path)
+    views = render()
+    views.save(path)
+    return views
+
+
 def render_test_images(mesh_path: str | Path, count: int, seed: int, sampling: ViewSampling = ViewSampling(),
                        mesh_scale: float = 1.0, workers: int = 2, chunk: int = 25,
                        progress: bool = True) -> TestImages:

@@ -40,6 +40,7 @@ from paz6d.probabilistic_keypoints.config import (FIXED_SETTINGS, RANSAC_THRESHO
 from paz6d.processors.predict import predict_in_batches
 from paz6d.synthesis.augment import share_generator
 from paz6d.synthesis.occluders import PolygonOccluders
+from paz6d.training.presets import check_same_run
 
 #: Seed offsets of the validation views, of the lifting images and of the test images (disjoint from the
 #: training views and from each other).
@@ -60,11 +61,8 @@ def _prepare_run_dir(job: ProbabilisticTraining, settings: dict, object_diameter
                          "diameter": object_diameter, "input_size": settings["input_size"], "margin": margin,
                          "downsample": settings["downsample"], "settings": settings})
     if run_files.path_of(job.out, run_files.CONFIG_FILE).is_file():
-        previous = run_files.read_config(job.out)
-        changed = [key for key in ("method", "config", "seed", "mesh_path", "mesh_scale") if previous.get(key) != config[key]]
-        changed += [key for key in FIXED_SETTINGS if previous.get("settings", {}).get(key) != config["settings"][key]]
-        if changed:
-            raise ValueError(f"out: {job.out} holds a different run ({', '.join(changed)} differ); choose another --out")
+        check_same_run(job.out, run_files.read_config(job.out), config,
+                       ("method", "config", "seed", "mesh_path", "mesh_scale"), FIXED_SETTINGS)
     run_files.write_config(job.out, config)
 
 
@@ -227,16 +225,6 @@ def _spearman(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(rank_a, rank_b)[0, 1])
 
 
-def _cached_views(path: Path, render):
-    from paz6d.keypointnet.views import ViewSet
-
-    if path.exists():
-        return ViewSet.load(path)
-    views = render()
-    views.save(path)
-    return views
-
-
 def _cached_test_crops(path: Path, job: ProbabilisticTraining, settings: dict, sampling, count: int, seed: int) -> dict:
     """Crops of ``count`` freshly rendered whole images cut as at inference (``images``, ``K``,
     ``T_model2cam``), cached in ``path``."""
@@ -294,7 +282,7 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
 
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
-    from paz6d.keypointnet.views import ViewSampling, render_views, training_batch
+    from paz6d.keypointnet.views import ViewSampling, cached_views, render_views, training_batch
     from paz6d.probabilistic_keypoints import model as pk
     from paz6d.training.trainer import Trainer
 
@@ -312,9 +300,9 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
     def render(count, seed):
         return lambda: render_views(job.mesh, count, seed, sampling, job.mesh_scale, job.workers, progress=job.progress)
 
-    train_views = _cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
-    validation_views = _cached_views(run_files.views_path(out, "val"),
-                                     render(settings["validation_views"], job.seed + VALIDATION_SEED_OFFSET))
+    train_views = cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
+    validation_views = cached_views(run_files.views_path(out, "val"),
+                                    render(settings["validation_views"], job.seed + VALIDATION_SEED_OFFSET))
     test = _cached_test_crops(run_files.views_path(out, "test"), job, settings, sampling, settings["test_images"],
                               job.seed + TEST_SEED_OFFSET)
     render_seconds = time.perf_counter() - started

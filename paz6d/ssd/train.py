@@ -35,17 +35,14 @@ from paz6d.ssd.encoding import BACKGROUND, decode_outputs, select_detections
 from paz6d.ssd.config import FIXED_SETTINGS, SSDTraining
 from paz6d.ssd.pipeline import draw_detections
 from paz6d.synthesis.box_augment import ssd_augmentation
+from paz6d.training.presets import check_same_run
 
 def _prepare_run_dir(job: SSDTraining, settings: dict, class_names: tuple[str, ...]) -> None:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"dataset": str(job.dataset.resolve()), "split": job.split, "config": job.config, "seed": job.seed,
               "class_names": list(class_names), "settings": settings}
-    previous = run_files.read_config(job.out)
-    if previous is not None:
-        changed = [key for key in ("dataset", "config", "seed", "class_names") if previous.get(key) != config[key]]
-        changed += [key for key in FIXED_SETTINGS if previous.get("settings", {}).get(key) != settings.get(key)]
-        if changed:
-            raise ValueError(f"out: {job.out} holds a different run ({', '.join(changed)} differ); choose another --out")
+    check_same_run(job.out, run_files.read_config(job.out), config, ("dataset", "config", "seed", "class_names"),
+                   FIXED_SETTINGS)
     run_files.write_config(job.out, config)
 
 

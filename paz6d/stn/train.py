@@ -24,6 +24,7 @@ from paz6d.processors.predict import predict_in_batches
 from paz6d.stn import run_dir as run_files
 from paz6d.stn.config import FIXED_SETTINGS, STNTraining
 from paz6d.stn.digits import CLASS_NAMES, TEST, TRAIN, ClutteredDigits, DigitCanvas
+from paz6d.training.presets import check_same_run
 
 #: Canvases and crops drawn in ``crops.png`` and the training samples.
 PREVIEW_COUNT = 16
@@ -39,13 +40,8 @@ def _prepare_run_dir(job: STNTraining, settings: dict) -> None:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = _canonical({"method": "stn", "config": job.config, "transformer": job.transformer, "seed": job.seed,
                          "settings": settings})
-    previous = run_files.read_config(job.out)
-    if previous is not None:
-        changed = [key for key in ("method", "config", "transformer", "seed") if previous.get(key) != config[key]]
-        changed += [key for key in FIXED_SETTINGS
-                    if previous.get("settings", {}).get(key) != config["settings"].get(key)]
-        if changed:
-            raise ValueError(f"out: {job.out} holds a different run ({', '.join(changed)} differ); choose another --out")
+    check_same_run(job.out, run_files.read_config(job.out), config, ("method", "config", "transformer", "seed"),
+                   FIXED_SETTINGS)
     run_files.write_config(job.out, config)
 
 

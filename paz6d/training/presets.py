@@ -1,10 +1,13 @@
 """A training run's settings: a named preset of a method's ``CONFIGS`` with the run's overrides and
-flag values applied. Shared by the settings dataclasses of ``paz6d train <method>``.
+flag values applied (shared by the settings dataclasses of ``paz6d train <method>``), and the check that a
+resumed run is the same run.
 
 Light: standard library only, so the ``paz6d train <method>`` parsers stay cheap.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 
 def preset_settings(configs: dict[str, dict], config: str, overrides: dict, check_overrides: bool = True,
@@ -55,3 +58,19 @@ def apply_positive_integers(settings: dict, values: dict[str, int | None]) -> di
                 raise ValueError(f"{name}: expected a positive integer, got {value}")
             settings[name] = int(value)
     return settings
+
+
+def check_same_run(out: str | Path, previous: dict | None, config: dict, keys: tuple[str, ...],
+                   fixed_settings: tuple[str, ...]) -> None:
+    """Checks that a run directory's earlier ``config.json`` (``previous``; ``None``: a new run) describes
+    the run ``config``: the same ``keys`` and the same ``fixed_settings`` of its ``"settings"``.
+
+    Raises:
+        ValueError: naming ``out`` and every key that differs.
+    """
+    if previous is None:
+        return
+    changed = [key for key in keys if previous.get(key) != config[key]]
+    changed += [key for key in fixed_settings if previous.get("settings", {}).get(key) != config["settings"].get(key)]
+    if changed:
+        raise ValueError(f"out: {out} holds a different run ({', '.join(changed)} differ); choose another --out")
