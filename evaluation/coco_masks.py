@@ -10,11 +10,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from paz6d.backend.rle import (POLYGON_SCALE, MaskIntervals, concatenated_ranges, counts_from_intervals,  # noqa: F401
+from paz6d.backend.rle import (POLYGON_SCALE, MaskIntervals, concatenated_ranges, counts_from_intervals,
                                decode_counts_strings, decode_rle, encode_counts_string, encode_mask,
                                intervals_from_counts, intervals_from_mask, mask_from_intervals,
                                segmentations_to_intervals)
 
+__all__ = ["POLYGON_SCALE", "MaskIntervals", "concatenated_ranges", "counts_from_intervals", "decode_counts_strings",
+           "decode_rle", "encode_counts_string", "encode_mask", "intervals_from_counts", "intervals_from_mask",
+           "mask_from_intervals", "segmentations_to_intervals", "pair_intersections", "iou_from_intersections",
+           "box_overlap_areas", "box_iou_pairs", "box_iou", "mask_iou"]
 
 # ----------------------------------------------------------------------------------------------
 # IoU
