@@ -75,6 +75,21 @@ class Box2D:
         x_min, y_min, x_max, y_max = as_array(coordinates, "coordinates", (4,)).reshape(4)
         return cls(x_min, y_min, x_max, y_max, score, class_name)
 
+    @classmethod
+    def coerce(cls, box) -> "Box2D":
+        """``box`` itself when it is a :class:`Box2D`, else :meth:`from_array` of its
+        ``(x_min, y_min, x_max, y_max)`` pixels (a pipeline's ``box2d`` argument).
+
+        Raises:
+            ValueError: naming ``box2d``.
+        """
+        if isinstance(box, cls):
+            return box
+        try:
+            return cls.from_array(box)
+        except ValueError as error:
+            raise ValueError(f"box2d: expected a Box2D or (x_min, y_min, x_max, y_max) pixels ({error})") from error
+
     def to_dict(self) -> dict[str, Any]:
         return {"x_min": self.x_min, "y_min": self.y_min, "x_max": self.x_max, "y_max": self.y_max,
                 "score": self.score, "class_name": self.class_name}

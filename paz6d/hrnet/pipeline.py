@@ -59,15 +59,6 @@ class DecodeHeatmaps(Processor):
         return decode_heatmaps(heatmaps, self.stride, self.method, self.domain, self.sigma)
 
 
-def _as_box(box) -> Box2D:
-    if isinstance(box, Box2D):
-        return box
-    try:
-        return Box2D.from_array(box)
-    except ValueError as error:
-        raise ValueError(f"box2d: expected a Box2D or (x_min, y_min, x_max, y_max) pixels ({error})") from error
-
-
 class HRNetKeypoints2D(SequentialProcessor):
     """``(image, box2d) -> Keypoints2D``: the object's ``N`` keypoints in image pixels, with scores.
 
@@ -111,7 +102,7 @@ class HRNetKeypoints2D(SequentialProcessor):
 
     def _sample(self, image, box) -> tuple[np.ndarray, Box2D]:
         image = as_image(image)
-        box = _as_box(box)
+        box = Box2D.coerce(box)
         check_box_in_image(box.to_array(), image.shape[1], image.shape[0], "box2d")
         return image, box
 

@@ -99,15 +99,6 @@ class KeypointPnP(Processor):
         return self.solve(self.points_model[usable], keypoints.points[usable], camera, threshold)
 
 
-def _as_box(box) -> Box2D:
-    if isinstance(box, Box2D):
-        return box
-    try:
-        return Box2D.from_array(box)
-    except ValueError as error:
-        raise ValueError(f"box2d: expected a Box2D or (x_min, y_min, x_max, y_max) pixels ({error})") from error
-
-
 class KeypointPose6D(SequentialProcessor):
     """``(image, box2d, camera=None) -> Pose6D`` with a trained KeypointNet run and PnP.
 
@@ -194,7 +185,7 @@ class KeypointPose6D(SequentialProcessor):
         image = as_image(image)
         height, width = image.shape[:2]
         camera = self._camera(camera, width, height)
-        box = _as_box(box)
+        box = Box2D.coerce(box)
         check_box_in_image(box.to_array(), width, height, "box2d")
         return image, box, camera
 
@@ -234,7 +225,7 @@ class KeypointPose6D(SequentialProcessor):
 
     def estimate_from_keypoints(self, keypoints: Keypoints2D, box2d, camera=None) -> Pose6D:
         """The steps from ``solve_pnp`` on, for keypoints found in ``box2d``."""
-        box = _as_box(box2d)
+        box = Box2D.coerce(box2d)
         values = {"keypoints": [keypoints], "boxes": [box], "windows": [square_window(box.to_array(), self.margin)],
                   "cameras": [self._camera(camera)]}
         pose = self.run_steps(values, start="solve_pnp")["poses"][0]
