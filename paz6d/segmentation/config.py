@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from paz6d.cli_options import option
+from paz6d.training.presets import apply_positive_integers, preset_settings
 
 CONFIGS: dict[str, dict] = {
     # CPU budget: about 12 minutes (reading the data set + training) on 2 shared CPU cores (docs/segmentation.md).
@@ -41,18 +42,8 @@ class SegmentationTraining:
 
     def settings(self) -> dict:
         """The config's settings with ``overrides``, ``steps`` and ``batch_size`` applied (checked)."""
-        if self.config not in CONFIGS:
-            raise ValueError(f"config: expected one of {sorted(CONFIGS)}, got {self.config!r}")
-        unknown = sorted(set(self.overrides) - set(CONFIGS[self.config]))
-        if unknown:
-            raise ValueError(f"overrides: unknown setting(s) {unknown}; known: {sorted(CONFIGS[self.config])}")
-        settings = {**CONFIGS[self.config], **self.overrides}
-        for name in ("steps", "batch_size"):
-            value = getattr(self, name)
-            if value is not None:
-                if int(value) <= 0:
-                    raise ValueError(f"{name}: expected a positive integer, got {value}")
-                settings[name] = int(value)
+        settings = apply_positive_integers(preset_settings(CONFIGS, self.config, self.overrides, known="known:"),
+                                           {"steps": self.steps, "batch_size": self.batch_size})
         settings["widths"] = tuple(int(width) for width in settings["widths"])
         if settings["input_size"] % 2 ** len(settings["widths"]):
             raise ValueError(f"input_size: expected a multiple of {2 ** len(settings['widths'])} "

@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from paz6d.backend.files import load_json, write_json_atomically
+from paz6d.backend.files import check_run_files, load_json, write_json_atomically
 
 SEGMENTER_FILE = "segmenter.json"
 MODEL_FILE = "model.keras"
@@ -98,13 +98,7 @@ def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
 def validate(run_dir: str | Path) -> dict[str, Any]:
     """Checks that ``run_dir`` is a directory with ``segmenter.json`` and ``model.keras``; returns the
     segmenter description."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise ValueError(f"run_dir: {run_dir} is not a directory")
-    for name in REQUIRED_FILES:
-        if not (run_dir / name).is_file():
-            raise ValueError(f"{run_dir / name}: file not found (is {run_dir} a segmentation run directory?)")
-    return read_segmenter(run_dir)
+    return read_segmenter(check_run_files(run_dir, REQUIRED_FILES, "a segmentation"))
 
 
 def read_model(run_dir: str | Path):
