@@ -12,6 +12,10 @@ the per-image time (seconds, the same on every row of an image, as BOP asks)::
         --out det.csv             # also writes det_detections.json (COCO results of the detector)
     paz6d evaluate bop --dataset ../shared/data/bop_lmo --results det.csv --metrics mssd,mspd,add --out det.json
 
+With ``--depth`` every pose is refined by ICP against the image's depth image (BOP ``depth/`` files in
+millimetres times ``depth_scale``, read in metres; :class:`paz6d.processors.refine.RefineWithDepth`), and
+the summary counts the refinements accepted and rejected.
+
 A bare ``--run RUN_DIR`` with ``--object-id`` (or a run whose mesh is named ``obj_XXXXXX``) keeps working.
 Images without an RGB file are skipped (reported), as are, with ground-truth boxes, instances below
 ``--min-visible``. Nothing estimated is an error (exit 2).
@@ -28,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import write_json_atomically
+from paz6d.backend.icp import check_depth
 from paz6d.backend.paths import check_output_file, check_outputs_apart, check_plain_name
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
@@ -72,6 +77,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-visible", type=float, default=TARGET_MIN_VISIBLE_FRACTION,
                         help=f"without --detector, skip instances whose visible fraction is below this (default "
                              f"{TARGET_MIN_VISIBLE_FRACTION}, as BOP'19 targets)")
+    parser.add_argument("--depth", action="store_true",
+                        help="refine every pose by ICP (open3d) against the image's depth (depth/<im_id>.png of "
+                             "the split, times depth_scale of scene_camera.json); a refinement that fails its "
+                             "checks keeps the RGB pose")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
                         help="progress bar (default: --progress)")
 
@@ -222,18 +231,39 @@ def _estimator(method: str, run_dir: Path):
     return load_pose_estimator(run_dir)[1]
 
 
-def _load_estimators(runs: dict[int, tuple[Path, str]]) -> dict[int, object]:
-    return {obj_id: _estimator(method, run_dir) for obj_id, (run_dir, method) in runs.items()}
+def _load_estimators(runs: dict[int, tuple[Path, str]]) -> tuple[dict[int, object], dict[int, str]]:
+    """``({obj_id: estimator}, {obj_id: reason})``: a run that loads but can never give a pose (a KeypointNet
+    with fewer than 4 usable keypoints, a ``PnPError``) is left out with a warning, so its instances score as
+    misses and the other objects are still estimated.
+
+    Raises:
+        ValueError: a corrupt run directory, or no run that can give a pose.
+    """
+    from paz6d.backend.pnp import PnPError
+
+    estimators, unusable = {}, {}
+    for obj_id, (run_dir, method) in runs.items():
+        try:
+            estimators[obj_id] = _estimator(method, run_dir)
+        except PnPError as error:
+            unusable[obj_id] = str(error)
+    if not estimators:
+        raise ValueError("no pose model can estimate: " + "; ".join(unusable.values()))
+    for obj_id, reason in unusable.items():
+        warnings.warn(f"object {obj_id} is not estimated (its instances score as misses): {reason}", stacklevel=2)
+    return estimators, unusable
 
 
 def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path, split: str, box: str = "obj",
-                               min_visible: float = TARGET_MIN_VISIBLE_FRACTION, progress: bool = True) -> dict:
+                               min_visible: float = TARGET_MIN_VISIBLE_FRACTION, progress: bool = True,
+                               depth: bool = False) -> dict:
     """Every visible-enough instance of the runs' objects, from its ground-truth box.
 
     Returns:
         ``{"estimates": _Estimates, "targets": [Target], "skipped_images", "failed": {obj_id: count},
-        "images"}``; an estimate that fails (e.g. PnP with too few keypoints, a ``ValueError``) is counted
-        and left out (BOP scores a missing estimate as a miss).
+        "images", "unusable": {obj_id: reason}}`` (see :func:`_load_estimators`); an estimate that fails
+        (e.g. PnP with too few keypoints, a ``ValueError``) is counted and left out (BOP scores a missing
+        estimate as a miss).
     """
     from tqdm.auto import tqdm
 
@@ -242,7 +272,7 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
     if box not in BOXES:
         raise ValueError(f"box: expected one of {sorted(BOXES)}, got {box!r}")
     data = BOPDataset(dataset, split=split)
-    estimators = None  # loaded at the first instance to estimate
+    estimators, unusable = None, {}  # loaded at the first instance to estimate
     estimates, targets = _Estimates(), []
     skipped_images, images, failed = 0, 0, {obj_id: 0 for obj_id in runs}
     for sample in tqdm(data, desc="estimate (ground-truth boxes)", unit="image", disable=not progress,
@@ -259,10 +289,13 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
             counts[instance.obj_id] = counts.get(instance.obj_id, 0) + 1
         targets += [Target(sample.scene_id, sample.im_id, obj_id, count) for obj_id, count in sorted(counts.items())]
         if estimators is None:
-            estimators = _load_estimators(runs)
+            estimators, unusable = _load_estimators(runs)
         images += 1
         poses, seconds = [], 0.0
+        extra = {"depth": checked_depth(sample, dataset, split)} if depth else {}
         for instance in instances:
+            if instance.obj_id in unusable:
+                continue
             if not instance.info or BOXES[box] not in instance.info:
                 raise ValueError(f"{dataset}: scene {sample.scene_id} image {sample.im_id} has no {BOXES[box]} in "
                                  f"scene_gt_info.json (needed for the ground-truth box)")
@@ -270,7 +303,8 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
             started = time.perf_counter()
             try:
                 pose = estimators[instance.obj_id](sample.image, (float(x), float(y), float(x + width),
-                                                                   float(y + height)), camera=sample.camera)
+                                                                   float(y + height)), camera=sample.camera,
+                                                  **extra)
             except ValueError:
                 pose = None
             seconds += time.perf_counter() - started
@@ -280,7 +314,8 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
             poses.append((instance.obj_id, 1.0, pose.to_matrix()))
         estimates.add_image(sample.scene_id, sample.im_id, poses, seconds)
     return {"estimates": estimates, "targets": targets, "skipped_images": skipped_images, "failed": failed,
-            "images": images}
+            "estimators": estimators or {},
+            "images": images, "unusable": unusable}
 
 
 def split_images(dataset: Path, split: str):
@@ -310,12 +345,14 @@ def split_images(dataset: Path, split: str):
 
 
 def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path, dataset: Path, split: str,
-                           score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True) -> dict:
+                           score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True,
+                           depth: bool = False) -> dict:
     """Detect every RGB image of the split, then estimate each detection of an object that has a run.
 
     Returns:
         ``{"estimates": _Estimates, "detections": [COCO result dicts], "images": [(scene_id, im_id)],
-        "skipped_images", "failed": {obj_id: count}, "without_model": {class: count}, "seconds_per_image"}``.
+        "skipped_images", "failed": {obj_id: count}, "without_model": {class: count}, "unusable": {obj_id: reason},
+        "seconds_per_image"}``.
     """
     from tqdm.auto import tqdm
 
@@ -326,7 +363,8 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
     from paz6d.ssd.pipeline import DetectSingleShot
 
     detector = DetectSingleShot(detector_dir, score_threshold=score_threshold)
-    pipeline = DetectAndEstimatePose6D(detector, _load_estimators(runs))
+    estimators, unusable = _load_estimators(runs)
+    pipeline = DetectAndEstimatePose6D(detector, estimators)
     estimates, detections, images = _Estimates(), [], []
     skipped_images, failed, without_model, total = 0, {obj_id: 0 for obj_id in runs}, {}, 0.0
     entries = list(split_images(dataset, split))
@@ -341,10 +379,11 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
             raise ValueError(f"{path}: image is {image.shape[1]}x{image.shape[0]} pixels, but {dataset}/camera.json "
                              f"says {width}x{height}")
         camera = Camera(K, width, height)
+        depth_image = read_split_depth(dataset, split, scene_id, im_id, image.shape[:2]) if depth else None
         started = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MissingPoseModelWarning)
-            values = pipeline.run(image, camera)
+            values = pipeline.run(image, camera, depth_image)
         seconds = time.perf_counter() - started
         total += seconds
         images.append((scene_id, im_id))
@@ -355,7 +394,7 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
             detections.append({"image_id": coco_image_id(scene_id, im_id), "category_id": obj_id,
                                "bbox": [round(float(v), 2) for v in (box.x_min, box.y_min, box.width, box.height)],
                                "score": round(float(box.score), 5)})
-            if obj_id not in runs:
+            if obj_id not in estimators:
                 without_model[box.class_name] = without_model.get(box.class_name, 0) + 1
         poses = []
         for box, pose in zip(values["boxes"], values["poses"]):
@@ -366,7 +405,8 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
                 poses.append((obj_id, float(box.score), pose.to_matrix()))
         estimates.add_image(scene_id, im_id, poses, seconds)
     return {"estimates": estimates, "detections": detections, "images": images, "skipped_images": skipped_images,
-            "failed": failed, "without_model": without_model,
+            "estimators": estimators,
+            "failed": failed, "without_model": without_model, "unusable": unusable,
             "seconds_per_image": total / len(images) if images else None}
 
 
@@ -379,6 +419,55 @@ def detector_targets(dataset: Path, images: list[tuple[int, int]], object_ids) -
     wanted = set(images)
     return [target for target in read_targets(path)
             if (target.scene_id, target.im_id) in wanted and target.obj_id in object_ids]
+
+
+# ------------------------------------------------------------------------------------------ depth (--depth)
+def _depth_file(dataset: Path, split: str, scene_id: int, im_id: int) -> Path:
+    """``<dataset>/<split>/<scene>/depth/<im_id>.png`` (or ``.tif``/``.tiff``) of one image.
+
+    Raises:
+        ValueError: no depth file, naming the one expected.
+    """
+    from paz6d.datasets.bop.scene import DEPTH_SUFFIXES, find_image
+
+    folder = Path(dataset) / split / f"{scene_id:06d}" / "depth"
+    path = find_image(folder, im_id, DEPTH_SUFFIXES)
+    if path is None:
+        raise ValueError(f"{folder / f'{im_id:06d}.png'}: depth image not found (--depth needs one per image)")
+    return path
+
+
+def checked_depth(sample, dataset: Path, split: str) -> np.ndarray:
+    """The depth ``(H, W)`` metres of a :class:`~paz6d.datasets.bop.reader.BOPSample`, checked to exist, be
+    finite and have its RGB image's size (errors name the depth file)."""
+    path = _depth_file(dataset, split, sample.scene_id, sample.im_id)
+    return check_depth(sample.depth, str(path), sample.image.shape[:2])
+
+
+def read_split_depth(dataset: Path, split: str, scene_id: int, im_id: int, shape: tuple[int, int]) -> np.ndarray:
+    """The depth ``(H, W)`` metres of one image of a split (its file times ``depth_scale`` of
+    ``scene_camera.json``), checked as :func:`checked_depth` does; no ground truth is read."""
+    from paz6d.datasets.bop.camera import load_scene_camera
+    from paz6d.datasets.bop.scene import read_depth
+
+    path = _depth_file(dataset, split, scene_id, im_id)
+    cameras_path = path.parent.parent / "scene_camera.json"
+    depth_scale = load_scene_camera(cameras_path, units="m")[im_id].depth_scale
+    if depth_scale is None:
+        raise ValueError(f"{cameras_path}: image {im_id}: missing field 'depth_scale' (needed by --depth)")
+    return check_depth(read_depth(path, depth_scale, units="m"), str(path), shape)
+
+
+def refinement_statistics(estimators) -> dict:
+    """Counts and mean process time of the depth refinements the estimators' ``refine_with_depth`` steps ran."""
+    steps = [estimator["refine_with_depth"].processor.statistics for estimator in estimators.values()]
+    count = sum(step["refinements"] for step in steps)
+    rejected: dict[str, int] = {}
+    for step in steps:
+        for check, number in step["rejected"].items():
+            rejected[check] = rejected.get(check, 0) + number
+    return {"refinements": count, "accepted": sum(step["accepted"] for step in steps), "rejected": rejected,
+            "mean_cpu_seconds": sum(step["seconds"] for step in steps) / count if count else None}
 
 
 # ------------------------------------------------------------------------------------------ command
@@ -420,14 +509,15 @@ def estimate(args: argparse.Namespace) -> dict:
     import_tensorflow()
     objects = sorted(runs)
     if args.detector is None:
-        found = estimate_with_ground_truth(runs, args.dataset, args.split, args.box, args.min_visible, args.progress)
+        found = estimate_with_ground_truth(runs, args.dataset, args.split, args.box, args.min_visible, args.progress,
+                                           args.depth)
         targets = found["targets"]
         if found["images"] == 0:
             raise ValueError(f"{args.dataset}: no instance of objects {objects} with an RGB image and visible "
                              f"fraction >= {args.min_visible} in split {args.split!r}")
     else:
         found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
-                                       args.progress)
+                                       args.progress, args.depth)
         targets = detector_targets(args.dataset, found["images"], runs)
         if not found["images"]:
             raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "
@@ -446,6 +536,7 @@ def estimate(args: argparse.Namespace) -> dict:
                "per_object": {str(obj_id): int(np.sum(rows["obj_ids"] == obj_id)) for obj_id in objects},
                "failed": {str(key): value for key, value in found["failed"].items()},
                "images_without_rgb_skipped": found["skipped_images"],
+               "unusable": {str(key): reason for key, reason in found["unusable"].items()},
                "methods": {str(obj_id): method for obj_id, (_, method) in runs.items()},
                "mean_seconds_per_image": float(np.mean(list(dict(zip(zip(rows["scene_ids"], rows["im_ids"]),
                                                                         rows["times"])).values())))}
@@ -458,6 +549,8 @@ def estimate(args: argparse.Namespace) -> dict:
     if args.targets_out is not None:
         write_targets(args.targets_out, targets)
         summary["targets_out"] = str(args.targets_out)
+    if args.depth:
+        summary["depth_refinement"] = refinement_statistics(found["estimators"])
     return summary
 
 
@@ -466,6 +559,8 @@ def run(args: argparse.Namespace) -> int:
     failed = sum(int(value) for value in summary["failed"].values())
     extra = (f", {summary['detections']} detections -> {summary['detections_out']}"
              if "detections_out" in summary else "")
+    if summary["unusable"]:
+        extra += f"; objects {sorted(map(int, summary['unusable']))} not estimated (unusable pose model)"
     print(f"wrote {args.out}: {summary['estimates']} estimates of objects {sorted(map(int, summary['per_object']))} "
           f"({failed} failed, {summary['images_without_rgb_skipped']} images without RGB skipped{extra}; "
           f"{summary['mean_seconds_per_image']:.3f} s per image)")

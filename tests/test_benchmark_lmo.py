@@ -45,7 +45,8 @@ def mocked(tmp_path, monkeypatch):
     def estimate(job, condition):
         calls.append(f"estimate {condition}")
         touch(job.result(condition, ".csv"))
-        return {"estimates": 3}
+        unusable = {"5": "keypoints.json: only 2 usable keypoints"} if job.method == "keypointnet" else {}
+        return {"estimates": 3, "unusable": unusable}
 
     def evaluate(job, condition):
         calls.append(f"evaluate {condition}")
@@ -105,6 +106,9 @@ def test_keypointnet_reuses_the_data_and_detector_and_adds_its_scores_to_the_rep
     assert calls[:2] == ["pose 1", "pose 5"] and "detector" not in calls
     assert sorted(report["methods"]) == ["aae", "keypointnet"]
     assert "| keypointnet | gt_visible_boxes | 5 |" in score_table(report)
+    assert report["not_estimated"] == {"aae": {}, "keypointnet": {"5": "keypoints.json: only 2 usable keypoints"}}
+    assert ("- keypointnet, object 5: not estimated, scored as misses (keypoints.json: only 2 usable keypoints)"
+            in (tmp_path / "bench" / "report.md").read_text())
 
 
 def test_other_settings_in_the_same_folder_and_bad_input_are_refused(mocked, tmp_path):

@@ -251,6 +251,36 @@ def test_estimate_skips_images_without_rgb_and_fails_clearly_when_nothing_is_est
     assert not (tmp_path / "none.csv").exists()
 
 
+def test_estimate_scores_an_object_whose_pose_model_cannot_estimate_as_misses(world, tmp_path, capsys, monkeypatch):
+    from paz6d import estimate as module
+    from paz6d.backend.pnp import PnPError
+    from paz6d.datasets.bop import read_pose_results
+
+    real = module._estimator
+
+    def estimator(method, run_dir):  # as a KeypointNet run with 2 usable keypoints fails when it is loaded
+        if run_dir.name == "aae_8":
+            raise PnPError(f"{run_dir}/keypoints.json: only 2 usable keypoints, PnP needs at least 4")
+        return real(method, run_dir)
+
+    monkeypatch.setattr(module, "_estimator", estimator)
+    runs = [f"--run={obj_id}={world / f'aae_{obj_id}'}" for obj_id in OBJECTS]
+    for name, flags in (("truth", ["--box", "visib"]), ("det", ["--detector", str(world / "ssd"), "--score-threshold",
+                                                                "0"])):
+        out, targets = tmp_path / f"{name}.csv", tmp_path / f"{name}_targets.json"
+        with pytest.warns(UserWarning, match="object 8 is not estimated .*only 2 usable keypoints"):
+            assert main(["estimate", *runs, *flags, "--dataset", str(world / "set"), "--out", str(out),
+                         "--targets-out", str(targets), "--no-progress"]) == 0
+        assert set(read_pose_results(out).obj_ids.tolist()) == {5}
+        assert {entry["obj_id"] for entry in json.loads(targets.read_text())} == set(OBJECTS)  # 8 scores as misses
+        assert "objects [8] not estimated (unusable pose model)" in capsys.readouterr().out
+        report = _evaluate(world, out, tmp_path, name)
+        assert report["per_object"]["8"]["AR_MSSD"] == 0
+    assert main(["estimate", runs[1], "--dataset", str(world / "set"), "--out", str(tmp_path / "none.csv"),
+                 "--no-progress"]) == 2
+    assert "no pose model can estimate: " in capsys.readouterr().err and not (tmp_path / "none.csv").exists()
+
+
 @pytest.mark.parametrize("flags, expected", [
     (["--run", "{world}/missing"], "--run: {world}/missing is not a directory"),
     (["--run", "5={world}/set"], "is not a run directory of any method"),

@@ -345,6 +345,24 @@ def score_table(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _not_estimated(job: Benchmark) -> dict[str, str]:
+    """``{obj_id: reason}`` of the objects whose pose model could not estimate (from the estimate stages)."""
+    found = {}
+    for condition in ("gt", "detections"):
+        marker = job.marker(f"estimate_{job.method}_{condition}")
+        if marker.is_file():
+            found.update((load_json_object(marker).get("summary") or {}).get("unusable", {}))
+    return found
+
+
+def not_estimated_notes(report: dict) -> str:
+    """Markdown lines naming the objects scored as misses because their pose model could not estimate."""
+    lines = [f"- {method}, object {int(obj_id)}: not estimated, scored as misses ({reason})"
+             for method, objects in sorted(report.get("not_estimated", {}).items())
+             for obj_id, reason in sorted(objects.items(), key=lambda item: int(item[0]))]
+    return ("\n" + "\n".join(lines) + "\n") if lines else ""
+
+
 def _overlays(job: Benchmark, condition: str) -> list[Path]:
     """One PNG per real frame with the estimates' model outlines and axes, and a grid of all frames."""
     import cv2
@@ -408,15 +426,17 @@ def write_report(job: Benchmark, timings: dict[str, float]) -> dict:
     for summary in methods[job.method].values():
         if summary is not None:
             summary["mean_AR_MSSD_AR_MSPD"] = _mean_ar(summary)
+    not_estimated = dict(report.get("not_estimated", {}))
+    not_estimated[job.method] = _not_estimated(job)
     all_timings = {**report.get("timings_seconds", {}), **timings}
     detector = _scores(job.out / "results" / "detector_coco.json")
     overlays = {condition: [str(p) for p in _overlays(job, condition)] for condition in ("gt", "detections")}
     report = {"benchmark": "lmo", "quick": job.quick, "settings": asdict(job.settings), "objects": list(job.objects),
-              "lmo": str(job.lmo), "methods": methods, "detector_coco": detector,
+              "lmo": str(job.lmo), "methods": methods, "not_estimated": not_estimated, "detector_coco": detector,
               "timings_seconds": all_timings, "total_minutes": sum(all_timings.values()) / 60,
               "overlays": {**report.get("overlays", {}), job.method: overlays}}
     write_json_atomically(path, report, indent=2)
-    table = score_table(report)
+    table = score_table(report) + not_estimated_notes(report)
     header = (f"# paz6d benchmark lmo ({'quick' if job.quick else 'full'})\n\n"
               f"Synthetic training only; {len(job.objects)} LM-O objects; scored on the real RGB frames of "
               f"{job.lmo} with `paz6d evaluate bop`. Total stage time {report['total_minutes']:.1f} min.\n\n")
