@@ -16,7 +16,9 @@ from paz6d.backend.files import load_json
 from paz6d.backend.mesh import MeshError, diameter, load_mesh
 from paz6d.datasets.bop.models import parse_symmetries
 from paz6d.datasets.bop.units import MM_PER_M
+from paz6d.synthesis.mesh_distractors import textured_distractor_library
 from paz6d.synthesis.occluders import distractor_library
+from paz6d.synthesis.photo_backgrounds import sample_photographs
 from paz6d.synthesis.sampling import hull_points
 from paz6d.synthesis.scene import ZNEAR
 _OBJECT_ID = re.compile(r"^obj_(\d+)$")
@@ -34,7 +36,9 @@ class Assets:
         radii: ``(M,)`` radius of the bounding sphere about ``centres`` (metres).
         diameters: ``(M,)`` largest vertex distance (metres).
         outlines: convex-hull vertices of each mesh (a mesh is inside the image iff they are).
-        distractors: unannotated primitives (white vertex colours; tinted when rendered).
+        distractors: unannotated primitives (white vertex colours, tinted by a random colour when rendered)
+            and, with ``distractor_style="textured"``, photo-textured ones (colour-jittered when rendered).
+        distractor_tinted: ``(D,)`` bool, whether each distractor is a white primitive to tint.
         distractor_radii: their bounding-sphere radii (metres, centred at the origin).
         distractor_outlines: their convex-hull vertices.
         backgrounds: background image files (empty: procedural backgrounds).
@@ -49,6 +53,7 @@ class Assets:
     diameters: np.ndarray
     outlines: list[np.ndarray]
     distractors: list[trimesh.Trimesh]
+    distractor_tinted: np.ndarray
     distractor_radii: np.ndarray
     distractor_outlines: list[np.ndarray]
     backgrounds: list[Path]
@@ -149,10 +154,15 @@ def load_assets(config: GenerationConfig) -> Assets:
     centres = np.array([mesh.bounds.mean(axis=0) for mesh in meshes])
     radii = np.array([np.linalg.norm(mesh.vertices - centre, axis=1).max() for mesh, centre in zip(meshes, centres)])
     diameters = np.array([diameter(mesh.vertices) for mesh in meshes])
-    distractors = distractor_library(float(np.mean(diameters))) if config.distractors or \
-        config.occluder_probability > 0 else []
+    distractors, textured = [], []
+    if config.distractors or (config.occluder_probability > 0 and config.occluders > 0):
+        distractors = distractor_library(float(np.mean(diameters)))
+        if config.distractor_style == "textured":
+            textured = textured_distractor_library(float(np.mean(diameters)), sample_photographs(), seed=config.seed)
+    distractor_tinted = np.array([True] * len(distractors) + [False] * len(textured), dtype=bool)
+    distractors = distractors + textured
     distractor_radii = np.array([np.linalg.norm(mesh.vertices, axis=1).max() for mesh in distractors])
     backgrounds = check_backgrounds(config.backgrounds) if config.backgrounds is not None else []
     return Assets(meshes, object_ids, centres, radii, diameters, [hull_points(mesh.vertices) for mesh in meshes],
-                  distractors, distractor_radii, [hull_points(mesh.vertices) for mesh in distractors], backgrounds,
+                  distractors, distractor_tinted, distractor_radii, [hull_points(mesh.vertices) for mesh in distractors], backgrounds,
                   _distance_range(config, radii, diameters), _load_symmetries(config.symmetries, object_ids))

@@ -21,6 +21,7 @@ ROTATION_MODES = ("so3", "view-sphere")
 #: floating: objects at independent distances and orientations (paz6d.synthesis.scene); tabletop:
 #: upright on a textured table seen from above (paz6d.synthesis.tabletop).
 SCENE_STYLES = ("floating", "tabletop")
+DISTRACTOR_STYLES = ("primitive", "textured")
 RGB_FORMATS = ("png", "jpg")
 #: Key of the input digests in a run's fingerprint (see :meth:`GenerationConfig.input_contents`).
 CONTENTS_KEY = "input_contents"
@@ -112,6 +113,11 @@ class GenerationConfig:
                                                     "view-sphere", metavar=("MIN", "MAX"))
     distractors: int = option(2, "maximum number of unannotated distractor primitives per image")
     occluder_probability: float = option(0.3, "chance that a primitive is put between the camera and an object")
+    occluders: int = option(1, "occluder draws per image, each with --occluder-probability on a random object")
+    distractor_style: str = option(
+        "primitive", "primitive: boxes, cylinders, spheres, capsules in one random colour each; textured: as many "
+                     "again of photo-textured boxes, cylinders, spheres, capsules, cones, tori "
+                     "(paz6d.synthesis.mesh_distractors)", choices=DISTRACTOR_STYLES)
     backgrounds: Path | None = option(None, "folder of background images (default: procedural backgrounds)")
     light_count: tuple[int, int] = option((1, 3), "number of random lights", metavar=("MIN", "MAX"))
     color_jitter: float = option(0.2, "objects' base colour is multiplied by U(1 - j, 1 + j) per channel")
@@ -179,6 +185,11 @@ class GenerationConfig:
                 not 0 <= self.distractors <= MAX_PER_IMAGE:
             raise ValueError(f"distractors: expected an integer in 0..{MAX_PER_IMAGE}, got {self.distractors!r}")
         _fraction(self.occluder_probability, "occluder_probability")
+        if isinstance(self.occluders, bool) or int(self.occluders) != self.occluders or \
+                not 0 <= self.occluders <= MAX_PER_IMAGE:
+            raise ValueError(f"occluders: expected an integer in 0..{MAX_PER_IMAGE}, got {self.occluders!r}")
+        if self.distractor_style not in DISTRACTOR_STYLES:
+            raise ValueError(f"distractor_style: expected one of {DISTRACTOR_STYLES}, got {self.distractor_style!r}")
         _fraction(self.blur_probability, "blur_probability")
         low, high = _range(self.light_count, "light_count", minimum=0, maximum=MAX_PER_IMAGE)
         if int(low) != low or int(high) != high:
@@ -214,6 +225,9 @@ class GenerationConfig:
         data["scale"] = data.pop("mesh_scale")  # the key data sets made before the field's rename hold
         if data["scene"] == "floating":
             data.pop("scene")  # data sets made before scene styles existed are floating ones
+        if data["occluders"] == 1 and data["distractor_style"] == "primitive":
+            data.pop("occluders")  # nor do those made before these two fields existed
+            data.pop("distractor_style")
         data["meshes"] = [str(path.resolve()) for path in self.meshes]
         for name in ("backgrounds", "symmetries"):
             data[name] = None if data[name] is None else str(Path(data[name]).resolve())

@@ -28,6 +28,7 @@ class _Settings:
     inplane_degrees: float = 10.0
     distractors: int = 3
     occluder_probability: float = 0.0
+    occluders: int = 1
 
 
 @dataclass

@@ -31,6 +31,7 @@ class SceneSettings(Protocol):
     inplane_degrees: float
     distractors: int
     occluder_probability: float
+    occluders: int
 
 
 class SceneAssets(Protocol):
@@ -68,9 +69,28 @@ class Scene:
     support: tuple | None = None
 
 
+def add_occluders(generator: np.random.Generator, assets: SceneAssets, settings: SceneSettings,
+                  object_indices: list[int], poses: list[np.ndarray], clutter_indices: list[int],
+                  clutter_poses: list[np.ndarray]) -> None:
+    """``settings.occluders`` times, with ``occluder_probability``, puts a random distractor between
+    the camera and a random object (``poses``: ``T_model2cam`` of ``object_indices``); appends to
+    ``clutter_indices`` / ``clutter_poses`` in place. Two occluders may hide the same object."""
+    for _ in range(settings.occluders):
+        if generator.random() >= settings.occluder_probability:
+            continue
+        target = int(generator.integers(len(poses)))
+        choice = int(generator.integers(len(assets.distractors)))
+        target_centre = poses[target][:3, :3] @ assets.centres[object_indices[target]] + poses[target][:3, 3]
+        pose = occluder_pose(generator, target_centre, assets.radii[object_indices[target]],
+                             assets.distractor_radii[choice], ZNEAR)
+        if pose is not None:
+            clutter_indices.append(choice)
+            clutter_poses.append(pose)
+
+
 def sample_scene(generator: np.random.Generator, assets: SceneAssets, settings: SceneSettings) -> Scene:
-    """Draws the objects (fully inside the image, bounding spheres apart), distractors and, with
-    ``occluder_probability``, a primitive between the camera and one object."""
+    """Draws the objects (fully inside the image, bounding spheres apart), distractors and occluders
+    (:func:`add_occluders`)."""
     K = np.asarray(settings.K)
     width, height = settings.width, settings.height
     count = int(generator.integers(settings.objects_per_image[0], settings.objects_per_image[1] + 1))
@@ -99,13 +119,5 @@ def sample_scene(generator: np.random.Generator, assets: SceneAssets, settings: 
             if translation is not None:
                 clutter_indices.append(choice)
                 clutter_poses.append(from_rotation_translation(rotation, translation))
-        if generator.random() < settings.occluder_probability:
-            target = int(generator.integers(len(poses)))
-            choice = int(generator.integers(len(assets.distractors)))
-            target_centre = poses[target][:3, :3] @ assets.centres[object_indices[target]] + poses[target][:3, 3]
-            pose = occluder_pose(generator, target_centre, assets.radii[object_indices[target]],
-                                 assets.distractor_radii[choice], ZNEAR)
-            if pose is not None:
-                clutter_indices.append(choice)
-                clutter_poses.append(pose)
+        add_occluders(generator, assets, settings, object_indices, poses, clutter_indices, clutter_poses)
     return Scene(object_indices, np.array(poses), clutter_indices, np.array(clutter_poses).reshape(-1, 4, 4))

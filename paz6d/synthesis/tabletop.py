@@ -12,8 +12,8 @@ scenes of :mod:`paz6d.synthesis.scene` draw every object's distance and orientat
 * the objects upright (model ``+z`` along the table normal, as BOP models of tabletop sets are
   stored), turned about the normal at random, resting on the plane (lowest hull point at height 0),
   fully inside the image and with their bounding spheres apart;
-* distractor primitives resting on the table among them, and (with ``occluder_probability``) a
-  floating occluder in front of one object, as the floating scenes do;
+* distractor primitives resting on the table among them, and floating occluders in front of
+  objects (:func:`paz6d.synthesis.scene.add_occluders`), as the floating scenes do;
 * the table: a square plane of :data:`TABLE_SIDE` metres whose vertex colours are a photographic
   collage (:func:`paz6d.synthesis.photo_backgrounds.photo_collage`).
 
@@ -28,10 +28,9 @@ import trimesh
 from paz6d.backend import quaternion
 from paz6d.backend.camera import project_points
 from paz6d.backend.transform import from_rotation_translation
-from paz6d.synthesis.occluders import occluder_pose
 from paz6d.synthesis.photo_backgrounds import photo_collage
 from paz6d.synthesis.sampling import PLACEMENT_ATTEMPTS, inside_image
-from paz6d.synthesis.scene import ZNEAR, Scene, SceneAssets, SceneSettings
+from paz6d.synthesis.scene import Scene, SceneAssets, SceneSettings, add_occluders
 
 #: Camera elevations above the table plane (degrees) a tabletop scene accepts.
 ELEVATION_LIMITS = (15.0, 85.0)
@@ -157,15 +156,6 @@ def sample_tabletop_scene(generator: np.random.Generator, assets: SceneAssets, s
             if T_model2table is not None:
                 clutter_indices.append(choice)
                 clutter_poses.append(T_table2cam @ T_model2table)
-        if generator.random() < settings.occluder_probability:
-            target_index = int(generator.integers(len(poses)))
-            choice = int(generator.integers(len(assets.distractors)))
-            pose = poses[target_index]
-            target_centre = pose[:3, :3] @ assets.centres[object_indices[target_index]] + pose[:3, 3]
-            occluder = occluder_pose(generator, target_centre, assets.radii[object_indices[target_index]],
-                                     assets.distractor_radii[choice], ZNEAR)
-            if occluder is not None:
-                clutter_indices.append(choice)
-                clutter_poses.append(occluder)
+        add_occluders(generator, assets, settings, object_indices, poses, clutter_indices, clutter_poses)
     return Scene(object_indices, np.array(poses), clutter_indices, np.array(clutter_poses).reshape(-1, 4, 4),
                  support=(table_mesh(generator, photographs), T_table2cam))
