@@ -81,11 +81,12 @@ class ImageProducer:
         else:
             scene = sample_scene(generator, assets, config)
         lighting = random_lighting(generator, "scene", config.light_count, float(np.mean(assets.distance)))
+        object_tints = random_tints(generator, len(scene.object_indices), config.color_jitter)
         clutter_tints = random_colors(generator, len(scene.clutter_indices))
         textured = ~assets.distractor_tinted[np.asarray(scene.clutter_indices, dtype=np.int64)]
         if np.any(textured):  # photo-textured distractors keep their texture's colours, jittered like objects
             clutter_tints[textured] = random_tints(generator, int(textured.sum()), config.color_jitter)
-        tints = np.concatenate([random_tints(generator, len(scene.object_indices), config.color_jitter), clutter_tints])
+        tints = np.concatenate([object_tints, clutter_tints])
         objects = [(assets.meshes[i], pose) for i, pose in zip(scene.object_indices, scene.T_model2cam)]
         objects += [(assets.distractors[i], pose) for i, pose in zip(scene.clutter_indices, scene.clutter_T_model2cam)]
         if scene.support is not None:
