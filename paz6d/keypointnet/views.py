@@ -343,9 +343,43 @@ def downsample_masks(masks: np.ndarray, factor: int) -> np.ndarray:
     return blocks.mean(axis=(2, 4), dtype=np.float32)
 
 
+def relative_angles(rotations: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """Angles ``(V,)`` in degrees of the relative rotations ``rotations[v] @ rotation.T`` (``(V, 3, 3)``
+    and ``(3, 3)``): how far each view's camera turned from ``rotation``'s, about any axis."""
+    cosine = (np.einsum("vij,ij->v", rotations, rotation) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+
+
+def pair_partners(rotations: np.ndarray, first: np.ndarray, rng: np.random.Generator,
+                  max_angle: float | None = None, nearest: int = 8) -> np.ndarray:
+    """Second views ``(P,)`` for the first views ``first (P,)`` of pairs: uniformly another view, or
+    with ``max_angle`` (degrees) another view whose relative rotation to the first is at most
+    ``max_angle`` (one of the ``nearest`` closest views when none is that close).
+
+    Args:
+        rotations: ``(V, 3, 3)`` model-to-camera rotations of the views.
+    """
+    count = len(rotations)
+    if max_angle is None or max_angle >= 180.0:
+        return (first + rng.integers(1, count, len(first))) % count
+    if max_angle <= 0:
+        raise ValueError(f"max_angle: expected a positive angle in degrees, got {max_angle}")
+    partners = np.empty(len(first), dtype=np.int64)
+    for row, index in enumerate(first):
+        angles = relative_angles(rotations, rotations[index])
+        angles[index] = np.inf
+        candidates = np.flatnonzero(angles <= max_angle)
+        if len(candidates) == 0:
+            candidates = np.argsort(angles)[:min(nearest, count - 1)]
+        partners[row] = candidates[rng.integers(0, len(candidates))]
+    return partners
+
+
 def training_batch(views: ViewSet, rng: np.random.Generator, pairs: int, downsample: int,
-                   augmentation: Augmentation = Augmentation()) -> dict[str, np.ndarray]:
-    """A batch of ``pairs`` view pairs ``(a, b)`` of the object, views A first then views B.
+                   augmentation: Augmentation = Augmentation(), max_angle: float | None = None) -> dict[str, np.ndarray]:
+    """A batch of ``pairs`` view pairs ``(a, b)`` of the object, views A first then views B; with
+    ``max_angle`` (degrees) the two views of a pair differ by at most that rotation
+    (:func:`pair_partners`).
 
     Returns:
         ``images (2P, S, S, 3) float32`` (0..255), ``masks (2P, S/d, S/d) float32``, ``K (2P, 3, 3)``
@@ -354,7 +388,7 @@ def training_batch(views: ViewSet, rng: np.random.Generator, pairs: int, downsam
     if len(views) < 2:
         raise ValueError(f"views: expected at least 2 views to form pairs, got {len(views)}")
     first = rng.integers(0, len(views), pairs)
-    second = (first + rng.integers(1, len(views), pairs)) % len(views)
+    second = pair_partners(views.T_model2cam[:, :3, :3], first, rng, max_angle)
     order = np.concatenate([first, second])
     images, masks, intrinsics = [], [], []
     for index in order:
