@@ -22,6 +22,14 @@ CONFIGS: dict[str, dict] = {
              "dilations": (1, 1, 2, 4, 8, 16, 1, 2, 4, 8, 16, 1), "precision": "float32", "views": 20000,
              "validation_views": 200, "lift_views": 1000, "steps": 60000, "pairs": 16, "learning_rate": 1e-3,
              "ema_momentum": 0.999, "checkpoint_every": 2000, "sample_every": 2000, "lifting": "triangulate"},
+    # Discovery that converges in the CPU budget (measured in docs/keypointnet.md): the quick network, a
+    # curriculum on the pair angle and bootstrapping from the network's own lifted keypoints.
+    "discovery": {"num_keypoints": 16, "input_size": 128, "filters": 48, "downsample": 4, "context_stride": 8,
+                  "dilations": (1, 2, 4, 1, 2, 4), "precision": "auto", "views": 4000, "validation_views": 100,
+                  "lift_views": 300, "steps": 5000, "pairs": 8, "learning_rate": 5e-3, "ema_momentum": 0.998,
+                  "checkpoint_every": 500, "sample_every": 500, "lifting": "triangulate", "mode": "discovery",
+                  "pair_angle": (30.0, 180.0), "pair_angle_ramp": 0.4, "anchor_start": 0.2, "anchor_every": 250,
+                  "anchor_views": 256},
 }
 MODES = ("discovery", "supervised")
 PRECISIONS = ("float32", "bfloat16")  # compute dtype of the network body (see build_keypointnet)
@@ -89,7 +97,39 @@ class KeypointTraining:
         settings = preset_settings(CONFIGS, self.config, self.overrides, check_overrides=False)
         if self.mode not in MODES:
             raise ValueError(f"mode: expected one of {MODES}, got {self.mode!r}")
+        if settings.get("mode", self.mode) != self.mode:
+            raise ValueError(f"config: {self.config!r} is a {settings['mode']} preset; pass --mode {settings['mode']} "
+                             f"(got --mode {self.mode})")
         return apply_steps(settings, self.steps)
+
+
+def pair_angle_at(step: int, settings: dict) -> float | None:
+    """Curriculum of discovery pairs: the largest rotation (degrees) between the two views of a pair at
+    ``step``, going linearly from ``pair_angle[0]`` to ``pair_angle[1]`` over the first
+    ``pair_angle_ramp`` × ``steps`` steps; ``None`` (any two views) without a ``pair_angle`` setting."""
+    if settings.get("pair_angle") is None:
+        return None
+    start, end = (float(angle) for angle in settings["pair_angle"])
+    ramp = float(settings.get("pair_angle_ramp", 0.0)) * int(settings["steps"])
+    fraction = 1.0 if ramp <= 0 else min(1.0, step / ramp)
+    return start + (end - start) * fraction
+
+
+def anchor_start_step(settings: dict) -> int | None:
+    """First step of bootstrapping (``anchor_start`` × ``steps``), or ``None`` without ``anchor_start``."""
+    if settings.get("anchor_start") is None:
+        return None
+    return int(round(float(settings["anchor_start"]) * int(settings["steps"])))
+
+
+def anchors_due(step: int, lifted_at: int | None, settings: dict) -> bool:
+    """Whether the bootstrap anchors (the network's keypoints lifted to 3D) are to be (re-)lifted before
+    ``step``: from :func:`anchor_start_step` on, when never lifted or lifted ``anchor_every`` or more
+    steps earlier."""
+    start = anchor_start_step(settings)
+    if start is None or step < start:
+        return False
+    return lifted_at is None or step - lifted_at >= int(settings.get("anchor_every", 250))
 
 
 def resolve_precision(precision: str) -> str:

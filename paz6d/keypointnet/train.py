@@ -32,8 +32,8 @@ from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.backend.transform import apply, compose, invert
 from paz6d.keypointnet import run_dir as run_files
 from paz6d.keypointnet.config import (DISCOVERY_WEIGHTS, LIFTINGS, MAX_LIFTING_ERROR, SEPARATION_DELTA,
-                                      SEPARATION_DELTA_IMAGE, SUPERVISED_WEIGHTS, KeypointTraining,
-                                      resolve_precision)
+                                      SEPARATION_DELTA_IMAGE, SUPERVISED_WEIGHTS, KeypointTraining, anchors_due,
+                                      pair_angle_at, resolve_precision)
 from paz6d.processors.predict import predict_in_batches
 
 
@@ -77,6 +77,22 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
     def normalised(uv):
         return uv * (2.0 / size) + (1.0 / size - 1.0)  # pixels -> [-1, 1], as paz6d.backend.keypoints.normalize
 
+    sigma = float(stride)  # one feature cell
+
+    def targets_loss(outputs, points_model, K, T):
+        """Heatmap cross-entropy + coordinates + depth code against 3D keypoints ``points_model`` (N, 3)."""
+        points_cam = tf.einsum("bij,nj->bni", T[:, :3, :3], points_model) + T[:, None, :3, 3]
+        target_uv = kp.project(points_cam, K)
+        target_code = points_cam[..., 2] / (object_diameter * K[:, 0:1, 0] / size)
+        heatmap = kp.heatmap_loss(outputs["probabilities"], kp.gaussian_heatmaps(target_uv, grid, sigma))
+        coordinates = kp.coordinate_loss(normalised(outputs["uv"]), normalised(target_uv))
+        depth = tf.reduce_mean(tf.abs(outputs["depth"] - target_code))
+        return target_uv, {"heatmap": heatmap, "coordinates": coordinates, "depth": depth}
+
+    def anchor_loss(outputs, anchors, K, T):
+        _, terms = targets_loss(outputs, tf.cast(anchors, tf.float32), K, T)
+        return tf.add_n([SUPERVISED_WEIGHTS[name] * value for name, value in terms.items()])
+
     if mode == "discovery":
         grid_unit = normalised(grid)
 
@@ -100,26 +116,22 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
                      "separation_image": separation_image, "silhouette": silhouette, "variance": variance}
             weights = {**DISCOVERY_WEIGHTS, **settings.get("discovery_weights", {})}
             loss = tf.add_n([weights[name] * value for name, value in terms.items()])
+            if "anchors" in batch:  # bootstrapping: the network's own keypoints, lifted to 3D (_anchor_source)
+                anchor = anchor_loss(outputs, batch["anchors"], K, T)
+                loss = loss + batch["anchor_weight"] * anchor
+                terms["anchor"] = anchor
             return {"loss": loss, **terms}
 
         return loss_fn
 
     points = tf.constant(keypoints_model, tf.float32)
-    sigma = float(stride)  # one feature cell
 
     def pixel_error(uv, target_uv):
         return tf.reduce_mean(tf.norm(uv - target_uv, axis=-1))
 
     def supervised_loss(model, batch):
         outputs = model(batch["images"], training=True)
-        K, T = batch["K"], batch["T_model2cam"]
-        points_cam = tf.einsum("bij,nj->bni", T[:, :3, :3], points) + T[:, None, :3, 3]
-        target_uv = kp.project(points_cam, K)
-        target_code = points_cam[..., 2] / (object_diameter * K[:, 0:1, 0] / size)
-        heatmap = kp.heatmap_loss(outputs["probabilities"], kp.gaussian_heatmaps(target_uv, grid, sigma))
-        coordinates = kp.coordinate_loss(normalised(outputs["uv"]), normalised(target_uv))
-        depth = tf.reduce_mean(tf.abs(outputs["depth"] - target_code))
-        terms = {"heatmap": heatmap, "coordinates": coordinates, "depth": depth}
+        target_uv, terms = targets_loss(outputs, points, batch["K"], batch["T_model2cam"])
         loss = tf.add_n([SUPERVISED_WEIGHTS[name] * value for name, value in terms.items()])
         return {"loss": loss, "pixel_error": pixel_error(outputs["uv"], target_uv), **terms}
 
@@ -268,6 +280,49 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
     return {"lifting": name, "lifting_error_px": error.tolist(), "usable_keypoints": int(usable.sum())}
 
 
+class AnchorSource:
+    """Bootstrap anchors of discovery: the network's current keypoints on ``anchor_views`` training views
+    (plain crops, known poses) triangulated to 3D (object frame, metres), re-lifted every
+    ``anchor_every`` steps from ``anchor_start`` on (:func:`~paz6d.keypointnet.config.anchors_due`).
+
+    From then on every batch also trains the network to predict the projections of these anchors
+    (heatmap, coordinates, depth, as the supervised mode does with its targets), which ties each
+    keypoint to one 3D point over all views, not only over the two views of a pair.
+
+    Args:
+        model: the network being trained (read from the batch-preparing thread).
+        views: the training :class:`~paz6d.keypointnet.views.ViewSet`; seed: of the crops' backgrounds.
+    """
+
+    def __init__(self, model, views, settings: dict, seed: int):
+        self.model, self.views, self.settings, self.seed = model, views, settings, seed
+        self.points: np.ndarray | None = None
+        self.lifted_at: int | None = None
+        self._crops = None
+        self._infer = None
+
+    def __call__(self, step: int) -> np.ndarray | None:
+        """The anchors ``(N, 3)`` for ``step`` (lifting them first when due), or ``None`` before
+        bootstrapping starts."""
+        if anchors_due(step, self.lifted_at, self.settings):
+            self.points = self.lift()
+            self.lifted_at = step
+        return self.points
+
+    def lift(self) -> np.ndarray:
+        """The network's keypoints on the anchor crops, triangulated: ``(N, 3)`` metres, object frame."""
+        from paz6d.keypointnet.keypoints import decode_keypoints, triangulate_keypoints
+        from paz6d.keypointnet.model import inference_function
+
+        if self._crops is None:
+            self._crops = fixed_crops(self.views, self.seed, int(self.settings.get("anchor_views", 256)))
+            self._infer = inference_function(self.model)
+        images, K, T = self._crops
+        outputs = predict_in_batches(self._infer, images, 32)
+        points, _ = triangulate_keypoints(decode_keypoints(outputs, int(self.settings["downsample"])), K, T)
+        return points
+
+
 def supervised_keypoints(mesh, count: int, seed: int) -> np.ndarray:
     """``(count, 3)`` farthest-point samples (metres) of 5000 points drawn on the mesh surface."""
     from paz6d.backend.mesh import sample_points
@@ -334,8 +389,16 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
                                       ema_momentum=0.99 if ema is None else float(ema))
     pairs, downsample = settings["pairs"], settings["downsample"]
 
+    anchors = AnchorSource(model, train_views, settings, job.seed + 3) if job.mode == "discovery" else None
+
     def make_batch(step: int):
-        return training_batch(train_views, np.random.default_rng([job.seed, 1, step]), pairs, downsample)
+        batch = training_batch(train_views, np.random.default_rng([job.seed, 1, step]), pairs, downsample,
+                               max_angle=pair_angle_at(step, settings))
+        points = None if anchors is None else anchors(step)
+        if points is not None:
+            batch["anchors"] = points.astype(np.float32)
+            batch["anchor_weight"] = np.float32(settings.get("anchor_weight", 1.0))
+        return batch
 
     sample_images, sample_K, sample_T = fixed_crops(validation_views, job.seed, 8)
     sample_targets = None
