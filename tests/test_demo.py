@@ -75,33 +75,56 @@ def test_demo_smoke_run(tmp_path):
 
     K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
     assert ImplicitPose6D(tmp_path / "model", K).crop_size == 16
-    # re-running the finished demo trains nothing: the unmeasured throughput is written as null, not inf
-    again = run_demo(tmp_path, toy, test_images=3, workers=0, grid_rows=2)
+    # re-running the finished demo (as `paz6d demo` does, OOD check included) trains nothing: the
+    # unmeasured throughput is written as null, not inf
+    from paz6d.demo.command import DemoOptions, run_demos
+    from paz6d.demo.ood_set import CONDITIONS
+
+    again = run_demos(DemoOptions(out=tmp_path, test_images=3, workers=1, ood_images=2), toy)
     stored = json.loads((tmp_path / "report.json").read_text())
     assert again["training"]["steps"] == 20 and stored["training"]["model_samples_per_second"] is None
     assert stored["metrics"]["recall_0.1d"] == metrics["recall_0.1d"]
+    # the report carries the out-of-distribution check of the AAE, every condition with a verdict
+    check = stored["ood_check"]
+    assert check["views"] == 2 and check["conditions"] == list(CONDITIONS) and list(check["models"]) == ["AAE"]
+    aae = check["models"]["AAE"]
+    assert aae["in_distribution_style"] == "clutter" and list(aae["conditions"]) == list(CONDITIONS[1:])
+    for verdict in aae["conditions"].values():
+        assert verdict["recall"] in (0.0, 0.5, 1.0) and isinstance(verdict["pass"], bool)
+    assert aae["pass"] == all(verdict["pass"] for verdict in aae["conditions"].values())
+    assert (tmp_path / "ood_check.png").is_file() and check["chart"] == str(tmp_path / "ood_check.png")
 
 
 def test_demo_keypoints_option_runs_the_keypoint_demo_on_the_demo_mesh(tmp_path, monkeypatch):
     import paz6d.demo.aae_demo as demo
     import paz6d.demo.keypoint_demo as keypoint_demo
+    import paz6d.demo.ood_check as ood_check
     from paz6d.cli import build_parser
 
     calls = {}
     mesh = tmp_path / "mesh" / "obj_000001.ply"
     monkeypatch.setattr(demo, "run_demo", lambda out, config, test_images, workers, platform:
-                        calls.setdefault("aae", (out, test_images)) and {"files": {"mesh": str(mesh)}})
+                        calls.setdefault("aae", (out, test_images)) and {"files": {"mesh": str(mesh),
+                                                                                   "model": str(out / "model")}})
     monkeypatch.setattr(keypoint_demo, "run_keypoint_demo",
                         lambda out_dir, mesh_path, **options: calls.setdefault("keypoints", (out_dir, mesh_path, options)))
-    args = build_parser().parse_args(["demo", "--out", str(tmp_path), "--test-images", "7", "--keypoints"])
+    monkeypatch.setattr(ood_check, "run_check", lambda out, mesh_path, models, count, mesh_scale, workers:
+                        calls.setdefault("ood", (models, count)) and {"chart": str(out / "ood_check.png")})
+    args = build_parser().parse_args(["demo", "--out", str(tmp_path), "--test-images", "7", "--keypoints",
+                                      "--ood-images", "5"])
     assert args._run(args) == 0
     out_dir, mesh_path, options = calls["keypoints"]
     assert out_dir == tmp_path / "keypoints" and mesh_path == mesh
     assert options["mesh_scale"] == 0.001 and options["test_images"] == 7
+    models, count = calls["ood"]
+    assert count == 5 and [(m.name, m.kind) for m in models] == [("AAE", "aae"), ("KeypointNet", "keypointnet")]
+    assert models[1].run_dir == tmp_path / "keypoints" / "keypointnet_supervised"
+    assert "ood_check" in json.loads((tmp_path / "report.json").read_text())
+    (tmp_path / "plain").mkdir()
     args = build_parser().parse_args(["demo", "--out", str(tmp_path / "plain")])
     calls.clear()
     args._run(args)
-    assert "keypoints" not in calls
+    assert "keypoints" not in calls and [m.name for m in calls["ood"][0]] == ["AAE"]
 
 
 def test_one_scorer_one_key_set_and_unmeasured_values_written_as_null(tmp_path, capsys):

@@ -1,6 +1,8 @@
 """``paz6d demo``: the README's end-to-end job (AAE, :mod:`paz6d.demo.aae_demo`); ``--keypoints`` adds
-KeypointNet on the same object (:mod:`paz6d.demo.keypoint_demo`). Each flag is a field of
-:class:`DemoOptions`. Cheap to import: the demos load TensorFlow and the renderers when they run.
+KeypointNet on the same object (:mod:`paz6d.demo.keypoint_demo`); then every trained pose model goes
+through the out-of-distribution check (:mod:`paz6d.demo.ood_check`), written into ``OUT/report.json``
+(``ood_check``) and ``OUT/ood_check.png``. Each flag is a field of :class:`DemoOptions`. Cheap to
+import: the demos load TensorFlow and the renderers when they run.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ class DemoOptions:
     platform: str | None = option(None, "OpenGL platform of the renderers (default: auto)", choices=PLATFORMS)
     keypoints: bool = option(False, "also train and score KeypointNet (supervised, quick config; ~15 more minutes "
                                     "on 2 CPU cores) on the same object into OUT/keypoints")
+    ood_images: int = option(200, "held-out views of the out-of-distribution check (each scored under every condition)")
 
     def __post_init__(self):
         if self.steps is not None and self.steps <= 0:
@@ -35,6 +38,8 @@ class DemoOptions:
             raise ValueError(f"workers: expected a positive number of rendering processes, got {self.workers}")
         if self.test_images < 1:
             raise ValueError(f"test_images: expected a positive number of images, got {self.test_images}")
+        if self.ood_images < 1:
+            raise ValueError(f"ood_images: expected a positive number of views, got {self.ood_images}")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -42,17 +47,36 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_config_arguments(parser, DemoOptions)
 
 
+def run_demos(options: DemoOptions, config=QUICK, keypoint_overrides: dict | None = None) -> dict:
+    """The AAE demo with ``config``, KeypointNet's when ``options.keypoints`` (``keypoint_overrides``:
+    settings replaced in its quick config), then the OOD check of every model, added to the AAE
+    demo's report (``OUT/report.json``, key ``ood_check``); returns that report."""
+    from paz6d.demo import aae_demo, keypoint_demo, ood_check  # here: they load OpenCV, the renderers, TensorFlow
+    from paz6d.demo.report import write_report
+
+    out = Path(options.out)
+    report = aae_demo.run_demo(out, config, options.test_images, options.workers, options.platform)
+    mesh = Path(report["files"]["mesh"])
+    models = [ood_check.PoseModel("AAE", "aae", Path(report["files"]["model"]))]
+    if options.keypoints:
+        keypoint_out = out / "keypoints"
+        keypoint_demo.run_keypoint_demo(keypoint_out, mesh, mesh_scale=1.0 / MM_PER_M, test_images=options.test_images,
+                                        workers=options.workers, overrides=keypoint_overrides)
+        models.append(ood_check.PoseModel("KeypointNet", "keypointnet",
+                                          keypoint_demo.mode_run_dir(keypoint_out, "supervised")))
+    print(f"\n== out-of-distribution check ({options.ood_images} views, {len(models)} models)", flush=True)
+    report["ood_check"] = ood_check.run_check(out, mesh, models, options.ood_images, 1.0 / MM_PER_M,
+                                              workers=options.workers)
+    write_report(out / "report.json", report)
+    print(f"\nreport: {out / 'report.json'} (ood_check); chart: {report['ood_check']['chart']}")
+    return report
+
+
 def run(args: argparse.Namespace) -> int:
     """Runs ``paz6d demo``."""
-    from paz6d.demo import aae_demo, keypoint_demo  # here: they load OpenCV, scipy, the renderers and TensorFlow
-
     options = config_from_args(DemoOptions, args)
     config = QUICK if options.steps is None else replace(QUICK, steps=options.steps)
     with flags_in_errors(DemoOptions):
         check_output_folder(options.out, "out")
-        report = aae_demo.run_demo(options.out, config, options.test_images, options.workers, options.platform)
-        if options.keypoints:
-            keypoint_demo.run_keypoint_demo(Path(options.out) / "keypoints", Path(report["files"]["mesh"]),
-                                            mesh_scale=1.0 / MM_PER_M, test_images=options.test_images,
-                                            workers=options.workers)
+        run_demos(options, config)
     return 0

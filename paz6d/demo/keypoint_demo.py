@@ -29,6 +29,11 @@ from paz6d.keypointnet.train import train_keypointnet
 TEST_SEED_OFFSET = 1_000_003  # test images never share a seed with training/validation views
 
 
+def mode_run_dir(out_dir: str | Path, mode: str) -> Path:
+    """The run directory of the KeypointNet trained in ``mode`` by :func:`run_keypoint_demo` in ``out_dir``."""
+    return Path(out_dir) / f"keypointnet_{mode}"
+
+
 def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object_diameter: float, camera,
                            symmetric: bool = False, depth_from_box: bool = False, chunk: int = 25) -> tuple[dict, list]:
     """Scores :class:`KeypointPose6D` on rendered test images with their ground-truth boxes.
@@ -145,7 +150,7 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
                     "config": config, "seed": seed, "test_images": test_images, "modes": {}}
     runs = {}
     for mode in modes:
-        run_dir = out_dir / f"keypointnet_{mode}"
+        run_dir = mode_run_dir(out_dir, mode)
         runs[mode] = run_dir
         report["modes"][mode] = {"training": train_keypointnet(
             KeypointTraining(run_dir, Path(mesh_path), mesh_scale=mesh_scale, config=config, mode=mode, seed=seed,

@@ -1,5 +1,7 @@
-"""Backgrounds behind rendered objects: procedural clutter in three styles, random crops of
-background files, and a bank of procedural backgrounds reused through random crops."""
+"""Backgrounds behind rendered objects: procedural clutter in four styles (one mixes in photo
+collages), random crops of background files, a bank of procedural backgrounds reused through random
+crops, and the out-of-distribution backgrounds of the demo's OOD check (:data:`OOD_BACKGROUND_STYLES`),
+which no training pipeline uses."""
 
 from __future__ import annotations
 
@@ -13,8 +15,18 @@ from paz6d.backend.image import load_image
 #: ``"noise"``: multi-octave value noise between two colours, half of the time with stripes
 #: (``paz6d generate``); ``"clutter"``: a smooth colour field or soft stripes, up to 7 rectangles,
 #: ellipses and lines, blurred noise texture (AAE inputs); ``"shapes"``: coarse colour noise,
-#: 3-11 rectangles and ellipses, pixel noise (KeypointNet batches).
-BACKGROUND_STYLES = ("noise", "clutter", "shapes")
+#: 3-11 rectangles and ellipses, pixel noise; ``"shapes-photos"``: half ``"shapes"``, half photo
+#: collages (:func:`paz6d.synthesis.photo_backgrounds.photo_collage`), then Gaussian pixel noise of
+#: standard deviation 0-40 levels half of the time (KeypointNet batches).
+BACKGROUND_STYLES = ("noise", "clutter", "shapes", "shapes-photos")
+
+#: Backgrounds of the out-of-distribution check (``paz6d demo``), used by no training pipeline:
+#: ``"flat"``: one uniform random colour; ``"pixel-noise"``: every pixel and channel uniform in 0-255
+#: (standard deviation ~74 levels); ``"smooth-field"``: independent per-channel white noise low-passed by
+#: a Gaussian of sigma 4-16 px, each channel stretched to a random range at least 128 levels wide.
+OOD_BACKGROUND_STYLES = ("flat", "pixel-noise", "smooth-field")
+#: Largest pixel-noise standard deviation (levels) in any :data:`BACKGROUND_STYLES` entry.
+MAX_TRAINING_PIXEL_NOISE = 40.0
 
 
 def procedural_background(generator: np.random.Generator, width: int, height: int, style: str = "noise") -> np.ndarray:
@@ -25,7 +37,26 @@ def procedural_background(generator: np.random.Generator, width: int, height: in
         return _clutter(generator, width, height)
     if style == "shapes":
         return _shapes(generator, width, height)
+    if style == "shapes-photos":
+        return _shapes_or_photos(generator, width, height)
     raise ValueError(f"style: expected one of {BACKGROUND_STYLES}, got {style!r}")
+
+
+def ood_background(generator: np.random.Generator, width: int, height: int, style: str) -> np.ndarray:
+    """``(height, width, 3)`` uint8 background of one of :data:`OOD_BACKGROUND_STYLES`."""
+    if style == "flat":
+        return np.broadcast_to(generator.integers(0, 256, 3).astype(np.uint8), (height, width, 3)).copy()
+    if style == "pixel-noise":
+        return generator.integers(0, 256, (height, width, 3), dtype=np.uint8)
+    if style == "smooth-field":
+        sigma = float(np.exp(generator.uniform(np.log(4.0), np.log(16.0))))
+        field = cv2.GaussianBlur(generator.standard_normal((height, width, 3)).astype(np.float32), (0, 0), sigma)
+        field -= field.min(axis=(0, 1))
+        field /= np.maximum(field.max(axis=(0, 1)), 1e-6)
+        width_levels = generator.uniform(128, 255, 3)
+        low = generator.uniform(0, 255 - width_levels)
+        return np.clip(low + field * width_levels, 0, 255).astype(np.uint8)
+    raise ValueError(f"style: expected one of {OOD_BACKGROUND_STYLES}, got {style!r}")
 
 
 def _value_noise(generator: np.random.Generator, width: int, height: int) -> np.ndarray:
@@ -112,6 +143,21 @@ def _shapes(generator: np.random.Generator, width: int, height: int) -> np.ndarr
                           (centre[0] + extent[0], centre[1] + extent[1]), colour, -1)
     noise = generator.normal(0.0, generator.uniform(0, 12), background.shape)
     return np.clip(background + noise, 0, 255).astype(np.uint8)
+
+
+def _shapes_or_photos(generator: np.random.Generator, width: int, height: int) -> np.ndarray:
+    """``"shapes"`` or a photo collage (even odds), then, half of the time, Gaussian pixel noise of a
+    standard deviation uniform in 0-:data:`MAX_TRAINING_PIXEL_NOISE` levels."""
+    from paz6d.synthesis.photo_backgrounds import bundled_photographs, photo_collage
+
+    if generator.random() < 0.5:
+        background = _shapes(generator, width, height)
+    else:
+        background = photo_collage(generator, bundled_photographs(), width, height)
+    if generator.random() < 0.5:
+        noise = generator.normal(0.0, generator.uniform(0, MAX_TRAINING_PIXEL_NOISE), background.shape)
+        background = np.clip(background + noise, 0, 255).astype(np.uint8)
+    return background
 
 
 def crop_background(generator: np.random.Generator, image: np.ndarray, width: int, height: int,

@@ -15,7 +15,9 @@ Example::
 from __future__ import annotations
 
 import argparse
+from functools import lru_cache
 from pathlib import Path
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -45,6 +47,16 @@ def sample_photographs() -> list[np.ndarray]:
     return photographs
 
 
+@lru_cache(maxsize=1)
+def bundled_photographs() -> tuple[np.ndarray, ...]:
+    """:func:`sample_photographs` read once per process (read-only arrays; the ``"shapes-photos"``
+    background style draws from them for every sample)."""
+    photographs = tuple(sample_photographs())
+    for photograph in photographs:
+        photograph.setflags(write=False)
+    return photographs
+
+
 def _random_crop(generator: np.random.Generator, photograph: np.ndarray, width: int, height: int) -> np.ndarray:
     """A crop of 20-100 % of the largest window (at most 4x the output size), mirrored half of the
     time, area-resized to ``(height, width, 3)``."""
@@ -52,7 +64,7 @@ def _random_crop(generator: np.random.Generator, photograph: np.ndarray, width: 
                            interpolation=cv2.INTER_AREA)
 
 
-def photo_collage(generator: np.random.Generator, photographs: list[np.ndarray], width: int, height: int,
+def photo_collage(generator: np.random.Generator, photographs: Sequence[np.ndarray], width: int, height: int,
                   pieces: tuple[int, int] = (4, 16)) -> np.ndarray:
     """``(height, width, 3)`` uint8: a crop of one photograph covered by ``pieces`` (min, max) rectangles,
     each a crop of a random photograph (5-45 % of the image side, colour-scaled by 0.6-1.4 per channel).
