@@ -30,6 +30,7 @@ import numpy as np
 from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.draw import draw_box, draw_model_outline, draw_pose_axes, draw_projected_points, keypoint_colors
+from paz6d.backend.icp import check_depth
 from paz6d.backend.image import as_image
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
 
@@ -149,9 +150,10 @@ class SelectBoxes(Processor):
 
 
 class EstimatePoses(Processor):
-    """``(image, boxes [Box2D], camera) -> poses [Pose6D | None]``: each box's pose model on the image, one
-    pose per box (class name = the box's); ``None`` where the model raised ``ValueError`` (warned, or raised
-    with ``strict``).
+    """``(image, boxes [Box2D], camera, depth=None) -> poses [Pose6D | None]``: each box's pose model on the
+    image, one pose per box (class name = the box's); ``None`` where the model raised ``ValueError`` (warned,
+    or raised with ``strict``). A depth image (``(H, W)`` metres, the image's size) is passed on to every
+    model as ``depth=`` (ICP refinement).
 
     Args:
         estimators: class name -> callable ``(image, box, camera=...) -> Pose6D``.
@@ -161,11 +163,14 @@ class EstimatePoses(Processor):
         super().__init__(name)
         self.estimators, self.strict = dict(estimators), bool(strict)
 
-    def call(self, image, boxes, camera) -> list[Pose6D | None]:
+    def call(self, image, boxes, camera, depth=None) -> list[Pose6D | None]:
+        extra = {}
+        if depth is not None:
+            extra["depth"] = check_depth(depth, shape=image.shape[:2])
         poses = []
         for box in boxes:
             try:
-                pose = self.estimators[box.class_name](image, box, camera=camera)
+                pose = self.estimators[box.class_name](image, box, camera=camera, **extra)
             except ValueError as error:
                 if self.strict:
                     raise
@@ -196,7 +201,8 @@ class DetectAndEstimatePose6D(SequentialProcessor):
                                                       ``camera``
     ``detect``      ``image``                         ``detections``   the detector
     ``select``      ``detections``                    ``boxes``        :class:`SelectBoxes`
-    ``estimate``    ``image``, ``boxes``, ``camera``  ``poses``        :class:`EstimatePoses`
+    ``estimate``    ``image``, ``boxes``, ``camera``, ``poses``        :class:`EstimatePoses`
+                    ``depth`` (``None``: no ICP)
     ``pair``        ``boxes``, ``poses``              ``results``      :func:`pair_boxes_and_poses`
     ==============  ================================  ===============  ========================
 
@@ -241,7 +247,8 @@ class DetectAndEstimatePose6D(SequentialProcessor):
         self.add(KeyedStep(ImageCamera(camera), ("image", "camera"), ("image", "camera"), name="check"))
         self.add(KeyedStep(detector, "image", "detections", name="detect"))
         self.add(KeyedStep(SelectBoxes(tuple(named), strict), "detections", "boxes", name="select"))
-        self.add(KeyedStep(EstimatePoses(named, strict), ("image", "boxes", "camera"), "poses", name="estimate"))
+        self.add(KeyedStep(EstimatePoses(named, strict), ("image", "boxes", "camera", "depth"), "poses",
+                           name="estimate"))
         self.add(KeyedStep(pair_boxes_and_poses, ("boxes", "poses"), "results", name="pair"))
 
     @classmethod
@@ -270,18 +277,20 @@ class DetectAndEstimatePose6D(SequentialProcessor):
         detector = DetectSingleShot(detector_dir, score_threshold=score_threshold)
         return cls(detector, estimators, camera, strict, meshes)
 
-    def run(self, image, camera=None) -> dict:
+    def run(self, image, camera=None, depth=None) -> dict:
         """All named values of one image (``detections``, ``boxes``, ``poses``, ``results``...)."""
-        return self.run_steps({"image": image, "camera": camera})
+        return self.run_steps({"image": image, "camera": camera, "depth": depth})
 
-    def call(self, image, camera=None) -> list[tuple[Box2D, Pose6D]]:
+    def call(self, image, camera=None, depth=None) -> list[tuple[Box2D, Pose6D]]:
         """``[(box, pose)]`` for every detected object that has a pose model, in detection order.
 
         Args:
             image: ``(H, W, 3)`` uint8 RGB.
             camera: this image's Camera or ``K`` (default: the constructor's).
+            depth: optional ``(H, W)`` depth image (metres, 0 = none) registered to ``image``: each pose
+                model refines its pose by ICP (:class:`~paz6d.processors.refine.RefineWithDepth`).
         """
-        return self.run(image, camera)["results"]
+        return self.run(image, camera, depth)["results"]
 
     def _model_points(self, class_name: str):
         estimator = self.estimators.get(class_name)

@@ -564,4 +564,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {args.out}: {summary['estimates']} estimates of objects {sorted(map(int, summary['per_object']))} "
           f"({failed} failed, {summary['images_without_rgb_skipped']} images without RGB skipped{extra}; "
           f"{summary['mean_seconds_per_image']:.3f} s per image)")
+    if "depth_refinement" in summary:
+        refined = summary["depth_refinement"]
+        seconds = "" if refined["mean_cpu_seconds"] is None else f", {refined['mean_cpu_seconds']:.3f} CPU s each"
+        print(f"depth refinement (ICP): {refined['accepted']} of {refined['refinements']} accepted{seconds}; "
+              f"rejected by check: {refined['rejected']}")
     return 0

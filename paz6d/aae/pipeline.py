@@ -12,7 +12,8 @@ Steps (Sundermeyer et al., 2018):
    axis onto that ray;
 5. optional depth-free refinement (default on): ``t`` is refined by Gauss-Newton so the silhouette box
    of the object's convex hull under ``(R, t)`` matches the given box (alternating with step 4);
-6. optional ICP refinement (open3d) against a depth image.
+6. optional ICP refinement (open3d) against a depth image (:class:`~paz6d.processors.refine.RefineWithDepth`:
+   a shift along the ray, then multi-scale ICP; a refinement that fails its checks keeps the pose).
 
 :class:`ImplicitPose6D` runs them as named steps (``crop``, ``encode``, ``lookup``,
 ``pose_from_codebook``, ``refine_with_depth``) that can be read, replaced, inserted or removed.
@@ -32,11 +33,12 @@ from paz6d.aae.model import encode_function, encoder_of, to_model_input
 from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
 from paz6d.backend import quaternion
 from paz6d.backend.boxes import check_box_in_image
-from paz6d.backend.camera import Camera, as_camera, points_from_depth, project_points, unproject
+from paz6d.backend.camera import Camera, as_camera, project_points, unproject
 from paz6d.backend.checks import as_array, as_camera_matrix
+from paz6d.backend.icp import check_depth
 from paz6d.backend.image import as_image
-from paz6d.backend.transform import invert
 from paz6d.processors.crops import SquareCrop
+from paz6d.processors.refine import RefineWithDepth
 
 
 # ------------------------------------------------------------------------------------------ geometry
@@ -232,61 +234,6 @@ class PosesFromCodebook(Processor):
                 for rank, (index, similarity) in enumerate(zip(indices, similarities))]
 
 
-class RefineWithDepth(Processor):
-    """``(candidates [Pose6D], depth (H, W) or None, box (4,), camera) -> Pose6D``: without depth the first
-    candidate; with depth, ICP (open3d, point-to-point) of the depth points inside ``box`` onto the object's
-    surface points started from each candidate, the refined pose with the smallest inlier RMSE.
-
-    The scene points (a partial, visible surface) are registered to the full model surface, so every
-    scene point has a true counterpart; points farther than one diameter in depth from a candidate
-    (background, clutter in front) are ignored.
-
-    Args:
-        surface_points: ``(P, 3)`` metres; diameter: metres; class_name: written into refined poses.
-        max_iterations: ICP iterations per threshold.
-    """
-
-    def __init__(self, surface_points, diameter: float, class_name: str | None = None, max_iterations: int = 30,
-                 name: str | None = None):
-        super().__init__(name)
-        self.surface_points, self.diameter = np.asarray(surface_points, dtype=np.float64), float(diameter)
-        self.class_name, self.max_iterations = class_name, int(max_iterations)
-
-    def call(self, candidates: Sequence[Pose6D], depth, box, camera: Camera) -> Pose6D:
-        if depth is None:
-            return candidates[0]
-        import open3d as o3d
-
-        depth = np.asarray(depth, dtype=np.float32)
-        if depth.ndim != 2:
-            raise ValueError(f"depth: expected shape (H, W) in metres, got {depth.shape}")
-        box = np.asarray(box, dtype=np.float64)
-        masked = np.zeros_like(depth)
-        x0, y0 = max(int(np.floor(box[0])), 0), max(int(np.floor(box[1])), 0)
-        x1, y1 = min(int(np.ceil(box[2])), depth.shape[1]), min(int(np.ceil(box[3])), depth.shape[0])
-        masked[y0:y1, x0:x1] = depth[y0:y1, x0:x1]
-        scene = points_from_depth(masked, camera.K)
-        model = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.surface_points))
-        estimation = o3d.pipelines.registration.TransformationEstimationPointToPoint()
-        criteria = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=self.max_iterations)
-        best, best_error = candidates[0], np.inf
-        for candidate in candidates:
-            T_model2cam = candidate.to_matrix()
-            near = scene[np.abs(scene[:, 2] - T_model2cam[2, 3]) < self.diameter]
-            if len(near) < 10:
-                continue
-            source = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(near))
-            T_cam2model = invert(T_model2cam)
-            for threshold in (0.2 * self.diameter, 0.05 * self.diameter, 0.02 * self.diameter):
-                result = o3d.pipelines.registration.registration_icp(source, model, threshold, T_cam2model,
-                                                                     estimation, criteria)
-                T_cam2model = np.asarray(result.transformation)
-            if result.fitness > 0.5 and result.inlier_rmse < best_error:
-                best_error = result.inlier_rmse
-                best = Pose6D.from_matrix(invert(T_cam2model), class_name=self.class_name, score=candidate.score)
-        return best
-
-
 # ------------------------------------------------------------------------------------------ pipeline
 class ImplicitPose6D(SequentialProcessor):
     """Estimates an object's 6D pose from an RGB image and its 2D box with a trained AAE run directory.
@@ -299,7 +246,8 @@ class ImplicitPose6D(SequentialProcessor):
     - ``lookup``: ``codes``, ``top_k`` -> ``indices``, ``similarities``, ``rotations`` (:class:`CodebookLookup`);
     - ``pose_from_codebook``: ``indices``, ``similarities``, ``rotations``, ``boxes``, ``cameras`` ->
       ``candidates`` (:class:`PosesFromCodebook`);
-    - ``refine_with_depth``: ``candidates``, ``depths``, ``boxes``, ``cameras`` -> ``poses`` (:class:`RefineWithDepth`).
+    - ``refine_with_depth``: ``candidates``, ``depths``, ``boxes``, ``cameras`` -> ``poses``
+      (:class:`~paz6d.processors.refine.RefineWithDepth`; without a depth image the first candidate).
 
     Args:
         run_dir: folder written by ``paz6d train aae`` (:mod:`paz6d.aae.run_dir`).
@@ -344,7 +292,7 @@ class ImplicitPose6D(SequentialProcessor):
         self.add(KeyedStep(PosesFromCodebook(self.codebook, self.hull_points, refine, class_name),
                            ("indices", "similarities", "rotations", "boxes", "cameras"), "candidates",
                            "pose_from_codebook", per_sample=True))
-        self.add(KeyedStep(RefineWithDepth(self.surface_points, self.diameter, class_name),
+        self.add(KeyedStep(RefineWithDepth(self.surface_points, self.diameter),
                            ("candidates", "depths", "boxes", "cameras"), "poses", "refine_with_depth",
                            per_sample=True))
 
@@ -415,9 +363,7 @@ class ImplicitPose6D(SequentialProcessor):
 
     def refine_with_depth(self, candidates: Sequence[Pose6D], depth, box, camera=None) -> Pose6D:
         """The ``refine_with_depth`` step: ICP of the depth points inside ``box`` from each candidate
-        (see :class:`RefineWithDepth`); the camera's size is the depth image's."""
-        depth = np.asarray(depth, dtype=np.float32)
-        if depth.ndim != 2:
-            raise ValueError(f"depth: expected shape (H, W) in metres, got {depth.shape}")
+        (see :class:`~paz6d.processors.refine.RefineWithDepth`); the camera's size is the depth image's."""
+        depth = check_depth(depth)
         camera = as_camera(self.camera if camera is None else camera, depth.shape[1], depth.shape[0])
         return self["refine_with_depth"].processor(candidates, depth, np.asarray(box, dtype=np.float64), camera)

@@ -32,6 +32,7 @@ from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
 from paz6d.processors.pose import DepthFromBox, SolvePnP
 from paz6d.processors.predict import Predict
+from paz6d.processors.refine import RefineWithDepth
 
 class DecodeKeypoints(Processor):
     """KeypointNet outputs ``{"uv", "probabilities", ...}`` -> keypoints ``(B, N, 2)`` in crop pixels
@@ -99,6 +100,23 @@ class KeypointPnP(Processor):
         return self.solve(self.points_model[usable], keypoints.points[usable], camera, threshold)
 
 
+def surface_points_of_run(run_dir: str | Path, count: int = 2000, seed: int = 0) -> np.ndarray:
+    """``(count, 3)`` points (metres, model frame) sampled on the mesh a run was trained on (``mesh_path``
+    and ``mesh_scale`` of its ``config.json``), for depth refinement.
+
+    Raises:
+        ValueError: the run records no mesh, or its file is gone (naming both).
+    """
+    from paz6d.backend.mesh import load_mesh, sample_points  # here: trimesh, only when a depth image is given
+
+    config = run_files.read_config(run_dir)
+    mesh_path = config.get("mesh_path")
+    if not mesh_path or not Path(mesh_path).is_file():
+        raise ValueError(f"{Path(run_dir) / run_files.CONFIG_FILE}: mesh_path {mesh_path!r} is not a file; depth "
+                         f"refinement samples the object's surface from the mesh the run was trained on")
+    return sample_points(load_mesh(mesh_path, float(config.get("mesh_scale", 1.0))), count, seed)
+
+
 class KeypointPose6D(SequentialProcessor):
     """``(image, box2d, camera=None) -> Pose6D`` with a trained KeypointNet run and PnP.
 
@@ -113,7 +131,11 @@ class KeypointPose6D(SequentialProcessor):
     - ``to_keypoints2d``: ``points``, ``scores`` -> ``keypoints`` (:class:`~paz6d.processors.keypoints.ToKeypoints2D`);
     - ``solve_pnp``: ``keypoints``, ``windows``, ``cameras`` -> ``poses`` (:class:`KeypointPnP`);
     - ``depth_from_box`` (only with ``depth_from_box=True``): ``poses``, ``boxes``, ``cameras`` -> ``poses``
-      (:class:`~paz6d.processors.pose.DepthFromBox`).
+      (:class:`~paz6d.processors.pose.DepthFromBox`);
+    - ``refine_with_depth``: ``poses``, ``depths``, ``boxes``, ``cameras`` -> ``poses``
+      (:class:`~paz6d.processors.refine.RefineWithDepth`, ICP against the depth image; without one the pose
+      as it is). Its model points are sampled on the run's mesh (``mesh_path`` of ``config.json``) at the
+      first depth image.
 
     ``cameras`` holds a :class:`~paz6d.backend.camera.Camera` per image. A sample whose PnP fails
     carries its :class:`~paz6d.backend.pnp.PnPError` as its pose (raised by a call, ``None`` from
@@ -175,6 +197,8 @@ class KeypointPose6D(SequentialProcessor):
         if depth_from_box:
             self.add(KeyedStep(DepthFromBox(self.hull_points), ("poses", "boxes", "cameras"), "poses",
                                "depth_from_box", per_sample=True))
+        self.add(KeyedStep(RefineWithDepth(lambda: surface_points_of_run(self.run_dir)),
+                           ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth", per_sample=True))
 
     # -- inputs ---------------------------------------------------------------------------------
     def _camera(self, camera, width: int | None = None, height: int | None = None) -> Camera:
@@ -189,15 +213,18 @@ class KeypointPose6D(SequentialProcessor):
         check_box_in_image(box.to_array(), width, height, "box2d")
         return image, box, camera
 
-    def _values(self, images, boxes, cameras) -> dict:
+    def _values(self, images, boxes, cameras, depths=None) -> dict:
         if len(images) != len(boxes):
             raise ValueError(f"images/boxes: expected equal lengths, got {len(images)} and {len(boxes)}")
         cameras = [None] * len(images) if cameras is None else list(cameras)
         if len(cameras) != len(images):
             raise ValueError(f"cameras: expected one per image ({len(images)}), got {len(cameras)}")
+        depths = [None] * len(images) if depths is None else list(depths)
+        if len(depths) != len(images):
+            raise ValueError(f"depths: expected one per image ({len(images)}), got {len(depths)}")
         samples = [self._sample(*sample) for sample in zip(images, boxes, cameras)]
         return {"images": [sample[0] for sample in samples], "boxes": [sample[1] for sample in samples],
-                "cameras": [sample[2] for sample in samples]}
+                "cameras": [sample[2] for sample in samples], "depths": depths}
 
     # -- public API -----------------------------------------------------------------------------
     def detect_batch(self, images, boxes, cameras: Sequence | None = None) -> list[Keypoints2D]:
@@ -227,28 +254,35 @@ class KeypointPose6D(SequentialProcessor):
         """The steps from ``solve_pnp`` on, for keypoints found in ``box2d``."""
         box = Box2D.coerce(box2d)
         values = {"keypoints": [keypoints], "boxes": [box], "windows": [square_window(box.to_array(), self.margin)],
-                  "cameras": [self._camera(camera)]}
+                  "cameras": [self._camera(camera)], "depths": [None]}
         pose = self.run_steps(values, start="solve_pnp")["poses"][0]
         if isinstance(pose, Exception):
             raise pose
         return pose
 
-    def estimate_batch(self, images, boxes, cameras: Sequence | None = None) -> list[Pose6D | None]:
-        """Poses for many ``(image, box)`` pairs with one network call; ``None`` where PnP fails."""
+    def estimate_batch(self, images, boxes, cameras: Sequence | None = None,
+                       depths: Sequence | None = None) -> list[Pose6D | None]:
+        """Poses for many ``(image, box)`` pairs with one network call; ``None`` where PnP fails.
+
+        Args:
+            depths: optional ``(H, W)`` depth image (metres, 0 = none) or ``None`` per image: ICP refinement.
+        """
         if len(images) == 0 and len(boxes) == 0:
             return []
-        poses = self.run_steps(self._values(images, boxes, cameras))["poses"]
+        poses = self.run_steps(self._values(images, boxes, cameras, depths))["poses"]
         return [None if isinstance(pose, Exception) else pose for pose in poses]
 
-    def call(self, image, box2d, camera=None) -> Pose6D:
+    def call(self, image, box2d, camera=None, depth=None) -> Pose6D:
         """Pose ``T_model2cam`` (metres) of the object inside ``box2d`` (``Box2D`` or ``xyxy`` pixels).
 
         Args:
             camera: this image's Camera or ``K`` (default: the constructor's).
+            depth: optional ``(H, W)`` depth image (metres, 0 = none) registered to ``image``: the PnP pose
+                is refined by ICP (open3d; kept as it is when the refinement fails its checks).
         Raises:
             PnPError: too few usable keypoints or no PnP solution.
         """
-        pose = self.run_steps(self._values([image], [box2d], [camera]))["poses"][0]
+        pose = self.run_steps(self._values([image], [box2d], [camera], [depth]))["poses"][0]
         if isinstance(pose, Exception):
             raise pose
         return pose
