@@ -151,3 +151,47 @@ def test_detect_and_estimate_passes_the_depth_image_to_the_pose_models():
     assert len(pipeline(image, depth=depth)) == 1 and np.array_equal(seen[-1], depth)
     with pytest.raises(ValueError, match=r"depth: depth image is 10x8 pixels, expected 20x16"):
         pipeline(image, depth=depth[:8, :10])
+
+
+def test_keypoint_pipeline_refines_with_depth_on_points_sampled_from_the_run_mesh(world, tmp_path):
+    """KeypointPose6D's ``refine_with_depth`` step samples the run's mesh (config.json mesh_path) at the first
+    depth image and undoes a depth error; without mesh_path the error names config.json."""
+    import json
+
+    from test_depth_refinement import raycast_depth
+
+    from paz6d.backend.camera import Camera, transform_and_project
+    from paz6d.backend.mesh import load_mesh
+    from paz6d.keypointnet import model as kp
+    from paz6d.keypointnet.pipeline import KeypointPose6D
+    from paz6d.keypointnet.run_dir import write_keypoints
+
+    mesh_path = next((world / "mesh").glob("*.ply"))
+    run = tmp_path / "keypoint_run"
+    run.mkdir()
+    kp.save_keypointnet(kp.build_keypointnet(8, 32, 4, 2, (1,)), run / "model.keras")  # untrained: not used here
+    config = {"input_size": 32, "margin": 1.25, "downsample": 2, "mesh_path": str(mesh_path), "mesh_scale": 0.001}
+    (run / "config.json").write_text(json.dumps(config))
+    cube = np.array([[x, y, z] for x in (-0.04, 0.04) for y in (-0.03, 0.03) for z in (-0.02, 0.02)])
+    write_keypoints(run, cube, np.ones(8, bool), "farthest-point")
+    K = np.array([[500.0, 0, 159.5], [0, 500.0, 119.5], [0, 0, 1]])
+    camera = Camera(K, 320, 240)
+    estimator = KeypointPose6D(run, camera)
+    assert estimator.names[-1] == "refine_with_depth"
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec([0.3, 0.5, -0.2]).as_matrix()
+    T[:3, 3] = [0.0, 0.01, 0.55]
+    mesh = load_mesh(mesh_path, 0.001)
+    depth = raycast_depth([(mesh, T)], K, 320, 240)
+    pixels = transform_and_project(np.asarray(mesh.vertices), T, K)
+    box = Box2D(*pixels.min(axis=0), *(pixels.max(axis=0) + 1))
+    far = T.copy()
+    far[:3, 3] *= 1.06  # 3.3 cm along the ray
+    values = {"poses": [Pose6D.from_matrix(far)], "depths": [depth], "boxes": [box], "cameras": [camera]}
+    refined = estimator.run_steps(values, start="refine_with_depth")["poses"][0]
+    assert np.linalg.norm(refined.translation - T[:3, 3]) < 0.001
+    assert estimator["refine_with_depth"].processor.statistics["accepted"] == 1
+    del config["mesh_path"]
+    (run / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match=r"config.json: mesh_path None is not a file; depth refinement samples"):
+        KeypointPose6D(run, camera).run_steps(values, start="refine_with_depth")
