@@ -460,7 +460,8 @@ def read_split_depth(dataset: Path, split: str, scene_id: int, im_id: int, shape
 
 def refinement_statistics(estimators) -> dict:
     """Counts and mean process time of the depth refinements the estimators' ``refine_with_depth`` steps ran."""
-    steps = [estimator["refine_with_depth"].processor.statistics for estimator in estimators.values()]
+    steps = [estimator["refine_with_depth"].processor.statistics for estimator in estimators.values()
+             if "refine_with_depth" in estimator.names]  # KeypointPose6D adds it at its first depth image
     count = sum(step["refinements"] for step in steps)
     rejected: dict[str, int] = {}
     for step in steps:

@@ -154,8 +154,9 @@ def test_detect_and_estimate_passes_the_depth_image_to_the_pose_models():
 
 
 def test_keypoint_pipeline_refines_with_depth_on_points_sampled_from_the_run_mesh(world, tmp_path):
-    """KeypointPose6D's ``refine_with_depth`` step samples the run's mesh (config.json mesh_path) at the first
-    depth image and undoes a depth error; without mesh_path the error names config.json."""
+    """KeypointPose6D adds its ``refine_with_depth`` step at the first call given a depth image; it samples the
+    run's mesh (config.json mesh_path) and undoes a depth error; without mesh_path the error names config.json.
+    The untrained network's PnP step is replaced by one returning the pose with a depth error."""
     import json
 
     from test_depth_refinement import raycast_depth
@@ -176,8 +177,14 @@ def test_keypoint_pipeline_refines_with_depth_on_points_sampled_from_the_run_mes
     write_keypoints(run, cube, np.ones(8, bool), "farthest-point")
     K = np.array([[500.0, 0, 159.5], [0, 500.0, 119.5], [0, 0, 1]])
     camera = Camera(K, 320, 240)
-    estimator = KeypointPose6D(run, camera)
-    assert estimator.names[-1] == "refine_with_depth"
+
+    def estimator_with_pnp_pose(pose: Pose6D) -> KeypointPose6D:
+        estimator = KeypointPose6D(run, camera)
+        estimator.replace("solve_pnp", KeyedStep(lambda keypoints, window, camera: pose,
+                                                 ("keypoints", "windows", "cameras"), "poses", "solve_pnp",
+                                                 per_sample=True))
+        return estimator
+
     T = np.eye(4)
     T[:3, :3] = Rotation.from_rotvec([0.3, 0.5, -0.2]).as_matrix()
     T[:3, 3] = [0.0, 0.01, 0.55]
@@ -187,11 +194,15 @@ def test_keypoint_pipeline_refines_with_depth_on_points_sampled_from_the_run_mes
     box = Box2D(*pixels.min(axis=0), *(pixels.max(axis=0) + 1))
     far = T.copy()
     far[:3, 3] *= 1.06  # 3.3 cm along the ray
-    values = {"poses": [Pose6D.from_matrix(far)], "depths": [depth], "boxes": [box], "cameras": [camera]}
-    refined = estimator.run_steps(values, start="refine_with_depth")["poses"][0]
+    image = np.zeros((240, 320, 3), np.uint8)
+    estimator = estimator_with_pnp_pose(Pose6D.from_matrix(far))
+    assert estimator(image, box) == Pose6D.from_matrix(far)  # without depth: the pose of the PnP step
+    assert "refine_with_depth" not in estimator.names  # added by the first call given a depth image
+    refined = estimator(image, box, depth=depth)
+    assert estimator.names[-2:] == ["solve_pnp", "refine_with_depth"]
     assert np.linalg.norm(refined.translation - T[:3, 3]) < 0.001
     assert estimator["refine_with_depth"].processor.statistics["accepted"] == 1
     del config["mesh_path"]
     (run / "config.json").write_text(json.dumps(config))
     with pytest.raises(ValueError, match=r"config.json: mesh_path None is not a file; depth refinement samples"):
-        KeypointPose6D(run, camera).run_steps(values, start="refine_with_depth")
+        estimator_with_pnp_pose(Pose6D.from_matrix(far))(image, box, depth=depth)

@@ -132,10 +132,10 @@ class KeypointPose6D(SequentialProcessor):
     - ``solve_pnp``: ``keypoints``, ``windows``, ``cameras`` -> ``poses`` (:class:`KeypointPnP`);
     - ``depth_from_box`` (only with ``depth_from_box=True``): ``poses``, ``boxes``, ``cameras`` -> ``poses``
       (:class:`~paz6d.processors.pose.DepthFromBox`);
-    - ``refine_with_depth``: ``poses``, ``depths``, ``boxes``, ``cameras`` -> ``poses``
-      (:class:`~paz6d.processors.refine.RefineWithDepth`, ICP against the depth image; without one the pose
-      as it is). Its model points are sampled on the run's mesh (``mesh_path`` of ``config.json``) at the
-      first depth image.
+    - ``refine_with_depth`` (added at the first call given a depth image): ``poses``, ``depths``, ``boxes``,
+      ``cameras`` -> ``poses`` (:class:`~paz6d.processors.refine.RefineWithDepth`, ICP against the depth
+      image; a sample without one keeps its pose). Its model points are sampled on the run's mesh
+      (``mesh_path`` of ``config.json``) then.
 
     ``cameras`` holds a :class:`~paz6d.backend.camera.Camera` per image. A sample whose PnP fails
     carries its :class:`~paz6d.backend.pnp.PnPError` as its pose (raised by a call, ``None`` from
@@ -197,8 +197,6 @@ class KeypointPose6D(SequentialProcessor):
         if depth_from_box:
             self.add(KeyedStep(DepthFromBox(self.hull_points), ("poses", "boxes", "cameras"), "poses",
                                "depth_from_box", per_sample=True))
-        self.add(KeyedStep(RefineWithDepth(lambda: surface_points_of_run(self.run_dir)),
-                           ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth", per_sample=True))
 
     # -- inputs ---------------------------------------------------------------------------------
     def _camera(self, camera, width: int | None = None, height: int | None = None) -> Camera:
@@ -223,6 +221,10 @@ class KeypointPose6D(SequentialProcessor):
         if len(depths) != len(images):
             raise ValueError(f"depths: expected one per image ({len(images)}), got {len(depths)}")
         samples = [self._sample(*sample) for sample in zip(images, boxes, cameras)]
+        if any(depth is not None for depth in depths) and "refine_with_depth" not in self.names:
+            self.add(KeyedStep(RefineWithDepth(lambda: surface_points_of_run(self.run_dir)),
+                               ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth",
+                               per_sample=True))
         return {"images": [sample[0] for sample in samples], "boxes": [sample[1] for sample in samples],
                 "cameras": [sample[2] for sample in samples], "depths": depths}
 
