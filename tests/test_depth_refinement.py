@@ -8,16 +8,14 @@ boxes and a cylinder), standing in front of a table plane.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from paz6d.abstract import Box2D, KeyedStep, Pose6D
+from paz6d.abstract import Box2D, Pose6D
 from paz6d.assets.demo_object import make_demo_mesh
 from paz6d.backend.camera import Camera, project_points
-from paz6d.backend.icp import ICPSettings, check_depth, refine_pose_icp
+from paz6d.backend.icp import ICPSettings, agreement_of, check_depth, refine_pose_icp
 from paz6d.backend.mesh import diameter, sample_points
 from paz6d.processors.refine import RefineWithDepth
 
@@ -119,6 +117,18 @@ def test_depth_without_the_object_is_refused_and_the_input_pose_kept(scene):
         result = refine_pose_icp(start, depth, K, scene["points"], scene["diameter"], box=scene["box"])
         assert not result.accepted and result.check == check, (name, result.reason)
         assert np.array_equal(result.T_model2cam, start), name
+
+
+def test_agreement_counts_depth_seen_behind_the_model_as_a_contradiction_and_ignores_occlusion(scene):
+    tolerance = 0.03 * scene["diameter"]
+    agreement, compared = agreement_of(scene["T"], scene["points"], scene["depth"], K, tolerance)
+    assert agreement > 0.9 and compared > 300
+    nearer = perturbed(scene["T"], [0.0, 0.0, 0.0], [0.0, 0.0, -0.03])  # in front of what the depth shows
+    assert agreement_of(nearer, scene["points"], scene["depth"], K, tolerance)[0] < 0.1
+    farther = perturbed(scene["T"], [0.0, 0.0, 0.0], [0.0, 0.0, 0.2])  # behind the table: all of it occluded
+    assert agreement_of(farther, scene["points"], scene["depth"], K, tolerance)[1] == 0
+    occluded_agreement, occluded_compared = agreement_of(scene["T"], scene["points"], scene["occluded"], K, tolerance)
+    assert occluded_agreement > 0.9 and occluded_compared < compared  # the plate hides points, contradicts none
 
 
 def test_refine_step_picks_the_accepted_candidate_and_counts_its_work(scene):

@@ -185,14 +185,12 @@ def visible_points(points_cam, K, shape: tuple[int, int], tolerance: float) -> t
     return np.stack([columns[keep], rows[keep]], axis=-1), depths[keep]
 
 
-def _mode(values: np.ndarray, half_width: float) -> tuple[float, int]:
-    """The centre of the densest window of ``values`` (a window of ``± half_width`` around a value, then
-    the mean of its members) and how many values it holds."""
+def _mode(values: np.ndarray, half_width: float) -> float:
+    """The mode of ``values``: the mean of the densest window of ``± half_width`` around one of them."""
     ordered = np.sort(values)
     counts = np.searchsorted(ordered, ordered + half_width, "right") - np.searchsorted(ordered, ordered - half_width)
     centre = ordered[int(np.argmax(counts))]
-    members = ordered[np.abs(ordered - centre) <= half_width]
-    return float(members.mean()), len(members)
+    return float(ordered[np.abs(ordered - centre) <= half_width].mean())
 
 
 def _depth_differences(T, model_points, depth, K, region, tolerance) -> tuple[np.ndarray, np.ndarray]:
@@ -204,13 +202,11 @@ def _depth_differences(T, model_points, depth, K, region, tolerance) -> tuple[np
     return (observed - depths)[has_depth], region[pixels[:, 1], pixels[:, 0]][has_depth]
 
 
-def agreement_of(T, model_points, depth, K, tolerance: float, region=None) -> tuple[float, int]:
+def agreement_of(T, model_points, depth, K, tolerance: float) -> tuple[float, int]:
     """``(agreement, count)``: of the model points visible under ``T`` whose pixel has depth and is not
     occluded (depth in front by more than ``tolerance`` metres), the fraction whose depth is within
-    ``tolerance``; ``count`` is how many were compared. ``region`` (bool ``(H, W)``) limits the points."""
-    differences, in_region = _depth_differences(T, model_points, depth, K,
-                                                np.ones(depth.shape, bool) if region is None else region, tolerance)
-    differences = differences[in_region]
+    ``tolerance``; ``count`` is how many were compared."""
+    differences, _ = _depth_differences(T, model_points, depth, K, np.ones(depth.shape, bool), tolerance)
     compared = differences[differences >= -tolerance]
     if len(compared) == 0:
         return 0.0, 0
@@ -269,7 +265,7 @@ def refine_pose_icp(T_model2cam, depth, K, model_points, diameter: float, box=No
     if len(differences) < settings.min_points:
         return rejected("depth_near_pose", f"{len(differences)} visible model points have depth within {limit:.3f} m "
                                            f"of the pose (at least {settings.min_points} needed)")
-    ray_shift, _ = _mode(differences, settings.mode_width * diameter)
+    ray_shift = _mode(differences, settings.mode_width * diameter)
     T_start = _shift_along_ray(T_input, ray_shift)
 
     scene = unproject(np.stack([columns, rows], axis=-1).astype(np.float64), depth[rows, columns], K)
