@@ -131,7 +131,7 @@ def test_anchor_source_lifts_when_due_and_keeps_the_anchors_in_between(tmp_path)
                        masks.astype(np.uint8) * 255, masks, K, T)
     model = build_keypointnet(4, size, 8, 2, (1,))
     source = AnchorSource(model, views, {"anchor_start": 0.5, "anchor_every": 10, "steps": 20, "downsample": 2,
-                                         "anchor_views": 8}, seed=0)
+                                         "anchor_views": 8, "input_size": size}, seed=0, object_diameter=0.1)
     assert source(9) is None and source.lifted_at is None
     first = source(10)
     assert first.shape == (4, 3) and np.all(np.isfinite(first)) and source.lifted_at == 10
@@ -139,3 +139,20 @@ def test_anchor_source_lifts_when_due_and_keeps_the_anchors_in_between(tmp_path)
     model.get_layer("logits").bias.assign(np.arange(4, dtype=np.float32))  # the network changed
     again = source(20)
     assert again is not first and source.lifted_at == 20
+
+
+def test_spread_modes_hand_computed():
+    from paz6d.keypointnet.keypoints import spread_modes
+
+    first = [[0, 0, 0]] * 4 + [[1, 0, 0]]  # keypoint 0: mostly at the origin
+    second = [[0.05, 0, 0]] * 3 + [[0, 2, 0]] * 2  # keypoint 1: mostly next to keypoint 0, sometimes far
+    per_view = np.stack([np.array(first, float), np.array(second, float)], axis=1)  # (V=5, N=2, 3)
+    # keypoint 0 is the more concentrated (4 estimates together): it keeps its mode; keypoint 1 takes
+    # its densest place at least delta = 0.5 from it
+    np.testing.assert_allclose(spread_modes(per_view, radius=0.1, delta=0.5), [[0, 0, 0], [0, 2, 0]])
+    # without the separation each keypoint gets its own densest place (the median would too)
+    np.testing.assert_allclose(spread_modes(per_view, radius=0.1, delta=0.0), [[0, 0, 0], [0.05, 0, 0]])
+    # no candidate delta away: the one farthest from the chosen points
+    np.testing.assert_allclose(spread_modes(per_view, radius=0.1, delta=5.0), [[0, 0, 0], [0, 2, 0]])
+    with pytest.raises(ValueError, match="per_view"):
+        spread_modes(np.zeros((5, 3)), 0.1, 0.5)

@@ -33,10 +33,53 @@ def lift_keypoints(uv, depth, K, T_model2cam) -> tuple[np.ndarray, np.ndarray]:
                          f"{uv.shape}, {depth.shape}, {K.shape}, {T_model2cam.shape}")
     if views == 0:
         raise ValueError("uv: expected at least one view to lift keypoints from")
-    per_view = np.stack([apply(invert(T_model2cam[v]), unproject(uv[v], depth[v], K[v])) for v in range(views)])
+    per_view = per_view_points(uv, depth, K, T_model2cam)
     points = np.median(per_view, axis=0)
     spread = np.median(np.linalg.norm(per_view - points[None], axis=-1), axis=0)
     return points, spread
+
+
+def per_view_points(uv: np.ndarray, depth: np.ndarray, K: np.ndarray, T_model2cam: np.ndarray) -> np.ndarray:
+    """Each view's keypoints ``uv (V, N, 2)`` at depths ``(V, N)`` (metres) moved to the object frame:
+    ``(V, N, 3)`` metres (``K (V, 3, 3)``, ``T_model2cam (V, 4, 4)``)."""
+    return np.stack([apply(invert(T_model2cam[v]), unproject(uv[v], depth[v], K[v])) for v in range(len(uv))])
+
+
+def spread_modes(per_view: np.ndarray, radius: float, delta: float) -> np.ndarray:
+    """One 3D point per keypoint where that keypoint lands most often, at least ``delta`` apart.
+
+    The density of a candidate (one view's estimate of keypoint ``n``, ``per_view[v, n]``) is how many
+    of keypoint ``n``'s estimates lie within ``radius`` of it. Keypoints are taken from the most
+    concentrated (highest peak density) to the least; each gets its densest candidate at least ``delta``
+    from the points already chosen, or, when none is that far, the candidate farthest from them.
+    Unlike the mean or median, this does not pull keypoints that wander over the object to its centre.
+
+    Args:
+        per_view: ``(V, N, 3)`` per-view estimates (e.g. :func:`per_view_points`).
+        radius, delta: same unit as ``per_view``.
+    Returns:
+        ``(N, 3)``.
+    """
+    per_view = np.asarray(per_view, dtype=np.float64)
+    if per_view.ndim != 3 or per_view.shape[-1] != 3 or len(per_view) == 0:
+        raise ValueError(f"per_view: expected (V >= 1, N, 3) points, got shape {per_view.shape}")
+    if radius <= 0 or delta < 0:
+        raise ValueError(f"radius/delta: expected radius > 0 and delta >= 0, got {radius}, {delta}")
+    clouds = per_view.transpose(1, 0, 2)  # (N, V, 3)
+    density = np.stack([(np.linalg.norm(cloud[:, None] - cloud[None], axis=-1) <= radius).sum(axis=1)
+                        for cloud in clouds])  # (N, V)
+    chosen = np.zeros((len(clouds), 3))
+    taken: list[int] = []
+    for index in np.argsort(-density.max(axis=1), kind="stable"):
+        if taken:
+            gap = np.linalg.norm(clouds[index][:, None] - chosen[taken][None], axis=-1).min(axis=1)
+            far = gap >= delta
+            best = np.argmax(np.where(far, density[index], -1)) if far.any() else np.argmax(gap)
+        else:
+            best = np.argmax(density[index])
+        chosen[index] = clouds[index][best]
+        taken.append(int(index))
+    return chosen
 
 
 def triangulate_keypoints(uv, K, T_model2cam, outlier_factor: float = 3.0) -> tuple[np.ndarray, np.ndarray]:

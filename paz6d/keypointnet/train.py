@@ -294,8 +294,9 @@ class AnchorSource:
         views: the training :class:`~paz6d.keypointnet.views.ViewSet`; seed: of the crops' backgrounds.
     """
 
-    def __init__(self, model, views, settings: dict, seed: int):
+    def __init__(self, model, views, settings: dict, seed: int, object_diameter: float):
         self.model, self.views, self.settings, self.seed = model, views, settings, seed
+        self.diameter = float(object_diameter)
         self.points: np.ndarray | None = None
         self.lifted_at: int | None = None
         self._crops = None
@@ -310,8 +311,16 @@ class AnchorSource:
         return self.points
 
     def lift(self) -> np.ndarray:
-        """The network's keypoints on the anchor crops, triangulated: ``(N, 3)`` metres, object frame."""
-        from paz6d.keypointnet.keypoints import decode_keypoints, triangulate_keypoints
+        """The network's keypoints on the anchor crops in 3D: ``(N, 3)`` metres, object frame.
+
+        ``anchor_lifting`` ``"modes"`` (default): each view's keypoints at their predicted depths in the
+        object frame, then per keypoint the place it lands most often, keypoints at least
+        ``separation_delta`` diameters apart (:func:`~paz6d.keypointnet.keypoints.spread_modes`, density
+        radius ``anchor_radius`` diameters); ``"triangulate"``: least-squares triangulation of the 2D
+        keypoints (inconsistent keypoints triangulate near the object's centre: every anchor collapsed
+        onto one point in the measured runs).
+        """
+        from paz6d.keypointnet.keypoints import decode_keypoints, per_view_points, spread_modes, triangulate_keypoints
         from paz6d.keypointnet.model import inference_function
 
         if self._crops is None:
@@ -319,8 +328,16 @@ class AnchorSource:
             self._infer = inference_function(self.model)
         images, K, T = self._crops
         outputs = predict_in_batches(self._infer, images, 32)
-        points, _ = triangulate_keypoints(decode_keypoints(outputs, int(self.settings["downsample"])), K, T)
-        return points
+        uv = decode_keypoints(outputs, int(self.settings["downsample"]))
+        method = self.settings.get("anchor_lifting", "modes")
+        if method == "triangulate":
+            return triangulate_keypoints(uv, K, T)[0]
+        if method != "modes":
+            raise ValueError(f"anchor_lifting: expected 'modes' or 'triangulate', got {method!r}")
+        depth = np.asarray(outputs["depth"], np.float64) * self.diameter * K[:, 0:1, 0] / int(self.settings["input_size"])
+        delta = float(self.settings.get("separation_delta", SEPARATION_DELTA)) * self.diameter
+        return spread_modes(per_view_points(uv, depth, K, T), float(self.settings.get("anchor_radius", 0.1)) * self.diameter,
+                            delta)
 
 
 def supervised_keypoints(mesh, count: int, seed: int) -> np.ndarray:
@@ -389,7 +406,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
                                       ema_momentum=0.99 if ema is None else float(ema))
     pairs, downsample = settings["pairs"], settings["downsample"]
 
-    anchors = AnchorSource(model, train_views, settings, job.seed + 3) if job.mode == "discovery" else None
+    anchors = AnchorSource(model, train_views, settings, job.seed + 3, object_diameter) if job.mode == "discovery" else None
 
     def make_batch(step: int):
         batch = training_batch(train_views, np.random.default_rng([job.seed, 1, step]), pairs, downsample,
