@@ -30,7 +30,7 @@ import numpy as np
 from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.draw import draw_box, draw_model_outline, draw_pose_axes, draw_projected_points, keypoint_colors
-from paz6d.backend.icp import check_depth
+from paz6d.backend.checks import check_depth
 from paz6d.backend.image import as_image
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
 

@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend.checks import check_depth
 from paz6d.backend.files import write_json_atomically
-from paz6d.backend.icp import check_depth
 from paz6d.backend.paths import check_output_file, check_outputs_apart, check_plain_name
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run_dir

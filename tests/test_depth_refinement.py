@@ -15,7 +15,8 @@ from scipy.spatial.transform import Rotation
 from paz6d.abstract import Box2D, Pose6D
 from paz6d.assets.demo_object import make_demo_mesh
 from paz6d.backend.camera import Camera, project_points
-from paz6d.backend.icp import ICPSettings, agreement_of, check_depth, refine_pose_icp
+from paz6d.backend.checks import check_depth
+from paz6d.backend.icp import ICPSettings, agreement_of, refine_pose_icp
 from paz6d.backend.mesh import diameter, sample_points
 from paz6d.processors.refine import RefineWithDepth
 

@@ -34,8 +34,7 @@ from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProces
 from paz6d.backend import quaternion
 from paz6d.backend.boxes import check_box_in_image
 from paz6d.backend.camera import Camera, as_camera, project_points, unproject
-from paz6d.backend.checks import as_array, as_camera_matrix
-from paz6d.backend.icp import check_depth
+from paz6d.backend.checks import as_array, as_camera_matrix, check_depth
 from paz6d.backend.image import as_image
 from paz6d.processors.crops import SquareCrop
 from paz6d.processors.refine import RefineWithDepth

@@ -181,3 +181,30 @@ def number_field(entry, name: str, where: str, minimum: float | None = None, max
             expected += f" in [{'-inf' if minimum is None else minimum}, {'inf' if maximum is None else maximum}]"
         raise ValueError(f"{where}: field {name!r} must be {expected}, got {short_repr(value)}")
     return float(value)
+
+
+def check_depth(depth, name: str = "depth", shape: tuple[int, int] | None = None) -> np.ndarray:
+    """A depth image as float32 ``(H, W)`` metres (0 = no data), checked.
+
+    Args:
+        name: the argument or file named in errors.
+        shape: the required ``(H, W)`` (the image's), or ``None``.
+    Raises:
+        ValueError: not 2D, another size than ``shape``, NaN/infinite or negative values.
+    """
+    try:
+        array = np.asarray(depth, dtype=np.float32)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name}: expected a numeric (H, W) depth image in metres, got {type(depth).__name__}") \
+            from error
+    if array.ndim != 2:
+        raise ValueError(f"{name}: expected a depth image of shape (H, W) in metres, got shape {array.shape}")
+    if shape is not None and array.shape != tuple(shape):
+        raise ValueError(f"{name}: depth image is {array.shape[1]}x{array.shape[0]} pixels, expected "
+                         f"{shape[1]}x{shape[0]} (the RGB image's size)")
+    bad = int(np.count_nonzero(~np.isfinite(array)))
+    if bad:
+        raise ValueError(f"{name}: {bad} NaN or infinite depth values; expected finite metres (0 = no data)")
+    if np.any(array < 0):
+        raise ValueError(f"{name}: negative depth values; expected metres >= 0 (0 = no data)")
+    return array

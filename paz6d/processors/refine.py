@@ -13,8 +13,8 @@ import numpy as np
 from paz6d.abstract.messages import Box2D, Pose6D
 from paz6d.abstract.processor import Processor
 from paz6d.backend.camera import Camera, as_camera
-from paz6d.backend.checks import as_points
-from paz6d.backend.icp import ICPResult, ICPSettings, check_depth, refine_pose_icp
+from paz6d.backend.checks import as_points, check_depth
+from paz6d.backend.icp import ICPResult, ICPSettings, refine_pose_icp
 
 
 class RefineWithDepth(Processor):
