@@ -4,14 +4,16 @@ ADI asks, for every estimate, how far each model point under the ground-truth po
 nearest model point under the estimated pose. Rigid motions preserve distances, so the question
 becomes: for the moved copy ``A x + b`` of every model point ``x`` (``A`` a rotation), how far is
 the nearest model point? :class:`PointTree` answers it with a KD-tree built once per object and
-searched by a numba-compiled kernel, which is several times faster than one ``scipy`` query per
-point because:
+searched by numba-compiled kernels:
 
-* the queries run in the tree's own point order, so consecutive queries are neighbours and the
-  previous answer seeds a tight upper bound that prunes most of the tree;
-* every node stores its tight bounding box, and the search descends into the nearer child first;
-* estimates are spread over threads (``workers``), each estimate searched by one thread, so the
-  result does not depend on the thread count.
+* the queries go 32 at a time in the tree's point order, so each block is compact in space; a block
+  starts from the leaf nearest its centre and walks that leaf's precomputed list of nearest leaves
+  until the next one is provably out of reach, scanning a leaf for all 32 queries at once (the
+  distances of one point to 32 queries are computed in SIMD registers) when its box is nearer to
+  some query than that query's best point so far;
+* the minimum of the same float64 distances is found whatever the pruning, and the square roots are
+  summed in tree order, so the means do not depend on the search strategy or the thread count;
+* estimates are spread over threads (``workers``), each estimate searched by one thread.
 
 The kernels live in :mod:`evaluation.pose_error_kernels`, imported (and compiled, then cached on disk
 by numba) on first use, so ``import evaluation`` stays light.
@@ -37,12 +39,19 @@ class PointTree:
 
         tree = pose_error_kernels.build_tree(np.ascontiguousarray(points), int(leaf_size))
         order, self._start, self._end, self._left, self._right, self._low, self._high = tree
-        self._points = np.ascontiguousarray(points[order])
+        self._coords = tuple(np.ascontiguousarray(points[order, axis]) for axis in range(3))  # tree order
+        self._leaves = pose_error_kernels.leaf_neighbours(self._start, self._end, self._left, self._right,
+                                                          self._low, self._high)
 
     @property
     def n(self) -> int:
         """Number of points in the tree."""
-        return len(self._points)
+        return len(self._coords[0])
+
+    @property
+    def points(self) -> np.ndarray:
+        """``(N, 3)`` the points in tree order, the order in which the means sum the distances."""
+        return np.stack(self._coords, axis=1)
 
     def mean_nearest_distance(self, A: np.ndarray, b: np.ndarray, workers: int = 1) -> np.ndarray:
         """``(E,)``: for each ``(A[e], b[e])`` the mean over the tree's points ``x`` of the distance
@@ -66,10 +75,12 @@ class PointTree:
 
         available = numba.config.NUMBA_NUM_THREADS
         threads = available if workers == -1 else max(1, min(int(workers), available))
+        arrays = (A, b, *self._coords, self._left, self._right, self._low, self._high, *self._leaves)
+        if threads == 1:  # the serial kernel: loading numba's threading layer costs time too
+            return pose_error_kernels.mean_nearest_distances(*arrays)
         previous = numba.get_num_threads()
         numba.set_num_threads(threads)
         try:
-            return pose_error_kernels.mean_nearest_distances(A, b, self._points, self._start, self._end,
-                                                             self._left, self._right, self._low, self._high)
+            return pose_error_kernels.mean_nearest_distances_parallel(*arrays)
         finally:
             numba.set_num_threads(previous)
