@@ -41,6 +41,36 @@ def test_mean_nearest_distance_equals_brute_force(seed, count, leaf_size, shift)
     np.testing.assert_allclose(got, brute_force_means(points, A, b), rtol=1e-12, atol=1e-9)
 
 
+def sequential_brute_force_means(tree: PointTree, A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The means as the kernel defines them, by brute force: queries ``A x + b`` evaluated term by
+    term, squared distances ``dx² + dy² + dz²`` in that order, square roots summed one by one in tree
+    order, divided by N."""
+    points = tree.points
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    means = []
+    for rotation, translation in zip(A, b):
+        queries = [rotation[row, 0] * x + rotation[row, 1] * y + rotation[row, 2] * z + translation[row]
+                   for row in range(3)]
+        squared = ((x[None, :] - queries[0][:, None]) ** 2 + (y[None, :] - queries[1][:, None]) ** 2
+                   + (z[None, :] - queries[2][:, None]) ** 2)
+        means.append(np.add.accumulate(np.sqrt(squared.min(axis=1)))[-1] / len(points))
+    return np.array(means)
+
+
+@pytest.mark.parametrize("leaf_size", [1, 3, 32])
+def test_mean_nearest_distance_is_bit_identical_to_brute_force(leaf_size):
+    """Every pruning path (home leaf, neighbour list, tree search when the list cannot cover the
+    reach: leaf size 1 gives 1,200 leaves for lists of 128) finds the same minima bit for bit."""
+    rng = np.random.default_rng(7)
+    points = surface_points(1200, 7)
+    A = Rotation.random(8, random_state=8).as_matrix()
+    A[0] = np.eye(3)
+    b = rng.normal(size=(8, 3)) * np.array([0.0, 0.5, 3.0, 10.0, 40.0, 150.0, 1000.0, 5000.0])[:, None]
+    tree = PointTree(points, leaf_size=leaf_size)
+    np.testing.assert_array_equal(tree.mean_nearest_distance(A, b), sequential_brute_force_means(tree, A, b))
+    assert sorted(map(tuple, tree.points)) == sorted(map(tuple, points))
+
+
 def test_identity_gives_zero_and_duplicates_are_handled():
     points = np.repeat(surface_points(50, 1), 3, axis=0)  # every point three times
     tree = PointTree(points, leaf_size=4)
