@@ -15,9 +15,10 @@ from paz6d.backend.image import load_image
 #: ``"noise"``: multi-octave value noise between two colours, half of the time with stripes
 #: (``paz6d generate``); ``"clutter"``: a smooth colour field or soft stripes, up to 7 rectangles,
 #: ellipses and lines, blurred noise texture (AAE inputs); ``"shapes"``: coarse colour noise,
-#: 3-11 rectangles and ellipses, pixel noise; ``"shapes-photos"``: half ``"shapes"``, half photo
-#: collages (:func:`paz6d.synthesis.photo_backgrounds.photo_collage`), then Gaussian pixel noise of
-#: standard deviation 0-40 levels half of the time (KeypointNet batches).
+#: 3-11 rectangles and ellipses, pixel noise (KeypointNet batches); ``"shapes-photos"``: half
+#: ``"shapes"``, half photo collages (:func:`paz6d.synthesis.photo_backgrounds.photo_collage`), then
+#: Gaussian pixel noise of standard deviation 0-40 levels half of the time (tried for KeypointNet's
+#: out-of-distribution robustness and not adopted: docs/keypointnet.md, "Out-of-distribution check").
 BACKGROUND_STYLES = ("noise", "clutter", "shapes", "shapes-photos")
 
 #: Backgrounds of the out-of-distribution check (``paz6d demo``), used by no training pipeline:
