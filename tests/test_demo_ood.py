@@ -5,8 +5,6 @@ fields on hand-made numbers; the table and the chart."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
