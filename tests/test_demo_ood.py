@@ -90,24 +90,6 @@ def test_no_training_pipeline_uses_an_ood_style():
         backgrounds.ood_background(np.random.default_rng(0), 8, 8, "shapes")
 
 
-def test_shapes_photos_mixes_shapes_and_photo_collages():
-    from paz6d.synthesis.photo_backgrounds import bundled_photographs, photo_collage
-
-    kinds = set()
-    for seed in range(12):
-        generator = np.random.default_rng(seed)
-        photos = generator.random() >= 0.5
-        base = (photo_collage(generator, bundled_photographs(), 48, 32) if photos
-                else backgrounds.procedural_background(generator, 48, 32, "shapes"))
-        if generator.random() < 0.5:
-            noise = generator.normal(0.0, generator.uniform(0, backgrounds.MAX_TRAINING_PIXEL_NOISE), base.shape)
-            base = np.clip(base + noise, 0, 255).astype(np.uint8)
-        np.testing.assert_array_equal(
-            backgrounds.procedural_background(np.random.default_rng(seed), 48, 32, "shapes-photos"), base)
-        kinds.add(photos)
-    assert kinds == {True, False}
-
-
 def test_retention_and_pass_fail_rule_on_hand_made_numbers():
     recalls = {IN_DISTRIBUTION: 0.8, "flat": 0.72, "pixel-noise": 0.719, "smooth-field": 0.9, "lighting": None}
     summary = ood_check.check_summary("shapes", recalls)

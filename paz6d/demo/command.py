@@ -15,6 +15,7 @@ from paz6d.aae.config import QUICK
 from paz6d.backend.paths import check_output_folder
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.units import MM_PER_M
+from paz6d.demo.report import write_report
 from renderers.platform import PLATFORMS
 
 
@@ -52,7 +53,6 @@ def run_demos(options: DemoOptions, config=QUICK, keypoint_overrides: dict | Non
     settings replaced in its quick config), then the OOD check of every model, added to the AAE
     demo's report (``OUT/report.json``, key ``ood_check``); returns that report."""
     from paz6d.demo import aae_demo, keypoint_demo, ood_check  # here: they load OpenCV, the renderers, TensorFlow
-    from paz6d.demo.report import write_report
 
     out = Path(options.out)
     report = aae_demo.run_demo(out, config, options.test_images, options.workers, options.platform)

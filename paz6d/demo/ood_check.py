@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import finite_or_none, new_figure, save_figure_atomically
+from paz6d.demo.keypoint_demo import evaluate_keypoint_pose
 from paz6d.demo.ood_set import CONDITIONS, IN_DISTRIBUTION, OODViews
 from paz6d.demo.report import number, print_rows, score_poses
 
@@ -75,7 +76,6 @@ class PoseModel:
                 return score_poses(poses, views.T_model2cam, points, object_diameter).metrics["recall_0.1d"]
 
             return aae_recall
-        from paz6d.demo.keypoint_demo import evaluate_keypoint_pose
         from paz6d.keypointnet.views import TestImages
 
         def keypointnet_recall(images: np.ndarray) -> float | None:

@@ -15,11 +15,8 @@ from paz6d.backend.image import load_image
 #: ``"noise"``: multi-octave value noise between two colours, half of the time with stripes
 #: (``paz6d generate``); ``"clutter"``: a smooth colour field or soft stripes, up to 7 rectangles,
 #: ellipses and lines, blurred noise texture (AAE inputs); ``"shapes"``: coarse colour noise,
-#: 3-11 rectangles and ellipses, pixel noise (KeypointNet batches); ``"shapes-photos"``: half
-#: ``"shapes"``, half photo collages (:func:`paz6d.synthesis.photo_backgrounds.photo_collage`), then
-#: Gaussian pixel noise of standard deviation 0-40 levels half of the time (tried for KeypointNet's
-#: out-of-distribution robustness and not adopted: docs/keypointnet.md, "Out-of-distribution check").
-BACKGROUND_STYLES = ("noise", "clutter", "shapes", "shapes-photos")
+#: 3-11 rectangles and ellipses, pixel noise (KeypointNet batches).
+BACKGROUND_STYLES = ("noise", "clutter", "shapes")
 
 #: Backgrounds of the out-of-distribution check (``paz6d demo``), used by no training pipeline:
 #: ``"flat"``: one uniform random colour; ``"pixel-noise"``: every pixel and channel uniform in 0-255
@@ -27,7 +24,7 @@ BACKGROUND_STYLES = ("noise", "clutter", "shapes", "shapes-photos")
 #: a Gaussian of sigma 4-16 px, each channel stretched to a random range at least 128 levels wide.
 OOD_BACKGROUND_STYLES = ("flat", "pixel-noise", "smooth-field")
 #: Largest pixel-noise standard deviation (levels) in any :data:`BACKGROUND_STYLES` entry.
-MAX_TRAINING_PIXEL_NOISE = 40.0
+MAX_TRAINING_PIXEL_NOISE = 12.0
 
 
 def procedural_background(generator: np.random.Generator, width: int, height: int, style: str = "noise") -> np.ndarray:
@@ -38,8 +35,6 @@ def procedural_background(generator: np.random.Generator, width: int, height: in
         return _clutter(generator, width, height)
     if style == "shapes":
         return _shapes(generator, width, height)
-    if style == "shapes-photos":
-        return _shapes_or_photos(generator, width, height)
     raise ValueError(f"style: expected one of {BACKGROUND_STYLES}, got {style!r}")
 
 
@@ -142,23 +137,8 @@ def _shapes(generator: np.random.Generator, width: int, height: int) -> np.ndarr
         else:
             cv2.rectangle(background, (centre[0] - extent[0], centre[1] - extent[1]),
                           (centre[0] + extent[0], centre[1] + extent[1]), colour, -1)
-    noise = generator.normal(0.0, generator.uniform(0, 12), background.shape)
+    noise = generator.normal(0.0, generator.uniform(0, MAX_TRAINING_PIXEL_NOISE), background.shape)
     return np.clip(background + noise, 0, 255).astype(np.uint8)
-
-
-def _shapes_or_photos(generator: np.random.Generator, width: int, height: int) -> np.ndarray:
-    """``"shapes"`` or a photo collage (even odds), then, half of the time, Gaussian pixel noise of a
-    standard deviation uniform in 0-:data:`MAX_TRAINING_PIXEL_NOISE` levels."""
-    from paz6d.synthesis.photo_backgrounds import bundled_photographs, photo_collage
-
-    if generator.random() < 0.5:
-        background = _shapes(generator, width, height)
-    else:
-        background = photo_collage(generator, bundled_photographs(), width, height)
-    if generator.random() < 0.5:
-        noise = generator.normal(0.0, generator.uniform(0, MAX_TRAINING_PIXEL_NOISE), background.shape)
-        background = np.clip(background + noise, 0, 255).astype(np.uint8)
-    return background
 
 
 def crop_background(generator: np.random.Generator, image: np.ndarray, width: int, height: int,

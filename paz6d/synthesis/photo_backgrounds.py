@@ -15,7 +15,6 @@ Example::
 from __future__ import annotations
 
 import argparse
-from functools import lru_cache
 from pathlib import Path
 from typing import Sequence
 
@@ -44,16 +43,6 @@ def sample_photographs() -> list[np.ndarray]:
         if image.ndim == 2:
             image = np.repeat(image[..., None], 3, axis=2)
         photographs.append(np.ascontiguousarray(image[..., :3]))
-    return photographs
-
-
-@lru_cache(maxsize=1)
-def bundled_photographs() -> tuple[np.ndarray, ...]:
-    """:func:`sample_photographs` read once per process (read-only arrays; the ``"shapes-photos"``
-    background style draws from them for every sample)."""
-    photographs = tuple(sample_photographs())
-    for photograph in photographs:
-        photograph.setflags(write=False)
     return photographs
 
 
