@@ -358,13 +358,17 @@ def mean_distances(A, b, points):
     ``b = t_est - t_gt``)."""
     estimates, count = A.shape[0], points.shape[0]
     result = np.empty(estimates)
+    px, py, pz = points[:, 0].copy(), points[:, 1].copy(), points[:, 2].copy()
+    distances = np.empty(count)
     for e in range(estimates):
+        for n in range(count):  # vectorized ...
+            x = A[e, 0, 0] * px[n] + A[e, 0, 1] * py[n] + A[e, 0, 2] * pz[n] + b[e, 0]
+            y = A[e, 1, 0] * px[n] + A[e, 1, 1] * py[n] + A[e, 1, 2] * pz[n] + b[e, 1]
+            z = A[e, 2, 0] * px[n] + A[e, 2, 1] * py[n] + A[e, 2, 2] * pz[n] + b[e, 2]
+            distances[n] = np.sqrt(x * x + y * y + z * z)
         total = 0.0
-        for n in range(count):
-            x = A[e, 0, 0] * points[n, 0] + A[e, 0, 1] * points[n, 1] + A[e, 0, 2] * points[n, 2] + b[e, 0]
-            y = A[e, 1, 0] * points[n, 0] + A[e, 1, 1] * points[n, 1] + A[e, 1, 2] * points[n, 2] + b[e, 1]
-            z = A[e, 2, 0] * points[n, 0] + A[e, 2, 1] * points[n, 1] + A[e, 2, 2] * points[n, 2] + b[e, 2]
-            total += np.sqrt(x * x + y * y + z * z)
+        for n in range(count):  # ... and summed in point order
+            total += distances[n]
         result[e] = total / count
     return result
 
@@ -376,12 +380,16 @@ def mean_pixel_distances(M_est, m_est, M_gt, m_gt, points):
     point lies on a camera plane."""
     estimates, count = M_est.shape[0], points.shape[0]
     result = np.empty(estimates)
+    x, y, z = points[:, 0].copy(), points[:, 1].copy(), points[:, 2].copy()
+    distances = np.empty(count)
     for e in range(estimates):
+        for n in range(count):  # vectorized (divisions and roots in SIMD registers) ...
+            u_est, v_est = _pixel(M_est, m_est, e, x[n], y[n], z[n])
+            u_gt, v_gt = _pixel(M_gt, m_gt, e, x[n], y[n], z[n])
+            distances[n] = np.sqrt((u_est - u_gt) ** 2 + (v_est - v_gt) ** 2)
         total = 0.0
-        for n in range(count):
-            u_est, v_est = _pixel(M_est, m_est, e, points[n, 0], points[n, 1], points[n, 2])
-            u_gt, v_gt = _pixel(M_gt, m_gt, e, points[n, 0], points[n, 1], points[n, 2])
-            total += np.sqrt((u_est - u_gt) ** 2 + (v_est - v_gt) ** 2)
+        for n in range(count):  # ... and summed in point order, as before
+            total += distances[n]
         result[e] = total / count
     return result
 
