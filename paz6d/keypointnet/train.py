@@ -5,8 +5,9 @@ Two modes share the data, the network, the PnP pipeline and the evaluation:
 
 - ``discovery`` (Suwajanakorn et al. 2018): pairs of views with known relative pose; the network
   finds ``N`` ordered keypoints by itself (multi-view consistency, relative pose, separation,
-  silhouette and variance losses). Their 3D positions in the object frame are then lifted from
-  training views with known poses (median over views).
+  silhouette and variance losses); the ``discovery`` preset adds a pair-angle curriculum and
+  bootstrapping from the network's own keypoints lifted to 3D (:class:`AnchorSource`). Their final 3D
+  positions in the object frame are lifted like the supervised ones (:func:`lift_run_keypoints`).
 - ``supervised``: ``N`` keypoints chosen by farthest-point sampling on the mesh surface are
   projected into every view; the network learns them as heatmaps (cross-entropy to a Gaussian)
   plus their coordinates and depths. The 3D keypoints are known exactly.
@@ -282,7 +283,7 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
 
 class AnchorSource:
     """Bootstrap anchors of discovery: the network's current keypoints on ``anchor_views`` training views
-    (plain crops, known poses) triangulated to 3D (object frame, metres), re-lifted every
+    (plain crops, known poses) lifted to 3D (object frame, metres; see :meth:`lift`), re-lifted every
     ``anchor_every`` steps from ``anchor_start`` on (:func:`~paz6d.keypointnet.config.anchors_due`).
 
     From then on every batch also trains the network to predict the projections of these anchors
