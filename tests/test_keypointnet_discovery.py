@@ -94,6 +94,9 @@ def test_relative_pose_gradient_through_the_svd_matches_finite_differences():
 
 
 def test_tiny_discovery_run_bootstraps_from_anchors_after_the_start(tmp_path):
+    # Not marked slow although it takes ~35 s at load average 9 (like the tiny runs of
+    # test_keypointnet_training.py): it is the only test of the anchor term inside the training loss and
+    # of the batches that carry the anchors.
     import csv
 
     from paz6d.assets.demo_object import write_demo_object
