@@ -115,3 +115,24 @@ def test_file_in_place_of_a_folder_is_a_clear_error(tmp_path):
     (tmp_path / "blocker").write_text("")
     with pytest.raises(ValueError, match="blocker"):
         write_json_atomically(tmp_path / "blocker" / "out.json", {"a": 1})
+
+
+def test_load_run_json_names_the_file_and_the_run_directory(tmp_path):
+    from paz6d.backend.files import load_run_json
+
+    path = tmp_path / "run" / "thing.json"
+    with pytest.raises(ValueError, match=r"thing.json: file not found \(is .*run a toy run directory\?\)"):
+        load_run_json(path, ("a",), "a toy")
+    path.parent.mkdir()
+    path.write_text("{")
+    with pytest.raises(ValueError, match=r"thing.json: invalid JSON"):
+        load_run_json(path, ("a",), "a toy")
+    with pytest.raises(ValueError, match=r"thing.json: corrupt toy description \(.*thing.json: invalid JSON"):
+        load_run_json(path, ("a",), "a toy", description="toy description")
+    path.write_text("[1]")
+    with pytest.raises(ValueError, match=r"thing.json: expected a JSON object, got list"):
+        load_run_json(path, ("a",), "a toy", description="toy description")
+    path.write_text('{"a": 1}')
+    with pytest.raises(ValueError, match=r"thing.json: missing field\(s\) \['b'\]"):
+        load_run_json(path, ("a", "b"), "a toy")
+    assert load_run_json(path, ("a",), "a toy") == {"a": 1}

@@ -171,17 +171,26 @@ def load_json_object(path: str | Path) -> dict:
     return data
 
 
-def load_run_json(path: str | Path, fields: tuple[str, ...], kind: str) -> dict:
+def load_run_json(path: str | Path, fields: tuple[str, ...], kind: str, description: str | None = None) -> dict:
     """A run directory's JSON object file that must hold ``fields``; ``kind`` names the method's run
-    directories in the message of a missing file (``"an HRNet"``: "is DIR an HRNet run directory?").
+    directories in the message of a missing file (``"an HRNet"``: "is DIR an HRNet run directory?");
+    with ``description``, a file that is not valid JSON is reported as ``"<path>: corrupt <description>
+    (<why>)"``.
 
     Raises:
-        ValueError: the file is missing, not a JSON object or lacks fields (naming the file).
+        ValueError: the file is missing, not valid JSON, not a JSON object or lacks fields (naming the file).
     """
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: file not found (is {path.parent} {kind} run directory?)")
-    data = load_json_object(path)
+    try:
+        data = load_json(path)
+    except ValueError as error:
+        if description is None:
+            raise
+        raise ValueError(f"{path}: corrupt {description} ({error})") from error
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
     missing = [name for name in fields if name not in data]
     if missing:
         raise ValueError(f"{path}: missing field(s) {missing}")

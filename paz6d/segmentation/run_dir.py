@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from paz6d.backend.files import check_run_files, load_json, write_json_atomically
+from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
 
 SEGMENTER_FILE = "segmenter.json"
 MODEL_FILE = "model.keras"
@@ -29,6 +29,8 @@ SEGMENTER_KEYS = ("input_size", "margin", "class_names", "threshold")
 MARKER_FILES = (SEGMENTER_FILE,)
 #: Files without which a run directory cannot segment.
 REQUIRED_FILES = (SEGMENTER_FILE, MODEL_FILE)
+#: How messages name this method's run directories ("is DIR a segmentation run directory?").
+KIND = "a segmentation"
 
 
 def model_path(run_dir: str | Path) -> Path:
@@ -50,17 +52,7 @@ def write_segmenter(run_dir: str | Path, input_size: int, margin: float, class_n
 def read_segmenter(run_dir: str | Path) -> dict[str, Any]:
     """``segmenter.json`` checked field by field."""
     path = Path(run_dir) / SEGMENTER_FILE
-    if not path.is_file():
-        raise ValueError(f"{path}: file not found (is {Path(run_dir)} a segmentation run directory?)")
-    try:
-        data = load_json(path)
-    except ValueError as error:
-        raise ValueError(f"{path}: corrupt segmenter description ({error})") from error
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
-    missing = [key for key in SEGMENTER_KEYS if key not in data]
-    if missing:
-        raise ValueError(f"{path}: missing field(s) {missing}")
+    data = load_run_json(path, SEGMENTER_KEYS, KIND, description="segmenter description")
     size = data["input_size"]
     if not isinstance(size, int) or isinstance(size, bool) or size <= 0:
         raise ValueError(f"{path}: input_size: expected a positive integer (pixels), got {size!r}")
@@ -82,12 +74,7 @@ def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
 def read_config(run_dir: str | Path) -> dict[str, Any] | None:
     """The training settings, ``None`` when the run has none yet."""
     path = Path(run_dir) / CONFIG_FILE
-    if not path.is_file():
-        return None
-    data = load_json(path)
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
-    return data
+    return load_json_object(path) if path.is_file() else None
 
 
 def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
@@ -98,7 +85,7 @@ def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
 def validate(run_dir: str | Path) -> dict[str, Any]:
     """Checks that ``run_dir`` is a directory with ``segmenter.json`` and ``model.keras``; returns the
     segmenter description."""
-    return read_segmenter(check_run_files(run_dir, REQUIRED_FILES, "a segmentation"))
+    return read_segmenter(check_run_files(run_dir, REQUIRED_FILES, KIND))
 
 
 def read_model(run_dir: str | Path):

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from paz6d.backend.boxes import SSD_VARIANCES
-from paz6d.backend.files import check_run_files, load_json, write_json_atomically
+from paz6d.backend.files import check_run_files, load_json, load_run_json, write_json_atomically
 
 DETECTOR_FILE = "detector.json"
 MODEL_FILE = "model.keras"
@@ -30,7 +30,8 @@ DETECTOR_KEYS = ("architecture", "class_names", "priors", "variances")
 MARKER_FILES = (DETECTOR_FILE,)
 #: Files without which a run directory cannot detect.
 REQUIRED_FILES = (DETECTOR_FILE, MODEL_FILE)
-
+#: How messages name this method's run directories ("is DIR an SSD run directory?").
+KIND = "an SSD"
 
 
 def model_path(run_dir: str | Path) -> Path:
@@ -60,17 +61,7 @@ def read_detector(run_dir: str | Path) -> dict[str, Any]:
     """``detector.json`` checked for its fields (``class_names`` a non-empty list of strings,
     4 positive ``variances``)."""
     path = Path(run_dir) / DETECTOR_FILE
-    if not path.is_file():
-        raise ValueError(f"{path}: file not found (is {Path(run_dir)} an SSD run directory?)")
-    try:
-        data = load_json(path)
-    except ValueError as error:
-        raise ValueError(f"{path}: corrupt detector description ({error})") from error
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
-    missing = [key for key in DETECTOR_KEYS if key not in data]
-    if missing:
-        raise ValueError(f"{path}: missing field(s) {missing}")
+    data = load_run_json(path, DETECTOR_KEYS, KIND, description="detector description")
     names = data["class_names"]
     if not isinstance(names, list) or not names or not all(isinstance(name, str) for name in names):
         raise ValueError(f"{path}: class_names: expected a non-empty list of names, got {names!r}")
@@ -116,4 +107,4 @@ def read_model(run_dir: str | Path):
 def validate(run_dir: str | Path) -> dict[str, Any]:
     """Checks that ``run_dir`` is a directory with ``detector.json`` and ``model.keras``; returns the
     detector description."""
-    return read_detector(check_run_files(run_dir, REQUIRED_FILES, "an SSD"))
+    return read_detector(check_run_files(run_dir, REQUIRED_FILES, KIND))
