@@ -145,6 +145,10 @@ def test_refine_step_picks_the_accepted_candidate_and_counts_its_work(scene):
     assert abs(step.diameter - scene["diameter"]) < 0.01
     kept = step(wrong, np.zeros((HEIGHT, WIDTH), np.float32), scene["box"], camera)
     assert kept == wrong  # refused: the input pose itself
+    model = step.icp_model  # the object's KD-tree and point cloud (with normals) are built once, then reused
+    assert model.cloud(normals=True).has_normals() and model.tree.n == len(scene["points"])
+    step([wrong, good], scene["depth"], scene["box"], camera)
+    assert step.icp_model is model and step.statistics["refinements"] == 5
 
 
 def test_bad_depth_images_raise_clear_errors(scene):

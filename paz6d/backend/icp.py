@@ -22,6 +22,7 @@ open3d is imported only when a refinement runs.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -193,9 +194,121 @@ def _shift_along_ray(T: np.ndarray, dz: float) -> np.ndarray:
     return shifted
 
 
+class ICPModel:
+    """The model side of the refinement for one object, built once and reused for every pose and image: its
+    surface points, diameter, KD-tree and open3d point cloud (normals estimated at the first point-to-plane
+    refinement).
+
+    Args:
+        model_points: ``(N, 3)`` points on the object's surface, metres, model frame (uniform samples).
+        diameter: the object's diameter, metres (the unit of the settings' lengths).
+    """
+
+    def __init__(self, model_points, diameter: float):
+        self.points = as_points(model_points, "model_points", dimension=3, min_count=10)
+        if not np.isfinite(diameter) or diameter <= 0:
+            raise ValueError(f"diameter: expected a positive length in metres, got {diameter}")
+        self.diameter = float(diameter)
+
+    @cached_property
+    def tree(self):
+        """``scipy.spatial.cKDTree`` of :attr:`points`."""
+        from scipy.spatial import cKDTree  # here: scipy.spatial costs ~0.2 s to import
+
+        return cKDTree(self.points)
+
+    @cached_property
+    def _cloud(self):
+        import open3d as o3d
+
+        return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.points))
+
+    def cloud(self, normals: bool):
+        """The open3d point cloud of :attr:`points`, with normals (radius 0.1 diameter) when ``normals``."""
+        import open3d as o3d
+
+        if normals and not self._cloud.has_normals():
+            self._cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.1 * self.diameter, max_nn=30))
+        return self._cloud
+
+    def refine(self, T_model2cam, depth, K, box=None, mask=None, settings: ICPSettings | None = None) -> ICPResult:
+        """See :func:`refine_pose_icp`."""
+        import open3d as o3d
+        from scipy.spatial import cKDTree
+
+        settings = settings or ICPSettings()
+        T_input = as_pose_matrix(T_model2cam, "T_model2cam")
+        if T_input[2, 3] <= 0:
+            raise ValueError(f"T_model2cam: expected the object in front of the camera (t_z > 0), got t_z = "
+                             f"{T_input[2, 3]}")
+        depth = check_depth(depth)
+        K = as_camera_matrix(K)
+        model_points, diameter = self.points, self.diameter
+        region = region_of(depth.shape, box, mask)
+
+        def rejected(check: str, reason: str, **fields) -> ICPResult:
+            return ICPResult(T_input.copy(), False, check=check, reason=reason, **fields)
+
+        rows, columns = np.nonzero(region & (depth > 0))
+        if len(rows) < settings.min_points:
+            return rejected("depth_in_region", f"{len(rows)} depth pixels in the object's region (at least "
+                                               f"{settings.min_points} needed)")
+        tolerance = settings.agreement_tolerance * diameter
+        differences, in_region = _depth_differences(T_input, model_points, depth, K, region, tolerance)
+        limit = settings.max_ray_shift * T_input[2, 3]
+        differences = differences[in_region & (np.abs(differences) <= limit)]
+        if len(differences) < settings.min_points:
+            return rejected("depth_near_pose", f"{len(differences)} visible model points have depth within "
+                                               f"{limit:.3f} m of the pose (at least {settings.min_points} needed)")
+        ray_shift = _mode(differences, settings.mode_width * diameter)
+        T_start = _shift_along_ray(T_input, ray_shift)
+
+        scene = unproject(np.stack([columns, rows], axis=-1).astype(np.float64), depth[rows, columns], K)
+        distances, _ = cKDTree(apply(T_start, model_points)).query(scene,
+                                                                   distance_upper_bound=settings.gate * diameter)
+        scene = scene[np.isfinite(distances)]
+        if len(scene) < settings.min_points:
+            return rejected("points_near_model", f"{len(scene)} depth points within {settings.gate} diameters of "
+                                                 f"the model (at least {settings.min_points} needed)",
+                            ray_shift=ray_shift)
+        if len(scene) > settings.max_points:
+            scene = scene[np.linspace(0, len(scene) - 1, settings.max_points).round().astype(np.int64)]
+
+        source = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(scene))
+        point_to_plane = settings.method == "point_to_plane"
+        target = self.cloud(normals=point_to_plane)
+        estimation = (o3d.pipelines.registration.TransformationEstimationPointToPlane() if point_to_plane
+                      else o3d.pipelines.registration.TransformationEstimationPointToPoint())
+        criteria = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=settings.max_iterations)
+        T_cam2model = invert(T_start)
+        for scale in settings.scales:
+            T_cam2model = np.asarray(o3d.pipelines.registration.registration_icp(
+                source, target, scale * diameter, T_cam2model, estimation, criteria).transformation)
+        T_refined = invert(T_cam2model)
+        distances, _ = self.tree.query(apply(T_cam2model, scene),
+                                       distance_upper_bound=settings.fitness_distance * diameter)
+        inliers = distances[np.isfinite(distances)]
+        fitness = len(inliers) / len(scene)
+        rmse = float(np.sqrt(np.mean(inliers ** 2))) if len(inliers) else float("inf")
+        agreement, compared = agreement_of(T_refined, model_points, depth, K, tolerance)
+        fields = dict(fitness=fitness, rmse=rmse, agreement=agreement, ray_shift=ray_shift, points=len(scene))
+        if T_refined[2, 3] <= 0:
+            return rejected("in_front", "ICP moved the object behind the camera", **fields)
+        if fitness < settings.min_fitness:
+            return rejected("fitness", f"fitness {fitness:.2f} below {settings.min_fitness}", **fields)
+        if compared < settings.min_points:
+            return rejected("visible_points", f"{compared} visible model points have depth to compare (at least "
+                                              f"{settings.min_points} needed)", **fields)
+        if agreement < settings.min_agreement:
+            return rejected("agreement", f"agreement {agreement:.2f} below {settings.min_agreement} (the depth "
+                                         f"lies behind the refined model's surface)", **fields)
+        return ICPResult(T_refined, True, **fields)
+
+
 def refine_pose_icp(T_model2cam, depth, K, model_points, diameter: float, box=None, mask=None,
                     settings: ICPSettings | None = None) -> ICPResult:
-    """Refines a pose with a depth image (see the module docstring for the steps and checks).
+    """Refines a pose with a depth image (see the module docstring for the steps and checks); to refine
+    many poses of one object, build its :class:`ICPModel` once and call :meth:`ICPModel.refine`.
 
     Args:
         T_model2cam: ``(4, 4)`` starting pose, metres (OpenCV camera frame).
@@ -209,75 +322,4 @@ def refine_pose_icp(T_model2cam, depth, K, model_points, diameter: float, box=No
     Returns:
         :class:`ICPResult`; when rejected its ``T_model2cam`` is the input pose.
     """
-    import open3d as o3d
-    from scipy.spatial import cKDTree  # here: scipy.spatial costs ~0.2 s to import
-
-    settings = settings or ICPSettings()
-    T_input = as_pose_matrix(T_model2cam, "T_model2cam")
-    if T_input[2, 3] <= 0:
-        raise ValueError(f"T_model2cam: expected the object in front of the camera (t_z > 0), got t_z = "
-                         f"{T_input[2, 3]}")
-    depth = check_depth(depth)
-    K = as_camera_matrix(K)
-    model_points = as_points(model_points, "model_points", dimension=3, min_count=10)
-    if not np.isfinite(diameter) or diameter <= 0:
-        raise ValueError(f"diameter: expected a positive length in metres, got {diameter}")
-    region = region_of(depth.shape, box, mask)
-
-    def rejected(check: str, reason: str, **fields) -> ICPResult:
-        return ICPResult(T_input.copy(), False, check=check, reason=reason, **fields)
-
-    rows, columns = np.nonzero(region & (depth > 0))
-    if len(rows) < settings.min_points:
-        return rejected("depth_in_region", f"{len(rows)} depth pixels in the object's region (at least "
-                                           f"{settings.min_points} needed)")
-    tolerance = settings.agreement_tolerance * diameter
-    differences, in_region = _depth_differences(T_input, model_points, depth, K, region, tolerance)
-    limit = settings.max_ray_shift * T_input[2, 3]
-    differences = differences[in_region & (np.abs(differences) <= limit)]
-    if len(differences) < settings.min_points:
-        return rejected("depth_near_pose", f"{len(differences)} visible model points have depth within {limit:.3f} m "
-                                           f"of the pose (at least {settings.min_points} needed)")
-    ray_shift = _mode(differences, settings.mode_width * diameter)
-    T_start = _shift_along_ray(T_input, ray_shift)
-
-    scene = unproject(np.stack([columns, rows], axis=-1).astype(np.float64), depth[rows, columns], K)
-    distances, _ = cKDTree(apply(T_start, model_points)).query(scene, distance_upper_bound=settings.gate * diameter)
-    scene = scene[np.isfinite(distances)]
-    if len(scene) < settings.min_points:
-        return rejected("points_near_model", f"{len(scene)} depth points within {settings.gate} diameters of the "
-                                             f"model (at least {settings.min_points} needed)", ray_shift=ray_shift)
-    if len(scene) > settings.max_points:
-        scene = scene[np.linspace(0, len(scene) - 1, settings.max_points).round().astype(np.int64)]
-
-    source = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(scene))
-    target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(model_points))
-    if settings.method == "point_to_plane":
-        target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.1 * diameter, max_nn=30))
-        estimation = o3d.pipelines.registration.TransformationEstimationPointToPlane()
-    else:
-        estimation = o3d.pipelines.registration.TransformationEstimationPointToPoint()
-    criteria = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=settings.max_iterations)
-    T_cam2model = invert(T_start)
-    for scale in settings.scales:
-        T_cam2model = np.asarray(o3d.pipelines.registration.registration_icp(
-            source, target, scale * diameter, T_cam2model, estimation, criteria).transformation)
-    T_refined = invert(T_cam2model)
-    distances, _ = cKDTree(model_points).query(apply(T_cam2model, scene),
-                                               distance_upper_bound=settings.fitness_distance * diameter)
-    inliers = distances[np.isfinite(distances)]
-    fitness = len(inliers) / len(scene)
-    rmse = float(np.sqrt(np.mean(inliers ** 2))) if len(inliers) else float("inf")
-    agreement, compared = agreement_of(T_refined, model_points, depth, K, tolerance)
-    fields = dict(fitness=fitness, rmse=rmse, agreement=agreement, ray_shift=ray_shift, points=len(scene))
-    if T_refined[2, 3] <= 0:
-        return rejected("in_front", "ICP moved the object behind the camera", **fields)
-    if fitness < settings.min_fitness:
-        return rejected("fitness", f"fitness {fitness:.2f} below {settings.min_fitness}", **fields)
-    if compared < settings.min_points:
-        return rejected("visible_points", f"{compared} visible model points have depth to compare (at least "
-                                          f"{settings.min_points} needed)", **fields)
-    if agreement < settings.min_agreement:
-        return rejected("agreement", f"agreement {agreement:.2f} below {settings.min_agreement} (the depth lies "
-                                     f"behind the refined model's surface)", **fields)
-    return ICPResult(T_refined, True, **fields)
+    return ICPModel(model_points, diameter).refine(T_model2cam, depth, K, box, mask, settings)

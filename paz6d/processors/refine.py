@@ -1,5 +1,5 @@
 """The depth-refinement step of the pose pipelines: :class:`RefineWithDepth` over
-:func:`paz6d.backend.icp.refine_pose_icp` (ICP with open3d against a depth image in metres).
+:class:`paz6d.backend.icp.ICPModel` (ICP with open3d against a depth image in metres).
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ from paz6d.abstract.messages import Box2D, Pose6D
 from paz6d.abstract.processor import Processor
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.checks import as_points, check_depth
-from paz6d.backend.icp import ICPResult, ICPSettings, refine_pose_icp
+from paz6d.backend.icp import ICPModel, ICPResult, ICPSettings
 
 
 class RefineWithDepth(Processor):
     """``(candidates, depth (H, W) or None, box, camera) -> Pose6D``: without depth the first candidate as
-    it is; with depth each candidate refined by :func:`~paz6d.backend.icp.refine_pose_icp` and the accepted
+    it is; with depth each candidate refined by :meth:`~paz6d.backend.icp.ICPModel.refine` and the accepted
     refinement with the highest agreement (then the lowest RMSE) returned, else the first candidate.
 
     ``candidates`` is a :class:`Pose6D` or a sequence of them (best first); the result keeps the chosen
@@ -40,6 +40,7 @@ class RefineWithDepth(Processor):
             raise ValueError(f"diameter: expected a positive length in metres, got {diameter}")
         self._model_points = model_points if callable(model_points) else as_points(model_points, "model_points")
         self._diameter, self.settings = None if diameter is None else float(diameter), settings or ICPSettings()
+        self._icp_model: ICPModel | None = None
         self.statistics = {"refinements": 0, "accepted": 0, "rejected": Counter(), "seconds": 0.0}
 
     @property
@@ -58,12 +59,19 @@ class RefineWithDepth(Processor):
             self._diameter = diameter(self.model_points)
         return self._diameter
 
+    @property
+    def icp_model(self) -> ICPModel:
+        """The object's :class:`~paz6d.backend.icp.ICPModel` (KD-tree, point cloud), built at the first
+        refinement and reused for every candidate and image."""
+        if self._icp_model is None:
+            self._icp_model = ICPModel(self.model_points, self.diameter)
+        return self._icp_model
+
     def refine(self, pose: Pose6D, depth: np.ndarray, box, camera: Camera) -> ICPResult:
         """One candidate's :class:`~paz6d.backend.icp.ICPResult` (counted in :attr:`statistics`)."""
         box = box.to_array() if isinstance(box, Box2D) else box
         started = time.process_time()
-        result = refine_pose_icp(pose.to_matrix(), depth, camera.K, self.model_points, self.diameter, box=box,
-                                 settings=self.settings)
+        result = self.icp_model.refine(pose.to_matrix(), depth, camera.K, box=box, settings=self.settings)
         self.statistics["seconds"] += time.process_time() - started
         self.statistics["refinements"] += 1
         if result.accepted:
