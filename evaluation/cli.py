@@ -5,30 +5,26 @@ Examples:
     paz6d evaluate voc --annotations Annotations/ --detections results/ --iou 0.5 --method 11point \
         --out voc.json --plots plots/
 
-The JSON is written atomically (temporary file, then ``os.replace``). The scoring modules are numpy
-only; matplotlib loads when plots are drawn, so building the parser stays cheap.
+The JSON is written atomically (temporary file, then ``os.replace``). Each subcommand imports its
+own scoring module when it runs, and matplotlib loads only when plots are drawn, so building the
+parser stays cheap.
+
+Scoring multiplies small (3x3, 4x4) matrices: OpenBLAS's thread pool, started when numpy loads,
+would only cost CPU time (0.1-0.25 s per process on 2 cores), so this module asks for one BLAS
+thread before numpy is imported. A value already set in the environment is kept.
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import importlib.util
-from pathlib import Path
+import os
 
-from evaluation import coco, detection_plots, voc
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from paz6d.backend.files import finite_or_none, write_json_atomically
-from paz6d.backend.paths import check_output_file, check_output_folder, check_outputs_apart
+import argparse  # noqa: E402
+from pathlib import Path  # noqa: E402
 
-_BOP_MODULE = "evaluation.bop_cli"
-
-
-def _bop_module():
-    """``evaluation.bop_cli`` when it exists (the BOP/pose part is written separately)."""
-    if importlib.util.find_spec(_BOP_MODULE) is None:
-        return None
-    return importlib.import_module(_BOP_MODULE)
+from paz6d.backend.files import finite_or_none, write_json_atomically  # noqa: E402
+from paz6d.backend.paths import check_output_file, check_output_folder, check_outputs_apart  # noqa: E402
 
 
 def _iou_threshold(text: str) -> float:
@@ -39,7 +35,7 @@ def _iou_threshold(text: str) -> float:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    """Adds the ``coco``, ``voc`` (and ``bop`` when available) subcommands to ``parser``."""
+    """Adds the ``coco``, ``voc`` and ``bop`` subcommands to ``parser``."""
     subparsers = parser.add_subparsers(dest="evaluate_command", required=True)
 
     coco = subparsers.add_parser("coco", help="COCO mAP (bbox or segm), same numbers as pycocotools",
@@ -70,13 +66,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
     voc.add_argument("--out", required=True, type=Path, help="output JSON (per-class AP + mAP)")
     voc.add_argument("--plots", type=Path, help="directory for PNG precision-recall plots")
 
-    bop_cli = _bop_module()
-    if bop_cli is not None:
-        bop = subparsers.add_parser("bop", help="BOP 6D pose evaluation")
-        bop_cli.configure(bop)
+    from evaluation import bop_cli
+
+    bop_cli.configure(subparsers.add_parser("bop", help="BOP 6D pose evaluation"))
 
 
 def _run_coco(args: argparse.Namespace) -> int:
+    from evaluation import coco, detection_plots
+
     evaluation = coco.evaluate_files(args.gt, args.results, args.iou_type)
     per_class = evaluation.per_category_ap()
     print(f"COCO {args.iou_type} evaluation of {args.results} against {args.gt}")
@@ -96,6 +93,8 @@ def _run_coco(args: argparse.Namespace) -> int:
 
 
 def _run_voc(args: argparse.Namespace) -> int:
+    from evaluation import detection_plots, voc
+
     names = voc.read_class_names(args.class_names) if args.class_names is not None else None
     evaluation = voc.evaluate_directories(args.annotations, args.detections, args.iou, args.method, args.box_format,
                                           args.plus_one, names, args.layout)
@@ -139,5 +138,7 @@ def run(args: argparse.Namespace) -> int:
     if args.evaluate_command == "voc":
         return _run_voc(args)
     if args.evaluate_command == "bop":
-        return _bop_module().run(args)
+        from evaluation import bop_cli
+
+        return bop_cli.run(args)
     raise ValueError(f"evaluate: unknown subcommand {args.evaluate_command!r}")

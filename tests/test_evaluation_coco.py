@@ -7,6 +7,7 @@ import copy
 import gc
 import io
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -319,24 +320,33 @@ def test_cli_reports_malformed_results_file(tmp_path):
     assert not (tmp_path / "out.json").exists()
 
 
-def test_cli_registers_and_dispatches_bop_when_its_module_exists(monkeypatch):
+def test_cli_dispatches_bop_to_bop_cli(monkeypatch):
     import argparse
-    import types
 
-    from evaluation import cli
+    from evaluation import bop_cli, cli
 
     calls = []
-    fake = types.SimpleNamespace(configure=lambda parser: parser.add_argument("--results-csv", required=True),
-                                 run=lambda args: calls.append(args.results_csv) or 7)
-    monkeypatch.setattr(cli, "_bop_module", lambda: fake)
+    monkeypatch.setattr(bop_cli, "run", lambda args: calls.append(args.results) or 7)
     parser = argparse.ArgumentParser()
     cli.configure(parser)
-    assert cli.run(parser.parse_args(["bop", "--results-csv", "r.csv"])) == 7 and calls == ["r.csv"]
-    monkeypatch.setattr(cli, "_bop_module", lambda: None)
-    parser = argparse.ArgumentParser()
-    cli.configure(parser)
-    with pytest.raises(SystemExit):  # no bop subcommand without evaluation.bop_cli
-        parser.parse_args(["bop", "--results-csv", "r.csv"])
+    args = parser.parse_args(["bop", "--dataset", "d", "--results", "r.csv", "--out", "o.json"])
+    assert cli.run(args) == 7 and calls == [Path("r.csv")]
+
+
+@pytest.mark.parametrize("preset, expected", [(None, "1"), ("3", "3")])
+def test_cli_asks_for_one_blas_thread_unless_the_user_chose(preset, expected):
+    import os
+    import subprocess
+    import sys
+
+    env = {key: value for key, value in os.environ.items() if key != "OPENBLAS_NUM_THREADS"}
+    if preset is not None:
+        env["OPENBLAS_NUM_THREADS"] = preset
+    code = ("import sys, os; import evaluation.cli; "
+            "print(os.environ['OPENBLAS_NUM_THREADS'], 'cv2' in sys.modules, 'evaluation.coco' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[1]).stdout.split()
+    assert out == [expected, "False", "False"]  # and neither OpenCV nor the COCO scorer loads with the parser
 
 
 def test_recall_thresholds_reached_equals_searchsorted():
