@@ -986,6 +986,12 @@ def train_cases() -> list[Case]:
         found.append(Case(f"train-emotion-data-{name}", replace_flag(TRAIN_EMOTION, "--data", "{case}/fer.csv"),
                           case_file("fer.csv", content), (expect,)))
     found += dataset_format_cases()
+    found += _flag_cases("train-ssd-", TRAIN_SSD, {  # refused before the data set is read
+        "--input-size": [(("100",), ""), (("0",), ""), (("-64",), "")],
+        "--steps": [(("0",), "")],
+    })
+    found.append(Case("train-ssd-input-size-full-config", (*TRAIN_SSD, "--config", "full", "--input-size", "512"),
+                      None, ("light network",)))
     found += _flag_cases("demo-", DEMO, {
         "--out": [(("{world}/results.csv",), "results.csv"), (("/dev/null",), "/dev/null")],
         "--test-images": [(("0",), ""), (("-2",), "")],

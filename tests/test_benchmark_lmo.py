@@ -13,7 +13,7 @@ from paz6d.benchmark import lmo
 from paz6d.benchmark.lmo import Benchmark, BenchmarkSettings, run_benchmark, score_table, stages
 
 TINY = BenchmarkSettings(images=6, backgrounds=3, detector_steps=4, aae_steps=4, aae_in_plane=4,
-                         keypointnet_steps=4, keypointnet_views=8, workers=1, aae_views=12)
+                         keypointnet_steps=4, keypointnet_views=8, workers=1, aae_views=12, detector_input_size=128)
 
 
 def _fake_lmo(root: Path, objects=(1, 5)) -> Path:

@@ -132,11 +132,25 @@ def test_resuming_continues_and_other_settings_are_refused(trained, generated):
     with pytest.raises(ValueError, match="holds a different run"):
         train_ssd(SSDTraining(dataset=generated, out=trained, steps=60, batch_size=4, seed=9, progress=False,
                               overrides=TINY))
+    with pytest.raises(ValueError, match="holds a different run"):  # --input-size is part of the run
+        train_ssd(SSDTraining(dataset=generated, out=trained, steps=60, batch_size=4, input_size=192,
+                              progress=False, overrides=TINY))
     summary = train_ssd(SSDTraining(dataset=generated, out=trained, steps=70, batch_size=4, progress=False,
                                     overrides=TINY))
     assert summary["steps"] == 70
     with (trained / "log.csv").open() as handle:
         assert [int(row["step"]) for row in csv.DictReader(handle)] == list(range(10, 71, 10))
+
+
+def test_input_size_flag_sets_the_light_network_input_and_is_checked():
+    assert SSDTraining(dataset="d", out="o").settings()["input_size"] == 512  # the quick config
+    assert SSDTraining(dataset="d", out="o", input_size=320).settings()["input_size"] == 320
+    assert SSDTraining(dataset="d", out="o", input_size=192, overrides=TINY).settings()["input_size"] == 192
+    for size, message in ((100, "multiple of 64"), (64, "at least 128"), (0, "positive")):
+        with pytest.raises(ValueError, match=message):
+            SSDTraining(dataset="d", out="o", input_size=size)
+    with pytest.raises(ValueError, match="only the light network"):
+        SSDTraining(dataset="d", out="o", config="full", input_size=512)
 
 
 def test_bop_to_coco_boxes_equal_bbox_visib_on_lmo(shared_data):
