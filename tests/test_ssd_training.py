@@ -143,7 +143,7 @@ def test_resuming_continues_and_other_settings_are_refused(trained, generated):
 
 
 def test_input_size_flag_sets_the_light_network_input_and_is_checked():
-    assert SSDTraining(dataset="d", out="o").settings()["input_size"] == 512  # the quick config
+    assert SSDTraining(dataset="d", out="o").settings()["input_size"] == 448  # the quick config
     assert SSDTraining(dataset="d", out="o", input_size=320).settings()["input_size"] == 320
     assert SSDTraining(dataset="d", out="o", input_size=192, overrides=TINY).settings()["input_size"] == 192
     for size, message in ((100, "multiple of 64"), (64, "at least 128"), (0, "positive")):

@@ -77,8 +77,8 @@ class BenchmarkSettings:
     aae_views: int = 1000
 
 
-# The quick benchmark keeps the detector at 320 px to stay within 45 minutes; 512 px (the SSD quick config's
-# own input since the eighth session) detects the real frames better at 2.5x the training time (docs/ssd.md).
+# The quick benchmark keeps the detector at 320 px to stay within 45 minutes; 448 px (the SSD quick config's
+# input since the eighth session) and 512 px detect the real frames better at 1.8-2x the training time.
 QUICK = BenchmarkSettings(images=1500, backgrounds=200, detector_steps=1500, aae_steps=1000, aae_in_plane=36,
                           keypointnet_steps=1000, keypointnet_views=2000, detector_input_size=320)
 FULL = BenchmarkSettings(images=2500, backgrounds=300, detector_steps=3000, aae_steps=5000, aae_in_plane=72,
