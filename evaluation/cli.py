@@ -5,9 +5,9 @@ Examples:
     paz6d evaluate voc --annotations Annotations/ --detections results/ --iou 0.5 --method 11point \
         --out voc.json --plots plots/
 
-The JSON is written atomically (temporary file, then ``os.replace``). Each subcommand imports its
-own scoring module when it runs, and matplotlib loads only when plots are drawn, so building the
-parser stays cheap.
+The JSON is written atomically (temporary file, then ``os.replace``). The COCO and VOC scorers are
+imported when their subcommand runs (the BOP one imports its heavy parts inside ``run``), and
+matplotlib loads only when plots are drawn, so building the parser stays cheap.
 
 Scoring multiplies small (3x3, 4x4) matrices: OpenBLAS's thread pool, started when numpy loads,
 would only cost CPU time (0.1-0.25 s per process on 2 cores), so this module asks for one BLAS
@@ -23,6 +23,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from evaluation import bop_cli  # noqa: E402
 from paz6d.backend.files import finite_or_none, write_json_atomically  # noqa: E402
 from paz6d.backend.paths import check_output_file, check_output_folder, check_outputs_apart  # noqa: E402
 
@@ -65,8 +66,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
                      help="detection file layout (auto-detected from file names by default)")
     voc.add_argument("--out", required=True, type=Path, help="output JSON (per-class AP + mAP)")
     voc.add_argument("--plots", type=Path, help="directory for PNG precision-recall plots")
-
-    from evaluation import bop_cli
 
     bop_cli.configure(subparsers.add_parser("bop", help="BOP 6D pose evaluation"))
 
@@ -138,7 +137,5 @@ def run(args: argparse.Namespace) -> int:
     if args.evaluate_command == "voc":
         return _run_voc(args)
     if args.evaluate_command == "bop":
-        from evaluation import bop_cli
-
         return bop_cli.run(args)
     raise ValueError(f"evaluate: unknown subcommand {args.evaluate_command!r}")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from paz6d.backend.checks import as_array, as_camera_matrix, as_points
@@ -34,8 +35,6 @@ def project_points(points_cam, K, distortion=None) -> np.ndarray:
     K = as_camera_matrix(K)
     distortion = _as_distortion(distortion)
     if distortion is not None:
-        import cv2  # only with distortion: evaluation and other numpy-only callers skip OpenCV's import
-
         flat = points.reshape(-1, 3)
         pixels, _ = cv2.projectPoints(flat, np.zeros(3), np.zeros(3), K, distortion)
         return pixels.reshape(points.shape[:-1] + (2,))
@@ -112,8 +111,6 @@ class Camera:
         pixels = as_points(pixels, "pixels", dimension=2)
         if self.distortion is None:
             return pixels
-        import cv2
-
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)
         undistorted = cv2.undistortPointsIter(pixels.reshape(-1, 1, 2), self.K, self.distortion, None, self.K,
                                               criteria)
@@ -123,8 +120,6 @@ class Camera:
         """Undistorts an image with this camera's distortion (identity when there is none)."""
         if self.distortion is None:
             return image
-        import cv2
-
         return cv2.undistort(image, self.K, self.distortion)
 
     def scaled(self, factor: float) -> "Camera":

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from paz6d.datasets.bop.fields import entries_by_id, integer_field, number_field, required_field
@@ -117,8 +118,6 @@ def read_depth(path: str | Path, depth_scale: float, units: Units = "m") -> np.n
         depth_scale: millimetres per stored unit (``scene_camera.json``).
         units: ``"m"`` or ``"mm"``.
     """
-    import cv2  # here, not at the top: evaluation reads scene files without images
-
     raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if raw is None or raw.ndim != 2:
         raise ValueError(f"{path}: could not decode a single-channel depth image")
@@ -129,8 +128,6 @@ def read_mask(path: Path) -> np.ndarray | None:
     """A BOP mask PNG as ``(H, W)`` bool (pixels > 127), ``None`` when the file is absent."""
     if not path.is_file():
         return None
-    import cv2
-
     mask = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if mask is None:
         raise ValueError(f"{path}: could not decode mask image")
