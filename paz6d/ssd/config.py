@@ -20,6 +20,16 @@ CONFIGS: dict[str, dict] = {
              "learning_rate": 1e-3, "warmup_steps": 1000, "weight_decay": 5e-4, "expand_ratio": 4.0,
              "expand_probability": 0.5, "iou_threshold": 0.5, "checkpoint_every": 5000, "sample_every": 5000},
 }
+
+
+def check_light_input_size(size: int, error: type[ValueError] = ValueError) -> int:
+    """``size`` when the light network can take it as its input side (a multiple of 64 pixels, at least
+    128: its coarsest feature map is 1/64 of the input), else raises ``error``."""
+    if size < 128 or size % 64:
+        raise error(f"input_size: expected a multiple of 64 of at least 128 for 'light', got {size}")
+    return size
+
+
 #: Data set formats ``paz6d train ssd --format`` reads (``paz6d.ssd.dataset.FORMATS``, kept here light).
 DATASET_FORMATS = ("auto", "generated", "voc", "coco", "openimages")
 #: Keys of a run's settings that must not change when it is resumed.
@@ -62,6 +72,5 @@ class SSDTraining:
                 raise ValueError(f"input_size: only the light network takes another input size; the "
                                  f"{self.config!r} config's {settings['architecture']} is fixed at "
                                  f"{CONFIGS[self.config]['input_size']} px")
-            if settings["input_size"] < 128 or settings["input_size"] % 64:
-                raise ValueError(f"input_size: expected a multiple of 64 of at least 128, got {settings['input_size']}")
+            check_light_input_size(settings["input_size"])
         return settings

@@ -29,6 +29,7 @@ from paz6d.backend.boxes import prior_boxes
 from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.image import normalize
 from paz6d.backend.tensorflow_guard import compiled_inference, import_keras, import_tensorflow, load_keras_model
+from paz6d.ssd.config import check_light_input_size
 
 tf = import_tensorflow()
 keras = import_keras()
@@ -95,9 +96,7 @@ def paper_priors(architecture: str, input_size: int | None = None) -> PriorSpec:
                          (76.8, 153.6, 230.4, 307.2, 384.0, 460.8, 537.6),
                          ((2,), (2, 3), (2, 3), (2, 3), (2, 3), (2,), (2,)))
     if architecture == "light":
-        size = 320 if input_size is None else int(input_size)
-        if size < 128 or size % 64:
-            raise SSDModelError(f"input_size: expected a multiple of 64 of at least 128 for 'light', got {size}")
+        size = check_light_input_size(320 if input_size is None else int(input_size), SSDModelError)
         maps = (size // 8, size // 16, size // 32, size // 64, (size // 64 + 1) // 2, 1)
         fractions = np.array([0.044, 0.094, 0.19, 0.34, 0.53, 0.75, 1.0])
         sides = tuple(float(v) for v in np.round(fractions * size, 1))
