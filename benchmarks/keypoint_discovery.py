@@ -2,8 +2,11 @@
 check the PnP/lifting stage alone, report CPU time.
 
     .venv/bin/python benchmarks/keypoint_discovery.py OUT [--config discovery] [--steps N]
-        [--object demo|cylinder] [--override key=json ...] [--views-cache DIR]
+        [--object demo|cylinder|symmetric] [--override key=json ...] [--views-cache DIR]
 
+``--object symmetric`` is the half-turn symmetric demo object
+(:func:`paz6d.assets.demo_object.make_symmetric_demo_mesh`), trained with the orientation network and
+scored with ADD-S.
 ``--views-cache`` keeps the rendered training/validation/lifting views between runs of the same
 object, view count and seed (proxy runs then only train and score). Writes ``OUT/proxy.json``:
 the demo's report (ADD(-S) recall, rotation errors, keypoint consistency) plus
@@ -74,7 +77,7 @@ def main() -> None:
     parser.add_argument("--mode", default="discovery")
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--object", choices=("demo", "cylinder"), default="demo")
+    parser.add_argument("--object", choices=("demo", "cylinder", "symmetric"), default="demo")
     parser.add_argument("--override", action="append", default=[], help="setting=JSON value (repeatable)")
     parser.add_argument("--views-cache", type=Path, default=None)
     args = parser.parse_args()
@@ -82,7 +85,7 @@ def main() -> None:
     from paz6d.backend.tensorflow_guard import import_tensorflow
 
     import_tensorflow()
-    from paz6d.assets.demo_object import write_demo_object
+    from paz6d.assets.demo_object import write_demo_object, write_symmetric_demo_object
     from paz6d.backend.mesh import diameter, load_mesh
     from paz6d.demo.keypoint_demo import TEST_SEED_OFFSET, run_keypoint_demo
     from paz6d.keypointnet.config import KeypointTraining
@@ -92,14 +95,18 @@ def main() -> None:
     for item in args.override:
         key, _, value = item.partition("=")
         overrides[key] = json.loads(value)
-    symmetric = args.object == "cylinder"
-    if symmetric:
+    symmetric = args.object in ("cylinder", "symmetric")
+    orientation = args.object == "symmetric"
+    if args.object == "cylinder":
         mesh_path, scale = cylinder_object(args.out / "mesh"), 1.0
+    elif orientation:
+        mesh_path, scale = write_symmetric_demo_object(args.out / "mesh"), 1e-3
     else:
         mesh_path, scale = write_demo_object(args.out / "mesh"), 1e-3
     run_dir = args.out / f"keypointnet_{args.mode}"
     settings = KeypointTraining(run_dir, mesh_path, mesh_scale=scale, config=args.config, mode=args.mode,
-                                seed=args.seed, steps=args.steps, overrides=overrides).settings()
+                                seed=args.seed, steps=args.steps, overrides=overrides,
+                                orientation_network=orientation).settings()
     cache_names = {"train": f"{args.object}_train_{settings['views']}_{args.seed}.npz",
                    "val": f"{args.object}_val_{settings['validation_views']}_{args.seed}.npz",
                    "lift": f"{args.object}_lift_{settings['lift_views']}_{args.seed}.npz"}
@@ -110,7 +117,8 @@ def main() -> None:
                 shutil.copy(args.views_cache / name, run_dir / f"views_{kind}.npz")
     started, cpu_started = time.perf_counter(), cpu_seconds()
     report = run_keypoint_demo(args.out, mesh_path, scale, modes=(args.mode,), config=args.config, seed=args.seed,
-                               steps=args.steps, symmetric=symmetric, overrides=overrides, progress=False)
+                               steps=args.steps, symmetric=symmetric, overrides=overrides, progress=False,
+                               orientation_network=orientation)
     report["cpu_seconds"] = round(cpu_seconds() - cpu_started, 1)
     report["wall_seconds"] = round(time.perf_counter() - started, 1)
     if args.views_cache is not None:
@@ -139,7 +147,8 @@ def main() -> None:
     mode = report["modes"][args.mode]
     print(json.dumps({"pnp": {key: mode["pnp"].get(key) for key in ("recall_0.1d", "rotation_error_deg")},
                       "training": {key: mode["training"].get(key) for key in
-                                   ("reprojection_px_median", "cross_view_px_median", "usable_keypoints")},
+                                   ("reprojection_px_median", "cross_view_px_median", "usable_keypoints",
+                                    "chart_accuracy")},
                       "oracle": report["oracle"], "spread_m": report["keypoint_spread_m"],
                       "cpu_s": report["cpu_seconds"], "wall_s": report["wall_seconds"]}, indent=1))
 

@@ -121,7 +121,8 @@ def _recall_png(path: Path, curves: dict[str, np.ndarray], object_diameter: floa
 def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
                       modes: tuple[str, ...] = ("supervised",), config: str = "quick",
                       test_images: int = 200, seed: int = 0, workers: int = 2, steps: int | None = None,
-                      symmetric: bool = False, progress: bool = True, overrides: dict | None = None) -> dict:
+                      symmetric: bool = False, progress: bool = True, overrides: dict | None = None,
+                      orientation_network: bool = False) -> dict:
     """Trains each mode in ``modes`` and evaluates it on ``test_images`` held-out synthetic images.
 
     Args:
@@ -130,6 +131,8 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
         steps: override the config's training steps.
         symmetric: the object is symmetric (score with ADD-S).
         overrides: replace settings of the config (e.g. a smaller network for tests).
+        orientation_network: train with the orientation network (a BOP mesh with a half-turn symmetry in
+            its ``models_info.json``; implies ``symmetric``).
     Returns:
         The report (also written to ``out_dir/keypoint_report.json``).
     """
@@ -139,6 +142,7 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
     from paz6d.backend.mesh import diameter, load_mesh
     from paz6d.keypointnet.views import ViewSampling, render_test_images
 
+    symmetric = symmetric or orientation_network
     started = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -154,7 +158,8 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
         runs[mode] = run_dir
         report["modes"][mode] = {"training": train_keypointnet(
             KeypointTraining(run_dir, Path(mesh_path), mesh_scale=mesh_scale, config=config, mode=mode, seed=seed,
-                             workers=workers, steps=steps, progress=progress, overrides=dict(overrides or {})))}
+                             workers=workers, steps=steps, progress=progress, overrides=dict(overrides or {}),
+                             orientation_network=orientation_network))}
     render_started = time.perf_counter()
     test = render_test_images(mesh_path, test_images, seed + TEST_SEED_OFFSET, sampling, mesh_scale, workers,
                               progress=progress)

@@ -51,6 +51,10 @@ SEPARATION_DELTA = 0.25  # object diameters
 SEPARATION_DELTA_IMAGE = 0.25  # [-1, 1] image units: 1/8 of the crop side
 #: Supervised loss weights (heatmap cross-entropy, coordinates in [-1, 1] units, depth code).
 SUPERVISED_WEIGHTS = {"heatmap": 1.0, "coordinates": 2.0, "depth": 1.0}
+#: With ``--orientation-network``: weight of the chart cross-entropy, and how often a training view is
+#: fed another safe chart than its own (see :mod:`paz6d.keypointnet.orientation`).
+ORIENTATION_WEIGHT = 1.0
+OTHER_CHART_PROBABILITY = 0.25
 
 
 @dataclass
@@ -80,6 +84,9 @@ class KeypointTraining:
     config: str = option("quick", "model and schedule size", choices=tuple(sorted(CONFIGS)))
     mode: str = option("supervised", "discovery (the paper's, unsupervised) or supervised (farthest-point "
                                      "keypoints)", choices=MODES)
+    orientation_network: bool = option(False, "the object has a half-turn symmetry (symmetries_discrete in the "
+                                              "models_info.json beside a BOP mesh): train the orientation network "
+                                              "that picks one of its two equivalent poses (score with ADD-S)")
     seed: int = option(0, "seed of every random choice")
     workers: int = option(2, "rendering worker processes (0: render in this process)")
     steps: int | None = option(None, "training steps (default: the config's)")
@@ -92,6 +99,17 @@ class KeypointTraining:
         self.mesh_scale = checked_mesh_scale(self.mesh, self.dataset, scale, self.seed, self.workers, self.object_id,
                                              None)
         self.settings()  # checks config, mode and steps
+        if self.orientation_network and self.mesh is not None:
+            self.symmetry()  # checks the mesh's models_info.json before anything is rendered
+
+    def symmetry(self):
+        """With ``orientation_network``: the mesh's half-turn symmetry as an
+        :class:`~paz6d.keypointnet.orientation.ChartSymmetry` (``None`` without)."""
+        if not self.orientation_network:
+            return None
+        from paz6d.keypointnet.orientation import ChartSymmetry, mesh_symmetry
+
+        return ChartSymmetry(mesh_symmetry(self.mesh, self.mesh_scale))
 
     def settings(self) -> dict:
         """The config's settings with ``overrides`` and ``steps`` applied."""

@@ -39,6 +39,7 @@ keras = import_keras()
 
 PACKAGE = "paz6d"
 OUTPUT_NAMES = ("uv", "depth", "probabilities")
+ORIENTATION_OUTPUTS = ("chart_logits", "chart")
 COMPUTE_DTYPES = ("float32", "bfloat16")
 
 
@@ -101,10 +102,38 @@ class SpatialExpectation(keras.layers.Layer):
         return {**super().get_config(), "stride": self.stride}
 
 
+@keras.saving.register_keras_serializable(package=PACKAGE)
+class ChartCondition(keras.layers.Layer):
+    """Conditions features on an orientation chart (:mod:`paz6d.keypointnet.orientation`).
+
+    Inputs ``[features (B, h, w, C), chart_logits (B, 3)]`` or, to force the chart in training,
+    ``[features, chart_logits, chart (B, 3) one-hot]``. The chart used is the forced one, else the
+    predicted ``argmax`` (no gradient flows through the choice); a learned vector per chart is added to
+    every feature cell. Outputs ``(conditioned features, chart one-hot (B, 3) float32)``.
+    """
+
+    def build(self, input_shape):
+        self.embedding = self.add_weight(shape=(int(input_shape[1][-1]), int(input_shape[0][-1])),
+                                         initializer="zeros", name="embedding")
+
+    def call(self, inputs):
+        features, logits = inputs[0], inputs[1]
+        if len(inputs) == 3:
+            chart = tf.cast(inputs[2], tf.float32)
+        else:
+            chart = tf.one_hot(tf.argmax(logits, axis=-1), tf.shape(logits)[-1], dtype=tf.float32)
+        chart = tf.stop_gradient(chart)
+        offset = tf.matmul(chart, tf.cast(self.embedding, tf.float32))
+        return features + tf.cast(offset, features.dtype)[:, None, None, :], chart
+
+    def compute_output_shape(self, input_shape):
+        return input_shape[0], input_shape[1]
+
+
 def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: int = 32,
                       downsample: int = 4, dilations: tuple[int, ...] = (1, 2, 4, 8, 1, 2, 4),
                       depth_prior: float = 1.3, context_stride: int | None = None, compute_dtype: str = "float32",
-                      name: str = "keypointnet"):
+                      orientation: bool = False, name: str = "keypointnet"):
     """Builds the KeypointNet Keras model.
 
     Args:
@@ -123,8 +152,15 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
             with float32 weights (Keras ``mixed_bfloat16``; faster on CPUs with native bf16 such as
             AVX512-BF16/AMX, see :func:`native_bfloat16`); the 1×1 heads and the spatial softmax and
             expectation always run in float32, so keypoints keep sub-pixel resolution.
+        orientation: add the orientation network for a 2-fold symmetric object
+            (:mod:`paz6d.keypointnet.orientation`): three strided convolutions on the stem's features,
+            pooled, predict ``chart_logits (B, 3)``; the chosen ``chart (B, 3)`` conditions the dilated
+            stack (:class:`ChartCondition`).
     Returns:
         ``keras.Model`` with outputs ``{"uv": (B, N, 2), "depth": (B, N), "probabilities": (B, h, w, N)}``.
+        With ``orientation``: ``(model, forcing)``, ``model`` adding outputs ``"chart_logits"`` and
+        ``"chart"``, and ``forcing`` the same network (shared layers) with inputs ``[image, chart]``
+        whose ``chart (B, 3)`` one-hot replaces the predicted chart (for training).
     """
     context_stride = downsample if context_stride is None else int(context_stride)
     if num_keypoints < 1:
@@ -143,34 +179,69 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
         raise ValueError(f"compute_dtype: expected one of {COMPUTE_DTYPES}, got {compute_dtype!r}")
     body = "mixed_bfloat16" if compute_dtype == "bfloat16" else "float32"
     layers = keras.layers
+    made = {}
+
+    def layer(name, make):
+        """The layer called ``name``, made once (a second forward pass shares it)."""
+        if name not in made:
+            made[name] = make()
+        return made[name]
 
     def conv_bn_relu(x, name, stride=1, rate=1):
-        x = layers.Conv2D(filters, 3, strides=stride, dilation_rate=rate, padding="same", use_bias=False,
-                          name=f"{name}_conv", dtype=body)(x)
-        x = layers.BatchNormalization(name=f"{name}_bn", dtype=body)(x)
-        return layers.ReLU(name=f"{name}_relu", dtype=body)(x)
+        x = layer(f"{name}_conv", lambda: layers.Conv2D(filters, 3, strides=stride, dilation_rate=rate, padding="same",
+                                                        use_bias=False, name=f"{name}_conv", dtype=body))(x)
+        x = layer(f"{name}_bn", lambda: layers.BatchNormalization(name=f"{name}_bn", dtype=body))(x)
+        return layer(f"{name}_relu", lambda: layers.ReLU(name=f"{name}_relu", dtype=body))(x)
 
-    inputs = keras.Input((input_size, input_size, 3), name="image")
-    x = layers.Rescaling(1.0 / 127.5, offset=-1.0, name="scale", dtype=body)(inputs)
-    stride = min(context_stride, 2)
-    x = conv_bn_relu(x, "stem", stride)
-    skips = {stride: x}
-    for level in range(int(math.log2(context_stride // stride))):
-        x = conv_bn_relu(x, f"down{level}", 2)
-        stride *= 2
-        skips[stride] = x
-    for index, rate in enumerate(dilations):
-        x = layers.Add(name=f"dilated{index}_add", dtype=body)([x, conv_bn_relu(x, f"dilated{index}", rate=int(rate))])
-    while stride > downsample:
-        stride //= 2
-        x = layers.UpSampling2D(2, interpolation="bilinear", name=f"up{stride}", dtype=body)(x)
-        x = conv_bn_relu(layers.Add(name=f"up{stride}_skip", dtype=body)([x, skips[stride]]), f"up{stride}")
-    logits = layers.Conv2D(num_keypoints, 1, name="logits", dtype="float32")(x)
-    depth_maps = layers.Conv2D(num_keypoints, 1, name="depth_maps", kernel_initializer="zeros",
-                               bias_initializer=keras.initializers.Constant(depth_prior), dtype="float32")(x)
-    uv, depth, probabilities = SpatialExpectation(downsample, name="expectation", dtype="float32")([logits, depth_maps])
-    outputs = {"uv": uv, "depth": depth, "probabilities": probabilities}
-    return keras.Model(inputs, outputs, name=name)
+    def forward(image, forced_chart=None):
+        x = layer("scale", lambda: layers.Rescaling(1.0 / 127.5, offset=-1.0, name="scale", dtype=body))(image)
+        stride = min(context_stride, 2)
+        x = conv_bn_relu(x, "stem", stride)
+        skips = {stride: x}
+        chart_outputs = {}
+        if orientation:
+            o = skips[stride]
+            for level in range(3):
+                o = conv_bn_relu(o, f"orient{level}", 2)
+            o = layer("orient_pool", lambda: layers.GlobalAveragePooling2D(name="orient_pool", dtype=body))(o)
+            chart_logits = layer("chart_logits", lambda: layers.Dense(3, name="chart_logits", dtype="float32"))(o)
+        for level in range(int(math.log2(context_stride // stride))):
+            x = conv_bn_relu(x, f"down{level}", 2)
+            stride *= 2
+            skips[stride] = x
+        if orientation:
+            condition = layer("chart", lambda: ChartCondition(name="chart", dtype=body))
+            x, chart = condition([x, chart_logits] if forced_chart is None else [x, chart_logits, forced_chart])
+            chart_outputs = {"chart_logits": chart_logits, "chart": chart}
+        for index, rate in enumerate(dilations):
+            add = layer(f"dilated{index}_add", lambda: layers.Add(name=f"dilated{index}_add", dtype=body))
+            x = add([x, conv_bn_relu(x, f"dilated{index}", rate=int(rate))])
+        while stride > downsample:
+            stride //= 2
+            x = layer(f"up{stride}", lambda: layers.UpSampling2D(2, interpolation="bilinear", name=f"up{stride}",
+                                                                 dtype=body))(x)
+            add = layer(f"up{stride}_skip", lambda: layers.Add(name=f"up{stride}_skip", dtype=body))
+            x = conv_bn_relu(add([x, skips[stride]]), f"up{stride}")
+        logits = layer("logits", lambda: layers.Conv2D(num_keypoints, 1, name="logits", dtype="float32"))(x)
+        depth_maps = layer("depth_maps", lambda: layers.Conv2D(
+            num_keypoints, 1, name="depth_maps", kernel_initializer="zeros",
+            bias_initializer=keras.initializers.Constant(depth_prior), dtype="float32"))(x)
+        expectation = layer("expectation", lambda: SpatialExpectation(downsample, name="expectation", dtype="float32"))
+        uv, depth, probabilities = expectation([logits, depth_maps])
+        return {"uv": uv, "depth": depth, "probabilities": probabilities, **chart_outputs}
+
+    image = keras.Input((input_size, input_size, 3), name="image")
+    model = keras.Model(image, forward(image), name=name)
+    if not orientation:
+        return model
+    chart = keras.Input((3,), name="forced_chart")
+    forcing = keras.Model([image, chart], forward(image, chart), name=f"{name}_chart_forced")
+    return model, forcing
+
+
+def has_orientation(model) -> bool:
+    """Whether ``model`` carries the orientation network (outputs ``chart_logits`` and ``chart``)."""
+    return set(ORIENTATION_OUTPUTS) <= output_names(model)
 
 
 def native_bfloat16(cpuinfo: str | Path = "/proc/cpuinfo") -> bool:
@@ -199,8 +270,9 @@ def load_keypointnet(path: str | Path):
     path = Path(path)
     model = load_keras_model(path, KeypointNetError)
     names = output_names(model)
-    if names != set(OUTPUT_NAMES):
-        raise KeypointNetError(f"{path}: expected a KeypointNet with outputs {OUTPUT_NAMES}, got {sorted(names)}")
+    if names not in (set(OUTPUT_NAMES), set(OUTPUT_NAMES) | set(ORIENTATION_OUTPUTS)):
+        raise KeypointNetError(f"{path}: expected a KeypointNet with outputs {OUTPUT_NAMES} (and optionally "
+                               f"{ORIENTATION_OUTPUTS}), got {sorted(names)}")
     return model
 
 

@@ -32,18 +32,20 @@ from paz6d.backend.farthest_points import farthest_point_sampling
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.backend.transform import apply, compose, invert
 from paz6d.keypointnet import run_dir as run_files
-from paz6d.keypointnet.config import (DISCOVERY_WEIGHTS, LIFTINGS, MAX_LIFTING_ERROR, SEPARATION_DELTA,
-                                      SEPARATION_DELTA_IMAGE, SUPERVISED_WEIGHTS, KeypointTraining, anchors_due,
-                                      pair_angle_at, resolve_precision)
+from paz6d.keypointnet.config import (DISCOVERY_WEIGHTS, LIFTINGS, MAX_LIFTING_ERROR, ORIENTATION_WEIGHT,
+                                      OTHER_CHART_PROBABILITY, SEPARATION_DELTA, SEPARATION_DELTA_IMAGE,
+                                      SUPERVISED_WEIGHTS, KeypointTraining, anchors_due, pair_angle_at,
+                                      resolve_precision)
 from paz6d.processors.predict import predict_in_batches
 
 
 # ------------------------------------------------------------------------------- run directory
 
-def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling) -> dict:
+def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling, symmetry) -> dict:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"mode": job.mode, "config": job.config, "seed": job.seed, "mesh_path": str(Path(job.mesh).resolve()),
               "mesh_scale": job.mesh_scale, "diameter": object_diameter,
+              "orientation": None if symmetry is None else symmetry.to_dict(),
               "input_size": settings["input_size"], "margin": sampling.margin, "downsample": settings["downsample"],
               "settings": {key: list(value) if isinstance(value, tuple) else value for key, value in settings.items()},
               "sampling": sampling.to_dict()}
@@ -51,7 +53,7 @@ def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: flo
     path = run_files.config_path(job.out)
     if path.exists():
         previous = run_files.read_config(job.out)
-        for key in ("mode", "config", "seed", "mesh_path", "mesh_scale", "input_size", "downsample"):
+        for key in ("mode", "config", "seed", "mesh_path", "mesh_scale", "input_size", "downsample", "orientation"):
             if previous.get(key) != config[key]:
                 raise ValueError(f"{path}: this run directory holds a different run ({key}={previous.get(key)!r}, "
                                  f"now {config[key]!r}); choose another --out")
@@ -66,10 +68,26 @@ def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: flo
 # ------------------------------------------------------------------------------- losses
 
 def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_model: np.ndarray | None):
-    """``loss_fn(model, batch) -> dict`` for the shared Trainer (TensorFlow imported here)."""
+    """``loss_fn(model, batch) -> dict`` for the shared Trainer (TensorFlow imported here). With a
+    ``chart`` in the batch, ``model`` is the chart-forcing network and the orientation network's
+    cross-entropy against ``chart_target`` is added (weight :data:`ORIENTATION_WEIGHT`)."""
     from paz6d.keypointnet import model as kp
 
     tf = kp.tf
+
+    def forward(model, batch):
+        """The network's outputs and the orientation term (an empty dict without orientation)."""
+        if "chart" not in batch:
+            return model(batch["images"], training=True), {}
+        outputs = model([batch["images"], batch["chart"]], training=True)
+        cross_entropy = tf.keras.losses.sparse_categorical_crossentropy(batch["chart_target"], outputs["chart_logits"],
+                                                                        from_logits=True)
+        return outputs, {"orientation": tf.reduce_mean(cross_entropy)}
+
+    def with_orientation(loss, terms, orientation):
+        if orientation:
+            loss = loss + ORIENTATION_WEIGHT * orientation["orientation"]
+        return {"loss": loss, **terms, **orientation}
     size = float(settings["input_size"])
     stride = int(settings["downsample"])
     grid = kp.cell_centres(int(size) // stride, int(size) // stride, stride)
@@ -98,7 +116,7 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
         grid_unit = normalised(grid)
 
         def loss_fn(model, batch):
-            outputs = model(batch["images"], training=True)
+            outputs, orientation = forward(model, batch)
             K, T = batch["K"], batch["T_model2cam"]
             pairs = tf.shape(K)[0] // 2
             depth = kp.metres_from_depth_code(outputs["depth"], object_diameter, K, int(size))
@@ -121,7 +139,7 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
                 anchor = anchor_loss(outputs, batch["anchors"], K, T)
                 loss = loss + batch["anchor_weight"] * anchor
                 terms["anchor"] = anchor
-            return {"loss": loss, **terms}
+            return with_orientation(loss, terms, orientation)
 
         return loss_fn
 
@@ -131,10 +149,10 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
         return tf.reduce_mean(tf.norm(uv - target_uv, axis=-1))
 
     def supervised_loss(model, batch):
-        outputs = model(batch["images"], training=True)
+        outputs, orientation = forward(model, batch)
         target_uv, terms = targets_loss(outputs, points, batch["K"], batch["T_model2cam"])
         loss = tf.add_n([SUPERVISED_WEIGHTS[name] * value for name, value in terms.items()])
-        return {"loss": loss, "pixel_error": pixel_error(outputs["uv"], target_uv), **terms}
+        return with_orientation(loss, {"pixel_error": pixel_error(outputs["uv"], target_uv), **terms}, orientation)
 
     return supervised_loss
 
@@ -196,10 +214,11 @@ def model_reprojection_errors(uv, K, T_model2cam, points_model, usable) -> np.nd
 
 # ------------------------------------------------------------------------------- samples
 
-def _sample_drawer(images: np.ndarray, targets: np.ndarray | None):
-    """``sample_callback(model, step, path)`` drawing predicted keypoints (filled) and targets (hollow)."""
+def _sample_drawer(model, images: np.ndarray, targets: np.ndarray | None):
+    """``sample_callback(trained, step, path)`` drawing ``model``'s keypoints (filled) and targets (hollow);
+    ``model`` is the inference network (``trained``, which the Trainer passes, may be its chart-forcing twin)."""
 
-    def draw(model, step, path):
+    def draw(trained, step, path):
         from paz6d.backend.draw import draw_keypoints, image_grid
         from paz6d.backend.image import save_image
 
@@ -244,7 +263,7 @@ def _cached_lifting_crops(path: Path, render, K, margin: float, size: int):
 
 
 def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out: Path,
-                       targets: np.ndarray | None = None) -> dict:
+                       targets: np.ndarray | None = None, symmetry=None) -> dict:
     """Writes ``out/keypoints.json``: the 3D keypoints (object frame, metres) that PnP will use.
 
     The trained network's keypoints on ``crops = (images, K, T_model2cam)`` (views with known
@@ -259,6 +278,8 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
     Keypoints whose median re-projection error exceeds :data:`MAX_LIFTING_ERROR` × crop side are
     marked unusable.
     ``targets`` (supervised mode: the farthest-point keypoints) are stored alongside for reference.
+    With ``symmetry`` (:class:`~paz6d.keypointnet.orientation.ChartSymmetry`) each view's pose is the one
+    the network's predicted chart picks.
     """
     from paz6d.keypointnet.model import metres_from_depth_code
     from paz6d.keypointnet.keypoints import decode_keypoints, lift_keypoints, triangulate_keypoints
@@ -268,6 +289,8 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
         raise ValueError(f"lifting: expected one of {LIFTINGS}, got {method!r}")
     images, K, T = crops
     outputs = predict_crops(model, images)
+    if symmetry is not None:
+        T = symmetry.for_outputs(T, outputs)
     uv = decode_keypoints(outputs, settings["downsample"])
     if method == "median":
         depth = np.asarray(metres_from_depth_code(outputs["depth"], object_diameter, K, settings["input_size"]))
@@ -295,8 +318,8 @@ class AnchorSource:
         views: the training :class:`~paz6d.keypointnet.views.ViewSet`; seed: of the crops' backgrounds.
     """
 
-    def __init__(self, model, views, settings: dict, seed: int, object_diameter: float):
-        self.model, self.views, self.settings, self.seed = model, views, settings, seed
+    def __init__(self, model, views, settings: dict, seed: int, object_diameter: float, symmetry=None):
+        self.model, self.views, self.settings, self.seed, self.symmetry = model, views, settings, seed, symmetry
         self.diameter = float(object_diameter)
         self.points: np.ndarray | None = None
         self.lifted_at: int | None = None
@@ -329,6 +352,8 @@ class AnchorSource:
             self._infer = inference_function(self.model)
         images, K, T = self._crops
         outputs = predict_in_batches(self._infer, images, 32)
+        if self.symmetry is not None:
+            T = self.symmetry.for_outputs(T, outputs)
         uv = decode_keypoints(outputs, int(self.settings["downsample"]))
         method = self.settings.get("anchor_lifting", "modes")
         if method == "triangulate":
@@ -339,6 +364,17 @@ class AnchorSource:
         delta = float(self.settings.get("separation_delta", SEPARATION_DELTA)) * self.diameter
         return spread_modes(per_view_points(uv, depth, K, T), float(self.settings.get("anchor_radius", 0.1)) * self.diameter,
                             delta)
+
+
+def orientation_batch(T_model2cam: np.ndarray, symmetry, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """What a batch needs for the orientation network: ``chart (V, 3)`` one-hot charts fed to the network
+    (:func:`~paz6d.keypointnet.orientation.training_charts`), ``chart_target (V,)`` the true charts, and
+    ``T_model2cam`` replaced by the poses the fed charts pick."""
+    from paz6d.keypointnet.orientation import canonical_poses, chart_targets, one_hot, training_charts
+
+    charts = training_charts(T_model2cam, symmetry.axis, rng, OTHER_CHART_PROBABILITY)
+    return {"chart": one_hot(charts), "chart_target": chart_targets(T_model2cam, symmetry.axis).astype(np.int32),
+            "T_model2cam": canonical_poses(T_model2cam, charts, symmetry.symmetry, symmetry.axis)}
 
 
 def supervised_keypoints(mesh, count: int, seed: int) -> np.ndarray:
@@ -377,7 +413,8 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     mesh = load_mesh(job.mesh, job.mesh_scale)
     object_diameter = diameter(np.asarray(mesh.vertices))
     sampling = ViewSampling(input_size=settings["input_size"])
-    _prepare_run_dir(job, settings, object_diameter, sampling)
+    symmetry = job.symmetry()
+    _prepare_run_dir(job, settings, object_diameter, sampling, symmetry)
     out = job.out
     run_files.write_object(out, object_diameter, hull_points(np.asarray(mesh.vertices)))
 
@@ -398,20 +435,25 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
 
     keras = kp.keras
     keras.utils.set_random_seed(job.seed)
-    model = kp.build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
+    built = kp.build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
                                  settings["downsample"], tuple(settings["dilations"]),
-                                 context_stride=settings.get("context_stride"), compute_dtype=settings["precision"])
+                                 context_stride=settings.get("context_stride"), compute_dtype=settings["precision"],
+                                 orientation=symmetry is not None)
+    model, trained = built if symmetry is not None else (built, built)  # trained: the chart-forcing twin
     schedule = keras.optimizers.schedules.CosineDecay(settings["learning_rate"], settings["steps"], alpha=0.05)
     ema = settings.get("ema_momentum")
     optimizer = keras.optimizers.Adam(schedule, global_clipnorm=5.0, use_ema=ema is not None,
                                       ema_momentum=0.99 if ema is None else float(ema))
     pairs, downsample = settings["pairs"], settings["downsample"]
 
-    anchors = AnchorSource(model, train_views, settings, job.seed + 3, object_diameter) if job.mode == "discovery" else None
+    anchors = (AnchorSource(model, train_views, settings, job.seed + 3, object_diameter, symmetry)
+               if job.mode == "discovery" else None)
 
     def make_batch(step: int):
-        batch = training_batch(train_views, np.random.default_rng([job.seed, 1, step]), pairs, downsample,
-                               max_angle=pair_angle_at(step, settings))
+        rng = np.random.default_rng([job.seed, 1, step])
+        batch = training_batch(train_views, rng, pairs, downsample, max_angle=pair_angle_at(step, settings))
+        if symmetry is not None:
+            batch.update(orientation_batch(batch["T_model2cam"], symmetry, rng))
         points = None if anchors is None else anchors(step)
         if points is not None:
             batch["anchors"] = points.astype(np.float32)
@@ -424,10 +466,10 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         from paz6d.backend.camera import transform_and_project
 
         sample_targets = np.stack([transform_and_project(keypoints_model, T, K) for T, K in zip(sample_T, sample_K)])
-    trainer = Trainer(model, optimizer, _loss_function(job.mode, settings, object_diameter, keypoints_model),
+    trainer = Trainer(trained, optimizer, _loss_function(job.mode, settings, object_diameter, keypoints_model),
                       make_batch, out, settings["steps"], checkpoint_every=settings["checkpoint_every"], log_every=10,
                       sample_every=settings["sample_every"],
-                      sample_callback=_sample_drawer(sample_images, sample_targets), progress=job.progress,
+                      sample_callback=_sample_drawer(model, sample_images, sample_targets), progress=job.progress,
                       prefetch=1)
     training = trainer.fit()
     kp.save_keypointnet(model, run_files.model_path(out))
@@ -441,18 +483,25 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
             sampling.camera.K, sampling.margin, settings["input_size"])
     else:  # crops cut from a data set's images: already made as at inference
         lifting_crops = fixed_crops(train_views, job.seed + 1, settings["lift_views"])
-    lifting = lift_run_keypoints(model, lifting_crops, settings, object_diameter, out, keypoints_model)
+    lifting = lift_run_keypoints(model, lifting_crops, settings, object_diameter, out, keypoints_model, symmetry)
     points_model, usable = run_files.read_keypoints(out)
 
     images, K, T = fixed_crops(validation_views, job.seed + 2)
     outputs = predict_crops(model, images)
+    chart_accuracy = None
+    if symmetry is not None:
+        from paz6d.keypointnet.orientation import chart_targets
+
+        chart_accuracy = float(np.mean(np.argmax(outputs["chart"], axis=1) == chart_targets(T, symmetry.axis)))
+        T = symmetry.for_outputs(T, outputs)
     depth = np.asarray(kp.metres_from_depth_code(outputs["depth"], object_diameter, K, settings["input_size"]))
     summary = {"mode": job.mode, "config": job.config, "steps": training.final_step,
                "train_seconds": round(train_seconds, 1), "render_seconds": round(render_seconds, 1),
                "final_losses": training.metrics,
                "loader_samples_per_second": finite_or_none(training.loader_samples_per_second, 1),
                "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1),
-               **lifting, "validation_views": len(images), "input_size": settings["input_size"]}
+               **lifting, "validation_views": len(images), "input_size": settings["input_size"],
+               "chart_accuracy": chart_accuracy}
     for method in DECODERS:  # "local" is what KeypointPose6D uses by default
         uv = decode_keypoints(outputs, downsample, method)
         consistency = cross_view_errors(uv, depth, K, T)
