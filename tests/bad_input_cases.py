@@ -959,6 +959,16 @@ def train_cases() -> list[Case]:
         "--seed": [(("-1",), "")],
         "--out": [(("{world}/results.csv",), "results.csv")],
     })
+    orientation = TRAIN_KEYPOINTNET + ("--orientation-network",)
+    bop_mesh = replace_flag(orientation, "--mesh", "{case}/bop/models/obj_000001.ply")
+    quarter_turn = [0, -1, 0, 0, 1, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]
+    found += [Case("train-keypointnet-orientation-not-a-bop-model", orientation, None, ("models_info.json",)),
+              Case("train-keypointnet-orientation-no-symmetry", bop_mesh, copy_bop,
+                   ("models_info.json", "exactly one discrete symmetry")),
+              Case("train-keypointnet-orientation-quarter-turn", bop_mesh,
+                   bop_file("models/models_info.json",
+                            lambda d: {k: {**v, "symmetries_discrete": [quarter_turn]} for k, v in d.items()}),
+                   ("models_info.json", "half-turn"))]
     found += _flag_cases("train-emotion-", TRAIN_EMOTION, {
         "--learning-rate": [(("nan",), ""), (("-1",), ""), (("inf",), ""), (("0",), "")],
         "--epochs": [(("0",), "")],
