@@ -80,6 +80,38 @@ def test_view_masks_and_jittered_batches_agree_with_their_intrinsics(mesh_path, 
     assert all(pairs_differ)  # a pair is two different views
 
 
+def test_relighting_and_background_noise_change_only_their_part_of_a_crop(views):
+    plain = kv.Augmentation(crop_scale=0.0, crop_shift=0.0, colour=False)
+    opaque = views.alpha == 255
+    noisy_views = 0
+    for index in range(len(views)):
+        base, _, _ = kv.augmented_view(views, index, np.random.default_rng([5, index]), plain)
+        noisy, _, _ = kv.augmented_view(views, index, np.random.default_rng([5, index]),
+                                        kv.Augmentation(0.0, 0.0, colour=False, background_noise=40.0))
+        assert np.array_equal(noisy[opaque[index]], base[opaque[index]])  # the object is untouched
+        clear = views.alpha[index] == 0
+        noisy_views += int(not np.array_equal(noisy[clear], base[clear]))
+        lit, _, _ = kv.augmented_view(views, index, np.random.default_rng([5, index]),
+                                      kv.Augmentation(0.0, 0.0, colour=False, relight=0.6))
+        assert not np.array_equal(lit[opaque[index]], base[opaque[index]])
+    assert 0 < noisy_views < len(views)  # on about half of the crops
+
+
+def test_relight_gains_and_ramp_stay_in_their_bounds():
+    from paz6d.synthesis.augment import relight
+
+    image = np.full((20, 30, 3), 100, np.uint8)
+    rng = np.random.default_rng(0)
+    state = rng.bit_generator.state
+    assert np.array_equal(relight(image, rng, 0.0), image.astype(np.float32)) and rng.bit_generator.state == state
+    for seed in range(20):
+        lit = relight(image, np.random.default_rng(seed), 0.6)
+        assert lit.dtype == np.float32 and lit.shape == image.shape
+        # gains within 1 +- 0.3, ramp within 1 +- 0.6 / 2 (half an image side from the centre)
+        assert lit.min() >= 100 * 0.7 * 0.7 - 1e-3 and lit.max() <= 100 * 1.3 * 1.3 + 1e-3
+        assert np.ptp(lit[..., 0]) > 0  # a ramp across the image
+
+
 def test_empty_masks_are_a_clear_error(views):
     masks = views.masks.copy()
     masks[2] = False

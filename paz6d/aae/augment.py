@@ -22,7 +22,7 @@ from paz6d.aae.model import crop_object
 from paz6d.aae.views import coverage_box, rotate_view
 from paz6d.abstract.processor import SequentialProcessor
 from paz6d.synthesis.augment import (RandomContrastBrightnessNoise, RandomGaussianBlur, RandomHue, RandomSaturation,
-                                     share_generator)
+                                     relight, share_generator)
 from paz6d.synthesis.backgrounds import BackgroundBank
 from paz6d.synthesis.occluders import PolygonOccluders
 
@@ -75,20 +75,6 @@ class ViewSampler:
                                           np.random.default_rng([seed, 7919]), style="clutter")
         self.input_augmentation = input_augmentation(augmentation, self.padding)
 
-    def _relight(self, rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """float32 copy of the object crop with random channel gains and a linear brightness ramp."""
-        strength = self.augmentation.light
-        values = rgb.astype(np.float32)
-        if strength > 0:
-            gains = (1.0 + rng.uniform(-strength / 2, strength / 2, 3)).astype(np.float32)
-            direction = rng.normal(size=2)
-            direction /= np.linalg.norm(direction) + 1e-12
-            coordinates = (np.arange(self.crop_size, dtype=np.float32) + 0.5) / self.crop_size - 0.5
-            ramp = direction[0] * coordinates[None, :] + direction[1] * coordinates[:, None]
-            gradient = np.clip(1.0 + rng.uniform(0, strength) * self.padding * ramp, 0.2, 2.0)
-            values *= gradient[..., None] * gains
-        return values
-
     def _augment(self, crop: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         share_generator(self.input_augmentation, rng)
         return self.input_augmentation(crop)
@@ -112,7 +98,7 @@ class ViewSampler:
         shifted = np.concatenate([centre - extent / 2, centre + extent / 2])
         rgba = crop_object(np.dstack([rgb, alpha]), shifted, self.crop_size, self.padding)
         weight = rgba[..., 3:].astype(np.float32) / 255.0
-        lit = self._relight(rgba[..., :3], rng)
+        lit = relight(rgba[..., :3], rng, self.augmentation.light, self.padding)
         composited = np.clip(weight * lit + (1 - weight) * self.backgrounds.patch(rng), 0, 255).astype(np.uint8)
         return self._augment(composited, rng), target
 

@@ -404,7 +404,8 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
     from paz6d.keypointnet.keypoints import DECODERS, decode_keypoints, keypoint_spread
-    from paz6d.keypointnet.views import ViewSampling, cached_views, render_test_images, render_views, training_batch
+    from paz6d.keypointnet.views import (Augmentation, ViewSampling, cached_views, render_test_images, render_views,
+                                         training_batch)
     from paz6d.synthesis.sampling import hull_points
 
     settings = job.settings()
@@ -449,9 +450,12 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     anchors = (AnchorSource(model, train_views, settings, job.seed + 3, object_diameter, symmetry)
                if job.mode == "discovery" else None)
 
+    augmentation = Augmentation(**settings.get("augmentation", {}))
+
     def make_batch(step: int):
         rng = np.random.default_rng([job.seed, 1, step])
-        batch = training_batch(train_views, rng, pairs, downsample, max_angle=pair_angle_at(step, settings))
+        batch = training_batch(train_views, rng, pairs, downsample, augmentation,
+                               max_angle=pair_angle_at(step, settings))
         if symmetry is not None:
             batch.update(orientation_batch(batch["T_model2cam"], symmetry, rng))
         points = None if anchors is None else anchors(step)

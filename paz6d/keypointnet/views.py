@@ -35,7 +35,7 @@ from paz6d.backend.files import load_npz, save_npz_atomically
 from paz6d.backend.mesh import diameter, load_mesh
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_box, square_window
 from paz6d.synthesis.augment import (BlendBackground, RandomBrightness, RandomContrast, RandomGaussianBlur, RandomHue,
-                                     RandomImageNoise, RandomSaturation, share_generator)
+                                     RandomImageNoise, RandomSaturation, relight, sensor_noise, share_generator)
 from paz6d.synthesis.lighting import random_lighting
 from paz6d.synthesis.sampling import hull_points, random_pose_in_view
 from paz6d.synthesis.workers import chunks, progress_bar, run_in_workers
@@ -288,12 +288,19 @@ class Augmentation:
         crop_shift: crop shift drawn from ``±crop_shift`` × crop side.
         colour: apply brightness/contrast/saturation/hue jitter and noise.
         background: composite over random backgrounds (else black).
+        relight: strength of the object's image-space re-lighting before compositing
+            (:func:`~paz6d.synthesis.augment.relight`: per-channel gains ``1 ± relight/2`` and a brightness
+            ramp); 0: none.
+        background_noise: on half of the crops, Gaussian pixel noise of a standard deviation uniform in
+            ``[0, background_noise]`` grey levels on the background only; 0: none.
     """
 
     crop_scale: float = 0.08
     crop_shift: float = 0.05
     colour: bool = True
     background: bool = True
+    relight: float = 0.0
+    background_noise: float = 0.0
 
 
 def _jitter_crop(views: ViewSet, index: int, rng: np.random.Generator, augmentation: Augmentation):
@@ -323,9 +330,14 @@ def augmented_view(views: ViewSet, index: int, rng: np.random.Generator,
                    augmentation: Augmentation = Augmentation()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One augmented crop: ``image (S, S, 3) uint8``, ``mask (S, S) bool`` and its ``K (3, 3)``."""
     rgb, alpha, mask, K = _jitter_crop(views, index, rng, augmentation)
+    if augmentation.relight > 0:
+        rgb = np.clip(relight(rgb, rng, augmentation.relight), 0, 255).astype(np.uint8)
     if augmentation.background:
         share_generator(BACKGROUND, rng)
         picture = BACKGROUND(rgb, alpha)
+        if augmentation.background_noise > 0 and rng.random() < 0.5:
+            noisy = sensor_noise(rng, picture, float(rng.uniform(0.0, augmentation.background_noise)))
+            picture = image_backend.alpha_blend(picture, alpha, noisy)
     else:
         picture = image_backend.alpha_blend(rgb, alpha, np.zeros_like(rgb))
     if augmentation.colour:

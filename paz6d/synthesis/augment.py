@@ -121,6 +121,26 @@ def sensor_noise(generator: np.random.Generator, image: np.ndarray, std: float) 
     return cv2.add(image.astype(np.float32), noise, dtype=cv2.CV_8U)  # saturating: rounds and clips
 
 
+def relight(rgb: np.ndarray, generator: np.random.Generator, strength: float, ramp_scale: float = 1.0) -> np.ndarray:
+    """Image-space re-lighting: ``rgb (H, W, 3)`` as float32 times random per-channel gains
+    ``1 ± strength/2`` and a linear brightness ramp across the image in a random direction, whose slope is
+    up to ``strength × ramp_scale`` per image side (factors clipped to [0.2, 2]). ``strength`` 0 returns
+    the float32 copy without drawing."""
+    values = rgb.astype(np.float32)
+    if strength <= 0:
+        return values
+    gains = (1.0 + generator.uniform(-strength / 2, strength / 2, 3)).astype(np.float32)
+    direction = generator.normal(size=2)
+    direction /= np.linalg.norm(direction) + 1e-12
+    height, width = values.shape[:2]
+    u = (np.arange(width, dtype=np.float32) + 0.5) / width - 0.5
+    v = (np.arange(height, dtype=np.float32) + 0.5) / height - 0.5
+    ramp = direction[0] * u[None, :] + direction[1] * v[:, None]
+    gradient = np.clip(1.0 + generator.uniform(0, strength) * ramp_scale * ramp, 0.2, 2.0)
+    values *= gradient[..., None] * gains  # in place: stays float32
+    return values
+
+
 class RandomImageNoise(RandomProcessor):
     """With ``probability``, zero-mean Gaussian noise of a standard deviation uniform in ``[0, max_std]``
     grey levels, rounded and clipped. Nothing is drawn when ``max_std`` is 0, and no coin is tossed
