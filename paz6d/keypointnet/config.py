@@ -1,5 +1,5 @@
 """Settings of ``paz6d train keypointnet``: the quick and full configs, loss weights and one run's
-:class:`KeypointTraining` (whose fields are the command's flags). Light: no numpy, no TensorFlow."""
+:class:`KeypointTraining` (whose fields are the command's flags). Light: no TensorFlow."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from pathlib import Path
 
 from paz6d.cli_options import option
 from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
+from paz6d.keypointnet.orientation import ChartSymmetry, mesh_symmetry
 from paz6d.training.presets import apply_steps, preset_settings
 from paz6d.training.source import checked_mesh_scale
 
@@ -107,8 +108,6 @@ class KeypointTraining:
         :class:`~paz6d.keypointnet.orientation.ChartSymmetry` (``None`` without)."""
         if not self.orientation_network:
             return None
-        from paz6d.keypointnet.orientation import ChartSymmetry, mesh_symmetry
-
         return ChartSymmetry(mesh_symmetry(self.mesh, self.mesh_scale))
 
     def settings(self) -> dict:

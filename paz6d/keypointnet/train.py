@@ -32,6 +32,7 @@ from paz6d.backend.farthest_points import farthest_point_sampling
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.backend.transform import apply, compose, invert
 from paz6d.keypointnet import run_dir as run_files
+from paz6d.keypointnet.orientation import canonical_poses, chart_targets, one_hot, training_charts
 from paz6d.keypointnet.config import (DISCOVERY_WEIGHTS, LIFTINGS, MAX_LIFTING_ERROR, ORIENTATION_WEIGHT,
                                       OTHER_CHART_PROBABILITY, SEPARATION_DELTA, SEPARATION_DELTA_IMAGE,
                                       SUPERVISED_WEIGHTS, KeypointTraining, anchors_due, pair_angle_at,
@@ -41,7 +42,7 @@ from paz6d.processors.predict import predict_in_batches
 
 # ------------------------------------------------------------------------------- run directory
 
-def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling, symmetry) -> dict:
+def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling, symmetry=None) -> dict:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"mode": job.mode, "config": job.config, "seed": job.seed, "mesh_path": str(Path(job.mesh).resolve()),
               "mesh_scale": job.mesh_scale, "diameter": object_diameter,
@@ -370,8 +371,6 @@ def orientation_batch(T_model2cam: np.ndarray, symmetry, rng: np.random.Generato
     """What a batch needs for the orientation network: ``chart (V, 3)`` one-hot charts fed to the network
     (:func:`~paz6d.keypointnet.orientation.training_charts`), ``chart_target (V,)`` the true charts, and
     ``T_model2cam`` replaced by the poses the fed charts pick."""
-    from paz6d.keypointnet.orientation import canonical_poses, chart_targets, one_hot, training_charts
-
     charts = training_charts(T_model2cam, symmetry.axis, rng, OTHER_CHART_PROBABILITY)
     return {"chart": one_hot(charts), "chart_target": chart_targets(T_model2cam, symmetry.axis).astype(np.int32),
             "T_model2cam": canonical_poses(T_model2cam, charts, symmetry.symmetry, symmetry.axis)}
@@ -494,8 +493,6 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     outputs = predict_crops(model, images)
     chart_accuracy = None
     if symmetry is not None:
-        from paz6d.keypointnet.orientation import chart_targets
-
         chart_accuracy = float(np.mean(np.argmax(outputs["chart"], axis=1) == chart_targets(T, symmetry.axis)))
         T = symmetry.for_outputs(T, outputs)
     depth = np.asarray(kp.metres_from_depth_code(outputs["depth"], object_diameter, K, settings["input_size"]))
