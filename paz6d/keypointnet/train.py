@@ -32,11 +32,11 @@ from paz6d.backend.farthest_points import farthest_point_sampling
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.backend.transform import apply, compose, invert
 from paz6d.keypointnet import run_dir as run_files
-from paz6d.keypointnet.orientation import canonical_poses, chart_targets, one_hot, training_charts
 from paz6d.keypointnet.config import (DISCOVERY_WEIGHTS, LIFTINGS, MAX_LIFTING_ERROR, ORIENTATION_WEIGHT,
                                       OTHER_CHART_PROBABILITY, SEPARATION_DELTA, SEPARATION_DELTA_IMAGE,
                                       SUPERVISED_WEIGHTS, KeypointTraining, anchors_due, pair_angle_at,
                                       resolve_precision)
+from paz6d.keypointnet.orientation import canonical_poses, chart_targets, one_hot, training_charts
 from paz6d.processors.predict import predict_in_batches
 
 
@@ -89,6 +89,7 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
         if orientation:
             loss = loss + ORIENTATION_WEIGHT * orientation["orientation"]
         return {"loss": loss, **terms, **orientation}
+
     size = float(settings["input_size"])
     stride = int(settings["downsample"])
     grid = kp.cell_centres(int(size) // stride, int(size) // stride, stride)
