@@ -12,6 +12,10 @@ Two modes share the data, the network, the PnP pipeline and the evaluation:
   projected into every view; the network learns them as heatmaps (cross-entropy to a Gaussian)
   plus their coordinates and depths. The 3D keypoints are known exactly.
 
+With ``orientation_network`` (a half-turn symmetric object) both modes add the orientation network of
+:mod:`paz6d.keypointnet.orientation`: batches carry the fed ``chart`` and the true ``chart_target``, their
+poses are the ones the fed charts pick, and the chart-forcing twin of the network is what is trained.
+
 The run directory (its files and formats: :mod:`paz6d.keypointnet.run_dir`) is what
 :class:`paz6d.keypointnet.pipeline.KeypointPose6D` loads, plus the Trainer's checkpoints, ``log.csv``,
 ``tensorboard/`` and ``samples/``, the rendered views (training, validation, and crops of unseen whole
