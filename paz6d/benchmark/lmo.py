@@ -38,6 +38,7 @@ from paz6d.abstract import Box2D, Pose6D
 from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
 from paz6d.cli import build_parser
 from paz6d.datasets.bop import read_pose_results
+from paz6d.datasets.bop.models import MODELS_INFO, load_models_info
 from paz6d.estimate import estimate
 from paz6d.keypointnet.config import KeypointTraining
 from paz6d.keypointnet.train import train_keypointnet
@@ -184,10 +185,13 @@ def _stage_pose(job: Benchmark, obj_id: int) -> dict:
                          dataset=job.out / "synthetic" if crops else None, object_id=obj_id,
                          pair_fraction=job.settings.scene_crops if crops else 0.5)
 
+    # objects with one half-turn symmetry (LM-O's eggbox and glue) get the orientation network
+    symmetries = load_models_info(job.mesh(obj_id).parent / MODELS_INFO)[obj_id].symmetries_discrete
     return train_keypointnet(KeypointTraining(job.pose_dir(obj_id), job.mesh(obj_id), mesh_scale=0.001,
                                               seed=job.seed, workers=job.settings.workers,
                                               steps=job.settings.keypointnet_steps, progress=job.progress,
-                                              overrides={"views": job.settings.keypointnet_views}))
+                                              overrides={"views": job.settings.keypointnet_views},
+                                              orientation_network=len(symmetries) == 1))
 
 
 def _estimate_args(job: Benchmark, condition: str) -> list[str]:
