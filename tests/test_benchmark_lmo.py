@@ -154,3 +154,16 @@ def test_every_real_stage_runs_on_the_shared_lmo_data_at_toy_size(tmp_path, shar
     assert (job.out / "detector" / "model.keras").is_file() and (job.pose_dir(5) / "codebook.npz").is_file()
     assert len(list((job.out / "overlays" / "aae_detections").glob("*.png"))) == 20
     assert (job.out / "overlays" / "aae_gt.png").is_file() and (job.out / "report.md").is_file()
+
+
+def test_keypointnet_stage_uses_the_orientation_network_for_half_turn_symmetric_objects(shared_data, tmp_path,
+                                                                                         monkeypatch):
+    jobs = {}
+    monkeypatch.setattr(lmo, "train_keypointnet", lambda job: jobs.setdefault(job.mesh.stem, job) and {})
+    bench = Benchmark(out=tmp_path / "bench", lmo=shared_data / "bop_lmo", quick=True, settings=TINY,
+                      method="keypointnet")
+    for obj_id in (5, 10, 11):
+        lmo._stage_pose(bench, obj_id)
+    assert {stem: job.orientation_network for stem, job in jobs.items()} == {
+        "obj_000005": False, "obj_000010": True, "obj_000011": True}
+    assert abs(jobs["obj_000010"].symmetry().symmetry[0, 0] + 1.0) < 1e-3  # the eggbox's half turn about z
