@@ -112,6 +112,20 @@ def test_relight_gains_and_ramp_stay_in_their_bounds():
         assert np.ptp(lit[..., 0]) > 0  # a ramp across the image
 
 
+def test_view_lighting_styles_are_drawn_per_view_and_recorded(mesh_path, views):
+    mixed = kv.ViewSampling(input_size=32, lighting=("key-fill", "surround"))
+    assert kv.ViewSampling.from_dict(mixed.to_dict()).lighting == ("key-fill", "surround")
+    old = kv.ViewSampling(input_size=32).to_dict()
+    del old["lighting"]  # run directories written before the setting existed
+    assert kv.ViewSampling.from_dict(old).lighting == ("key-fill",)
+    relit = kv.render_views(mesh_path, 6, seed=3, sampling=mixed, mesh_scale=1e-3, workers=0, progress=False)
+    assert np.array_equal(relit.T_model2cam, views.T_model2cam)  # same poses: the style is drawn after them
+    assert all(not np.array_equal(relit.rgb[i], views.rgb[i]) for i in range(6))  # other lights
+    assert np.array_equal(relit.masks, views.masks)
+    with pytest.raises(ValueError, match="lighting: expected one or more of"):
+        kv.ViewSampling(lighting=("studio",))
+
+
 def test_empty_masks_are_a_clear_error(views):
     masks = views.masks.copy()
     masks[2] = False

@@ -147,6 +147,11 @@ def test_lighting_styles_are_seeded_and_in_range():
     key_fill = lighting.random_lighting(np.random.default_rng(0), "key-fill")
     assert [light.kind for light in key_fill.lights] == ["directional", "point"]
     assert key_fill.lights[0].direction[2] > 0  # into the scene
+    surround = [lighting.random_lighting(np.random.default_rng(seed), "surround") for seed in range(200)]
+    assert {len(light.lights) for light in surround} == {1, 2}
+    directions = np.array([light.direction for setup in surround for light in setup.lights])
+    assert (directions[:, 2] < 0).mean() > 0.3 and (directions[:, 1] > 0).mean() > 0.3  # from behind, from above
+    assert all(max(light.color) == 1.0 and min(light.color) >= 0.75 for setup in surround for light in setup.lights)
     tints = lighting.random_tints(np.random.default_rng(0), 50, 0.2)
     assert tints.shape == (50, 3) and tints.min() >= 0.8 and tints.max() <= 1.2
     with pytest.raises(ValueError, match="style: expected one of"):

@@ -417,7 +417,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     started = time.perf_counter()
     mesh = load_mesh(job.mesh, job.mesh_scale)
     object_diameter = diameter(np.asarray(mesh.vertices))
-    sampling = ViewSampling(input_size=settings["input_size"])
+    sampling = ViewSampling(input_size=settings["input_size"], lighting=tuple(settings.get("lighting", ("key-fill",))))
     symmetry = job.symmetry()
     _prepare_run_dir(job, settings, object_diameter, sampling, symmetry)
     out = job.out

@@ -36,7 +36,7 @@ from paz6d.backend.mesh import diameter, load_mesh
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_box, square_window
 from paz6d.synthesis.augment import (BlendBackground, RandomBrightness, RandomContrast, RandomGaussianBlur, RandomHue,
                                      RandomImageNoise, RandomSaturation, relight, sensor_noise, share_generator)
-from paz6d.synthesis.lighting import random_lighting
+from paz6d.synthesis.lighting import LIGHTING_STYLES, random_lighting
 from paz6d.synthesis.sampling import hull_points, random_pose_in_view
 from paz6d.synthesis.workers import chunks, progress_bar, run_in_workers
 
@@ -54,6 +54,8 @@ class ViewSampling:
         distance: range of the object's distance (along z) in object diameters.
         border: fraction of the image width/height kept free at each side for the object centre.
         margin: crop side = ``margin`` × the longer side of the silhouette box.
+        lighting: light styles of :func:`~paz6d.synthesis.lighting.random_lighting` for the training crops,
+            one drawn per view (test images always use ``"key-fill"``).
     """
 
     input_size: int = 128
@@ -61,6 +63,7 @@ class ViewSampling:
     distance: tuple[float, float] = (3.0, 7.0)
     border: float = 0.15
     margin: float = 1.25
+    lighting: tuple[str, ...] = ("key-fill",)
 
     def __post_init__(self):
         if self.input_size < 8:
@@ -72,11 +75,14 @@ class ViewSampling:
             raise ValueError(f"border: expected a fraction in [0, 0.5), got {self.border}")
         if self.margin < 1.0:
             raise ValueError(f"margin: expected >= 1 so the crop holds the whole box, got {self.margin}")
+        if not self.lighting or any(style not in LIGHTING_STYLES for style in self.lighting):
+            raise ValueError(f"lighting: expected one or more of {LIGHTING_STYLES}, got {self.lighting}")
 
     def to_dict(self) -> dict:
         data = asdict(self)
         data["camera"] = self.camera.to_dict()
         data["distance"] = list(self.distance)
+        data["lighting"] = list(self.lighting)
         return data
 
     @classmethod
@@ -84,6 +90,7 @@ class ViewSampling:
         data = dict(data)
         data["camera"] = Camera.from_dict(data["camera"])
         data["distance"] = tuple(data["distance"])
+        data["lighting"] = tuple(data.get("lighting", ("key-fill",)))
         return cls(**data)
 
 
@@ -186,6 +193,11 @@ def sample_pose(rng: np.random.Generator, vertices: np.ndarray, object_diameter:
     return random_pose_in_view(rng, vertices, sampling.camera, sampling.border, sampling.distance, object_diameter)
 
 
+def _light_style(rng: np.random.Generator, styles: tuple[str, ...]) -> str:
+    """One of ``styles`` (no draw when there is only one, so single-style views stay as they were)."""
+    return styles[0] if len(styles) == 1 else styles[int(rng.integers(len(styles)))]
+
+
 def _render_crops(state: _ViewRenderer, indices: list[int], seed: int, sampling: ViewSampling) -> dict[str, np.ndarray]:
     """Renders each view's crop window at about its resolution in the camera image, then resamples it
     to ``input_size`` with :func:`crop_square`, exactly as test crops are cut from whole images."""
@@ -200,7 +212,7 @@ def _render_crops(state: _ViewRenderer, indices: list[int], seed: int, sampling:
         resolution = min(RENDER_SIZES, key=lambda candidate: abs(np.log(candidate / window[2])))
         rendered = state.renderer(resolution, resolution).render(
             crop_intrinsics(sampling.camera.K, window, resolution), [(state.mesh, T)],
-            lighting=random_lighting(rng, "key-fill"))
+            lighting=random_lighting(rng, _light_style(rng, sampling.lighting)))
         whole = (0, 0, resolution)
         out["rgb"][row] = crop_square(rendered.rgb, whole, size)
         out["alpha"][row] = crop_square(rendered.alpha, whole, size)

@@ -8,8 +8,9 @@ from renderers.lights import Light, Lighting
 
 #: ``"scene"``: ambient plus 1..n directional/point lights of random colour on the camera's side
 #: (``paz6d generate``); ``"key-fill"``: grey ambient, one directional key light and a point fill
-#: light at the camera (KeypointNet views).
-LIGHTING_STYLES = ("scene", "key-fill")
+#: light at the camera (KeypointNet views); ``"surround"``: grey ambient and one or two directional
+#: lights of random warm or cool white from any direction, behind and above the object included.
+LIGHTING_STYLES = ("scene", "key-fill", "surround")
 
 
 def random_lighting(generator: np.random.Generator, style: str = "scene", light_count: tuple[int, int] = (1, 3),
@@ -29,6 +30,17 @@ def random_lighting(generator: np.random.Generator, style: str = "scene", light_
                         lights=(Light("directional", intensity=float(generator.uniform(1.5, 3.5)),
                                       direction=tuple(direction)),
                                 Light("point", intensity=float(generator.uniform(0.3, 1.5)), position=(0.0, 0.0, 0.0))))
+    if style == "surround":
+        ambient = float(generator.uniform(0.1, 0.35))
+        lights = []
+        for _ in range(int(generator.integers(1, 3))):
+            direction = generator.normal(size=3)  # uniform on the sphere
+            warm = generator.uniform(0.75, 1.0)
+            color = (1.0, float(0.5 * (1.0 + warm)), float(warm)) if generator.random() < 0.5 else \
+                (float(warm), float(0.5 * (1.0 + warm)), 1.0)
+            lights.append(Light("directional", color=color, intensity=float(generator.uniform(1.5, 4.0)),
+                                direction=tuple(direction.tolist())))
+        return Lighting(ambient=(ambient, ambient, ambient), lights=tuple(lights))
     if style != "scene":
         raise ValueError(f"style: expected one of {LIGHTING_STYLES}, got {style!r}")
     ambient = tuple(float(a) for a in generator.uniform(0.1, 0.45) * generator.uniform(0.85, 1.0, 3))
