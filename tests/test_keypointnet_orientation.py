@@ -100,9 +100,13 @@ def test_only_a_single_half_turn_is_accepted():
 def test_symmetric_demo_object_maps_onto_itself_by_its_half_turn_only(tmp_path):
     from paz6d.assets.demo_object import HALF_TURN_Z, make_symmetric_demo_mesh, write_symmetric_demo_object
 
-    vertices = np.asarray(make_symmetric_demo_mesh().vertices)
+    mesh = make_symmetric_demo_mesh()
+    vertices = np.asarray(mesh.vertices)
     tree = cKDTree(vertices)
-    assert tree.query(vertices @ HALF_TURN_Z[:3, :3].T)[0].max() < 2e-3  # metres
+    assert tree.query(vertices @ HALF_TURN_Z[:3, :3].T)[0].max() < 1e-9  # metres
+    centres, colours = mesh.triangles_center, np.asarray(mesh.visual.face_colors)
+    distance, index = cKDTree(centres).query(centres @ HALF_TURN_Z[:3, :3].T)
+    assert distance.max() < 1e-9 and np.array_equal(colours[index], colours)  # the colours too
     for other in (half_turn([1, 0, 0]), half_turn([0, 1, 0])):
         assert tree.query(vertices @ other[:3, :3].T)[0].max() > 1e-2
     ply = write_symmetric_demo_object(tmp_path)

@@ -27,18 +27,16 @@ _PALETTES = {
 }
 
 
-def _coloured_part(mesh: trimesh.Trimesh, palette: np.ndarray, cell: float,
-                   symmetric_stripes: bool = False) -> trimesh.Trimesh:
+def _coloured_part(mesh: trimesh.Trimesh, palette: np.ndarray, cell: float) -> trimesh.Trimesh:
     """Subdivides ``mesh`` to edges <= ``cell`` metres and colours each face by the side it faces
-    (``palette`` row per side: -x, +x, -y, +y, -z, +z) with a band of darker stripes along x (placed by
-    ``|x|`` with ``symmetric_stripes``); faces are unmerged so colours stay per face."""
+    (``palette`` row per side: -x, +x, -y, +y, -z, +z) with a band of darker stripes along x;
+    faces are unmerged so colours stay per face."""
     vertices, faces = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=cell)
     part = trimesh.Trimesh(vertices, faces, process=False)
     normals = part.face_normals
     axis = np.argmax(np.abs(normals), axis=1)
     side = axis * 2 + (normals[np.arange(len(normals)), axis] > 0)
-    x = part.triangles_center[:, 0]
-    stripe = (np.floor((np.abs(x) if symmetric_stripes else x) / cell).astype(int) % 3 == 0) & (axis != 0)
+    stripe = (np.floor(part.triangles_center[:, 0] / cell).astype(int) % 3 == 0) & (axis != 0)
     rgb = palette[side] * np.where(stripe, 0.55, 1.0)[:, None]
     face_colors = np.concatenate([np.round(rgb), np.full((len(rgb), 1), 255)], axis=1).astype(np.uint8)
     part = trimesh.Trimesh(part.vertices[part.faces].reshape(-1, 3), np.arange(3 * len(part.faces)).reshape(-1, 3),
@@ -73,9 +71,9 @@ def write_demo_object(directory: str | Path) -> Path:
     return ply
 
 
-#: RGB per side (-x, +x, -y, +y, -z, +z) of the symmetric object's parts: opposite x and y sides alike.
+#: RGB per side (-x, +x, -y, +y, -z, +z) of the parts of one half of the symmetric object.
 _SYMMETRIC_PALETTES = {
-    "body": np.array([[200, 40, 40], [200, 40, 40], [40, 80, 200], [40, 80, 200], [240, 240, 235], [230, 200, 40]]),
+    "body": np.array([[120, 30, 30], [200, 40, 40], [40, 80, 200], [40, 80, 200], [240, 240, 235], [230, 200, 40]]),
     "handle": np.array([[60, 200, 220]] * 6),
     "block": np.array([[250, 140, 20], [250, 140, 20], [90, 50, 30], [90, 50, 30], [250, 140, 20], [30, 30, 30]]),
 }
@@ -86,19 +84,24 @@ HALF_TURN_Z = np.diag([-1.0, -1.0, 1.0, 1.0])
 def make_symmetric_demo_mesh() -> trimesh.Trimesh:
     """A demo object whose only symmetry is a half turn about z (:data:`HALF_TURN_Z`), in metres (about
     0.13 m diameter), vertex coloured: a body box with a handle at each end and two blocks on top at
-    opposite corners; top and bottom differ, so no other rotation maps it onto itself."""
-    body = trimesh.creation.box(extents=(0.08, 0.05, 0.04))
-    parts = [_coloured_part(body, _SYMMETRIC_PALETTES["body"], 0.012, symmetric_stripes=True)]
-    for sign in (1.0, -1.0):
-        handle = trimesh.creation.cylinder(radius=0.011, height=0.05, sections=16)
-        handle.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
-        handle.apply_translation((sign * 0.05, 0.0, -0.005))
-        block = trimesh.creation.box(extents=(0.025, 0.02, 0.025))
-        block.apply_translation((sign * 0.022, sign * 0.012, 0.032))
-        parts += [_coloured_part(handle, _SYMMETRIC_PALETTES["handle"], 0.012),
-                  _coloured_part(block, _SYMMETRIC_PALETTES["block"], 0.012, symmetric_stripes=True)]
-    merged = trimesh.util.concatenate(parts)
-    merged.apply_translation(-merged.bounds.mean(axis=0))
+    opposite corners; top and bottom differ, so no other rotation maps it onto itself.
+
+    One half (x > 0: half the body, a handle, a block) is built and coloured, then joined with its copy
+    turned by :data:`HALF_TURN_Z`, so geometry and colours are exactly symmetric."""
+    body = trimesh.creation.box(extents=(0.04, 0.05, 0.04))
+    body.apply_translation((0.02, 0.0, 0.0))
+    handle = trimesh.creation.cylinder(radius=0.011, height=0.05, sections=16)
+    handle.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
+    handle.apply_translation((0.05, 0.0, -0.005))
+    block = trimesh.creation.box(extents=(0.025, 0.02, 0.025))
+    block.apply_translation((0.022, 0.012, 0.032))
+    half = trimesh.util.concatenate([_coloured_part(mesh, _SYMMETRIC_PALETTES[name], 0.012) for mesh, name in
+                                     ((body, "body"), (handle, "handle"), (block, "block"))])
+    turned = half.copy()
+    turned.apply_transform(HALF_TURN_Z)
+    merged = trimesh.util.concatenate([half, turned])
+    low, high = merged.bounds
+    merged.apply_translation((0.0, 0.0, -0.5 * (low[2] + high[2])))  # centred; x and y already are
     return merged
 
 
