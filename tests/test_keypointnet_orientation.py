@@ -95,6 +95,9 @@ def test_only_a_single_half_turn_is_accepted():
     quarter[:3, :3] = Rotation.from_euler("z", 90, degrees=True).as_matrix()
     with pytest.raises(ValueError, match="needs a half-turn symmetry .180 degrees., got a rotation of 90.0"):
         ko.half_turn_symmetry(quarter[None], "obj 3")
+    assert ko.is_single_half_turn(half_turn([0, 0, 1])[None]) and ko.is_single_half_turn(half_turn([1, 0, 0]).ravel())
+    assert not ko.is_single_half_turn(np.zeros((0, 4, 4))) and not ko.is_single_half_turn(quarter[None])
+    assert not ko.is_single_half_turn(np.stack([half_turn([0, 0, 1]), half_turn([1, 0, 0])]))
 
 
 def test_symmetric_demo_object_maps_onto_itself_by_its_half_turn_only(tmp_path):

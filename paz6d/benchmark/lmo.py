@@ -41,6 +41,7 @@ from paz6d.datasets.bop import read_pose_results
 from paz6d.datasets.bop.models import MODELS_INFO, load_models_info
 from paz6d.estimate import estimate
 from paz6d.keypointnet.config import KeypointTraining
+from paz6d.keypointnet.orientation import is_single_half_turn
 from paz6d.keypointnet.train import train_keypointnet
 from paz6d.ssd.config import SSDTraining
 
@@ -191,7 +192,7 @@ def _stage_pose(job: Benchmark, obj_id: int) -> dict:
                                               seed=job.seed, workers=job.settings.workers,
                                               steps=job.settings.keypointnet_steps, progress=job.progress,
                                               overrides={"views": job.settings.keypointnet_views},
-                                              orientation_network=len(symmetries) == 1))
+                                              orientation_network=is_single_half_turn(symmetries)))
 
 
 def _estimate_args(job: Benchmark, condition: str) -> list[str]:

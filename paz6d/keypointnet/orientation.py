@@ -26,7 +26,8 @@ Numpy only (the network side is in :mod:`paz6d.keypointnet.model`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,23 @@ SAFE_COMPONENT = 0.35
 CHARTS = 3
 
 
+def _half_turn_problem(symmetries: np.ndarray) -> str | None:
+    """Why ``symmetries (S, 4, 4)`` is not exactly one half turn, or ``None`` when it is."""
+    if len(symmetries) != 1:
+        return f"the orientation network handles exactly one discrete symmetry (a half turn), got {len(symmetries)}"
+    angle = np.degrees(np.arccos(np.clip((np.trace(symmetries[0][:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+    if abs(angle - 180.0) > 5.0:
+        return (f"the orientation network needs a half-turn symmetry (180 degrees), "
+                f"got a rotation of {angle:.1f} degrees")
+    return None
+
+
+def is_single_half_turn(symmetries: np.ndarray) -> bool:
+    """Whether ``symmetries (S, 4, 4)`` (e.g. a BOP object's ``symmetries_discrete``) is exactly one half
+    turn, i.e. whether the orientation network applies."""
+    return _half_turn_problem(np.asarray(symmetries, np.float64).reshape(-1, 4, 4)) is None
+
+
 def half_turn_symmetry(symmetries: np.ndarray, where: str) -> np.ndarray:
     """The one 2-fold symmetry ``(4, 4)`` of ``symmetries (S, 4, 4)``.
 
@@ -43,13 +61,9 @@ def half_turn_symmetry(symmetries: np.ndarray, where: str) -> np.ndarray:
         ValueError: naming ``where``, when there is not exactly one symmetry or it is not a half turn.
     """
     symmetries = np.asarray(symmetries, np.float64).reshape(-1, 4, 4)
-    if len(symmetries) != 1:
-        raise ValueError(f"{where}: the orientation network handles exactly one discrete symmetry (a half turn), "
-                         f"got {len(symmetries)}")
-    angle = np.degrees(np.arccos(np.clip((np.trace(symmetries[0][:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
-    if abs(angle - 180.0) > 5.0:
-        raise ValueError(f"{where}: the orientation network needs a half-turn symmetry (180 degrees), "
-                         f"got a rotation of {angle:.1f} degrees")
+    problem = _half_turn_problem(symmetries)
+    if problem is not None:
+        raise ValueError(f"{where}: {problem}")
     return symmetries[0]
 
 
@@ -135,16 +149,16 @@ def one_hot(charts: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ChartSymmetry:
-    """A half-turn symmetry ``(4, 4)`` (metres) and its chart axis (:func:`chart_axis`)."""
+    """A half-turn symmetry ``(4, 4)`` (metres, checked) and its chart axis (:func:`chart_axis`)."""
 
     symmetry: np.ndarray
-    axis: np.ndarray = field(default=None)
 
     def __post_init__(self):
-        symmetry = half_turn_symmetry(self.symmetry, "symmetry")
-        object.__setattr__(self, "symmetry", symmetry)
-        if self.axis is None:
-            object.__setattr__(self, "axis", chart_axis(symmetry))
+        object.__setattr__(self, "symmetry", half_turn_symmetry(self.symmetry, "symmetry"))
+
+    @cached_property
+    def axis(self) -> np.ndarray:
+        return chart_axis(self.symmetry)
 
     def for_outputs(self, T_model2cam: np.ndarray, outputs: dict) -> np.ndarray:
         """The poses ``(V, 4, 4)`` that the network's predicted charts (``outputs["chart"]``) pick."""
