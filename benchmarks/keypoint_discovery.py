@@ -145,7 +145,8 @@ def main() -> None:
     report["load_average"] = list(np.round(np.loadtxt("/proc/loadavg", usecols=(0, 1, 2)), 2))
     (args.out / "proxy.json").write_text(json.dumps(report, indent=2, default=str))
     mode = report["modes"][args.mode]
-    print(json.dumps({"pnp": {key: mode["pnp"].get(key) for key in ("recall_0.1d", "rotation_error_deg")},
+    print(json.dumps({**{variant: {key: mode[variant].get(key) for key in ("recall_0.1d", "rotation_error_deg")}
+                         for variant in ("pnp", "pnp_13_crops")},
                       "training": {key: mode["training"].get(key) for key in
                                    ("reprojection_px_median", "cross_view_px_median", "usable_keypoints",
                                     "chart_accuracy")},

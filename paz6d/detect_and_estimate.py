@@ -62,8 +62,9 @@ def bop_object_id(class_name: str) -> int | None:
     return int(match.group(1)) if match else None
 
 
-def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None = None):
-    """The pose pipeline of a run directory, its method found by :func:`paz6d.run_dirs.method_of`.
+def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None = None, keypoint_crops: int = 1):
+    """The pose pipeline of a run directory, its method found by :func:`paz6d.run_dirs.method_of`;
+    ``keypoint_crops`` is the ``crops`` option of a :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`.
 
     Returns:
         ``(method, estimator)``: ``"aae"`` with an :class:`~paz6d.aae.pipeline.ImplicitPose6D` or
@@ -81,7 +82,7 @@ def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None
     if method == "keypointnet":
         from paz6d.keypointnet.pipeline import KeypointPose6D
 
-        return method, KeypointPose6D(run_dir, camera, class_name=class_name)
+        return method, KeypointPose6D(run_dir, camera, crops=keypoint_crops, class_name=class_name)
     raise ValueError(f"run_dir: {run_dir} is a {method} run directory, not a pose model (aae or keypointnet)")
 
 

@@ -36,6 +36,7 @@ from paz6d.backend.files import write_json_atomically
 from paz6d.backend.paths import check_output_file, check_outputs_apart, check_plain_name
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
+from paz6d.keypointnet.config import CROP_JITTERS
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION, read_targets
 from paz6d.ssd import run_dir as ssd_run_dir
@@ -81,6 +82,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="refine every pose by ICP (open3d) against the image's depth (depth/<im_id>.png of "
                              "the split, times depth_scale of scene_camera.json); a refinement that fails its "
                              "checks keeps the RGB pose")
+    parser.add_argument("--keypoint-crops", type=int, default=1,
+                        help=f"KeypointNet runs: crops per box, 1 to {len(CROP_JITTERS)} (more: more accurate, "
+                             f"that many network inputs; see KeypointPose6D's crops; default 1)")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
                         help="progress bar (default: --progress)")
 
@@ -223,15 +227,16 @@ class _Estimates:
         return result
 
 
-def _estimator(method: str, run_dir: Path):
+def _estimator(method: str, run_dir: Path, keypoint_crops: int = 1):
     """The pose pipeline of one run directory (``method`` as :func:`paz6d.run_dirs.method_of` names it),
     loaded once; each image's camera is given per call."""
     from paz6d.detect_and_estimate import load_pose_estimator
 
-    return load_pose_estimator(run_dir)[1]
+    return load_pose_estimator(run_dir, keypoint_crops=keypoint_crops)[1]
 
 
-def _load_estimators(runs: dict[int, tuple[Path, str]]) -> tuple[dict[int, object], dict[int, str]]:
+def _load_estimators(runs: dict[int, tuple[Path, str]],
+                     keypoint_crops: int = 1) -> tuple[dict[int, object], dict[int, str]]:
     """``({obj_id: estimator}, {obj_id: reason})``: a run that loads but can never give a pose (a KeypointNet
     with fewer than 4 usable keypoints, a ``PnPError``) is left out with a warning, so its instances score as
     misses and the other objects are still estimated.
@@ -244,7 +249,7 @@ def _load_estimators(runs: dict[int, tuple[Path, str]]) -> tuple[dict[int, objec
     estimators, unusable = {}, {}
     for obj_id, (run_dir, method) in runs.items():
         try:
-            estimators[obj_id] = _estimator(method, run_dir)
+            estimators[obj_id] = _estimator(method, run_dir, keypoint_crops)
         except PnPError as error:
             unusable[obj_id] = str(error)
     if not estimators:
@@ -256,7 +261,7 @@ def _load_estimators(runs: dict[int, tuple[Path, str]]) -> tuple[dict[int, objec
 
 def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path, split: str, box: str = "obj",
                                min_visible: float = TARGET_MIN_VISIBLE_FRACTION, progress: bool = True,
-                               depth: bool = False) -> dict:
+                               depth: bool = False, keypoint_crops: int = 1) -> dict:
     """Every visible-enough instance of the runs' objects, from its ground-truth box.
 
     Returns:
@@ -289,7 +294,7 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
             counts[instance.obj_id] = counts.get(instance.obj_id, 0) + 1
         targets += [Target(sample.scene_id, sample.im_id, obj_id, count) for obj_id, count in sorted(counts.items())]
         if estimators is None:
-            estimators, unusable = _load_estimators(runs)
+            estimators, unusable = _load_estimators(runs, keypoint_crops)
         images += 1
         poses, seconds = [], 0.0
         extra = {"depth": checked_depth(sample, dataset, split)} if depth else {}
@@ -346,7 +351,7 @@ def split_images(dataset: Path, split: str):
 
 def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path, dataset: Path, split: str,
                            score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True,
-                           depth: bool = False) -> dict:
+                           depth: bool = False, keypoint_crops: int = 1) -> dict:
     """Detect every RGB image of the split, then estimate each detection of an object that has a run.
 
     Returns:
@@ -363,7 +368,7 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
     from paz6d.ssd.pipeline import DetectSingleShot
 
     detector = DetectSingleShot(detector_dir, score_threshold=score_threshold)
-    estimators, unusable = _load_estimators(runs)
+    estimators, unusable = _load_estimators(runs, keypoint_crops)
     pipeline = DetectAndEstimatePose6D(detector, estimators)
     estimates, detections, images = _Estimates(), [], []
     skipped_images, failed, without_model, total = 0, {obj_id: 0 for obj_id in runs}, {}, 0.0
@@ -479,6 +484,8 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
     check_plain_name(args.split, "--split")
     if not 0.0 <= args.min_visible <= 1.0:
         raise ValueError(f"--min-visible: expected a visible fraction in [0, 1], got {args.min_visible}")
+    if not 1 <= args.keypoint_crops <= len(CROP_JITTERS):
+        raise ValueError(f"--keypoint-crops: expected 1 to {len(CROP_JITTERS)} crops per box, got {args.keypoint_crops}")
     if not 0.0 <= args.score_threshold <= 1.0:
         raise ValueError(f"--score-threshold: expected a score in [0, 1], got {args.score_threshold}")
     if args.detections_out is not None and args.detector is None:
@@ -511,14 +518,14 @@ def estimate(args: argparse.Namespace) -> dict:
     objects = sorted(runs)
     if args.detector is None:
         found = estimate_with_ground_truth(runs, args.dataset, args.split, args.box, args.min_visible, args.progress,
-                                           args.depth)
+                                           args.depth, args.keypoint_crops)
         targets = found["targets"]
         if found["images"] == 0:
             raise ValueError(f"{args.dataset}: no instance of objects {objects} with an RGB image and visible "
                              f"fraction >= {args.min_visible} in split {args.split!r}")
     else:
         found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
-                                       args.progress, args.depth)
+                                       args.progress, args.depth, args.keypoint_crops)
         targets = detector_targets(args.dataset, found["images"], runs)
         if not found["images"]:
             raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "

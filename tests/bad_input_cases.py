@@ -828,6 +828,7 @@ def estimate_cases() -> list[Case]:
         "--out": [(("{world}/bop",), "bop"), (("/dev/null",), "/dev/null")],
         "--method": [(("keypoints",), "")],
         "--score-threshold": [(("2",), ""), (("nan",), "")],
+        "--keypoint-crops": [(("0",), "--keypoint-crops"), (("14",), "--keypoint-crops")],
         "--detector": [(("{case}/none",), "none"), (("{world}/runs/aae",), "aae run directory")],
         "--detections-out": [(("{out}/d.json",), "only with --detector")],
     })

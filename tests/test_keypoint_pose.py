@@ -177,17 +177,45 @@ def run_dir(tmp_path_factory):
 def test_pnp_lifting_recovers_a_known_pose_from_perfect_keypoints(run_dir):
     from paz6d.keypointnet.pipeline import KeypointPose6D
 
-    estimator = KeypointPose6D(run_dir, Camera(K, 640, 480))
     T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
-    perfect = Keypoints2D(transform_and_project(estimator.points_model, T, K), np.ones(8))
-    pose = estimator.pose_from_keypoints(perfect, window_side=100)
-    np.testing.assert_allclose(pose.to_matrix(), T, atol=1e-7)  # Levenberg-Marquardt stops near 1e-8
-    assert pose.score == 1.0
+    for weighted in (False, True):
+        estimator = KeypointPose6D(run_dir, Camera(K, 640, 480), weighted_pnp=weighted)
+        perfect = Keypoints2D(transform_and_project(estimator.points_model, T, K), np.ones(8))
+        pose = estimator.pose_from_keypoints(perfect, window_side=100)
+        np.testing.assert_allclose(pose.to_matrix(), T, atol=1e-7)  # Levenberg-Marquardt stops near 1e-8
+        assert pose.score == 1.0
+    estimator = KeypointPose6D(run_dir, Camera(K, 640, 480), weighted_pnp=False)
     corrupted = np.array(perfect.points)
     corrupted[2] += [35.0, -20.0]  # one wrong keypoint: RANSAC drops it
     pose = estimator.pose_from_keypoints(Keypoints2D(corrupted, np.ones(8)), window_side=100)
     np.testing.assert_allclose(pose.to_matrix(), T, atol=1e-6)
     assert pose.score == pytest.approx(7 / 8)
+    # weighted, a wrong keypoint that says it is uncertain (score 1 / (1 + 40 px)) hardly moves the pose
+    scores = np.ones(8)
+    scores[2] = 1.0 / 41.0
+    weighted = KeypointPose6D(run_dir, Camera(K, 640, 480)).pose_from_keypoints(Keypoints2D(corrupted, scores),
+                                                                                 window_side=100)
+    np.testing.assert_allclose(weighted.to_matrix(), T, atol=2e-4)
+
+
+def test_weighted_pnp_beats_plain_pnp_when_the_scores_tell_the_noisy_keypoints(run_dir):
+    """Keypoints with 0.3 or 3 px noise, scores ``1 / (1 + sigma)`` in crop pixels (crop = image here):
+    weighting by them gives smaller translation errors than treating all alike, over seeded trials."""
+    from paz6d.keypointnet.pipeline import KeypointPose6D
+
+    camera = Camera(K, 640, 480)
+    plain, weighted = (KeypointPose6D(run_dir, camera, weighted_pnp=flag) for flag in (False, True))
+    rng = np.random.default_rng(3)
+    errors = {"plain": [], "weighted": []}
+    for trial in range(30):
+        T = _pose(rng.normal(0, 0.5, 3), [0.0, 0.0, 0.5])
+        sigma = np.where(np.arange(8) % 2 == 0, 0.3, 3.0)
+        noisy = transform_and_project(plain.points_model, T, K) + rng.normal(0, 1, (8, 2)) * sigma[:, None]
+        keypoints = Keypoints2D(noisy, 1.0 / (1.0 + sigma))
+        for name, estimator in (("plain", plain), ("weighted", weighted)):
+            pose = estimator.pose_from_keypoints(keypoints, window_side=estimator.input_size)
+            errors[name].append(np.linalg.norm(pose.translation - T[:3, 3]))
+    assert np.median(errors["weighted"]) < 0.6 * np.median(errors["plain"])
 
 
 def test_fewer_than_four_usable_keypoints_is_a_clear_error(run_dir, tmp_path):
@@ -328,8 +356,8 @@ def test_pipeline_steps_can_be_read_replaced_inserted_and_removed(run_dir):
 
     camera = Camera(K, 640, 480)
     estimator = KeypointPose6D(run_dir, camera, depth_from_box=True)
-    assert estimator.names == ["crop", "predict", "decode", "score", "to_image", "to_keypoints2d", "solve_pnp",
-                               "depth_from_box"]
+    assert estimator.names == ["jitter", "crop", "predict", "decode", "to_image", "merge_crops", "score",
+                               "to_keypoints2d", "solve_pnp", "depth_from_box"]
     T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
     perfect = transform_and_project(estimator.points_model, T, K)
     image = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)
@@ -338,8 +366,8 @@ def test_pipeline_steps_can_be_read_replaced_inserted_and_removed(run_dir):
     old = estimator.replace("to_image", KeyedStep(lambda uv, window: perfect, ("uv", "windows"), "points",
                                                   "to_image", per_sample=True))
     assert old.name == "to_image" and estimator["to_image"] is not old
-    estimator.replace("score", KeyedStep(lambda spread: np.ones(len(spread)), "spread", "scores", "score",
-                                         per_sample=True))
+    estimator.replace("score", KeyedStep(lambda spread, sigma: np.ones(len(spread)), ("spread", "sigma"), "scores",
+                                         "score", per_sample=True))
     pose = estimator(image, box)
     np.testing.assert_allclose(pose.to_matrix(), T, atol=1e-6)
     # a step inserted after the keypoints corrupts them: the pose changes
@@ -359,8 +387,67 @@ def test_pipeline_steps_can_be_read_replaced_inserted_and_removed(run_dir):
     assert moved.translation[2] != 1.0
     estimator.remove("depth_from_box")
     assert estimator(image, box) == fixed
-    with pytest.raises(ValueError, match=r"no step named 'missing'; steps are \['crop'"):
+    with pytest.raises(ValueError, match=r"no step named 'missing'; steps are \['jitter', 'crop'"):
         estimator.remove("missing")
+
+
+def test_jitter_boxes_moves_and_scales_each_box_and_keeps_the_plain_one_first():
+    from paz6d.keypointnet.pipeline import CROP_JITTERS, JitterBoxes
+
+    image = np.zeros((4, 4, 3))
+    images, boxes = JitterBoxes(7)([image, image], [(100, 50, 200, 150), Box2D.coerce((10, 20, 30, 60))])
+    assert len(images) == len(boxes) == 14 and images[7] is image
+    np.testing.assert_allclose(boxes[0], [100, 50, 200, 150])
+    np.testing.assert_allclose(boxes[1], [106, 50, 206, 150])  # 6 % of the width to the right
+    np.testing.assert_allclose(boxes[6], [97, 47, 203, 153])   # 6 % larger
+    np.testing.assert_allclose(boxes[7], [10, 20, 30, 60])
+    np.testing.assert_allclose(boxes[11], [10, 17.6, 30, 57.6])  # 6 % of the height up
+    for count in (0, len(CROP_JITTERS) + 1):
+        with pytest.raises(ValueError, match=f"crops: expected 1 to {len(CROP_JITTERS)}"):
+            JitterBoxes(count)
+
+
+def test_merge_crops_averages_keypoints_and_measures_their_scatter_against_a_loop():
+    from paz6d.keypointnet.pipeline import MIN_SIGMA, MergeCrops
+
+    rng = np.random.default_rng(0)
+    points = [rng.uniform(0, 100, (5, 2)) for _ in range(6)]
+    spread = [rng.uniform(0.2, 4.0, 5) for _ in range(6)]
+    windows = [(0, 0, side) for side in (64, 80, 64, 64, 70, 58)]
+    merged, mean_spread, sigma, plain = MergeCrops(3, 32)(points, spread, windows)
+    assert len(merged) == 2 and plain == [windows[0], windows[3]]
+    for sample in range(2):
+        crops = range(3 * sample, 3 * sample + 3)
+        scale = 32 / windows[3 * sample][2]  # image pixels -> pixels of the plain crop
+        for k in range(5):
+            spreads = [spread[c][k] * windows[c][2] / 32 * scale for c in crops]
+            weights = [1 / max(value, MIN_SIGMA) ** 2 for value in spreads]
+            mean = sum(w * points[c][k] for w, c in zip(weights, crops)) / sum(weights)
+            np.testing.assert_allclose(merged[sample][k], mean)
+            assert mean_spread[sample][k] == pytest.approx(np.mean(spreads))
+            scatter = np.sqrt(np.mean([np.sum((points[c][k] - mean) ** 2) for c in crops]) / 2) * scale
+            assert sigma[sample][k] == pytest.approx(max(scatter, MIN_SIGMA))
+    single = MergeCrops(1, 32)(points[:2], spread[:2], windows[:2])
+    np.testing.assert_allclose(single[0][1], points[1])
+    np.testing.assert_allclose(single[2][0], np.maximum(spread[0], MIN_SIGMA))
+
+
+def test_several_crops_recover_the_pose_from_perfect_keypoints(run_dir):
+    from paz6d.abstract import KeyedStep
+    from paz6d.keypointnet.pipeline import KeypointPose6D
+
+    T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
+    estimator = KeypointPose6D(run_dir, Camera(K, 640, 480), crops=5, max_spread=1e9)  # untrained: wide maps
+    perfect = transform_and_project(estimator.points_model, T, K)
+    estimator.replace("to_image", KeyedStep(lambda uv, window: perfect, ("uv", "windows"), "points", "to_image",
+                                            per_sample=True))
+    image = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    box = projected_box(estimator.points_model, T, K)
+    values = estimator.run_steps(estimator._values([image, image], [box, box], None), stop="merge_crops")
+    assert len(values["crops"]) == 10 and len({window for window in values["windows"]}) == 5
+    keypoints = estimator.detect(image, box)
+    np.testing.assert_allclose(keypoints.points, perfect)
+    np.testing.assert_allclose(estimator(image, box).to_matrix(), T, atol=1e-6)
 
 
 def test_camera_per_call_defaults_to_the_constructor_camera(run_dir):
@@ -375,8 +462,8 @@ def test_camera_per_call_defaults_to_the_constructor_camera(run_dir):
         perfect = transform_and_project(estimator.points_model, T, K)
         estimator.replace("to_image", KeyedStep(lambda uv, window: perfect, ("uv", "windows"), "points", "to_image",
                                                 per_sample=True))
-        estimator.replace("score", KeyedStep(lambda spread: np.ones(len(spread)), "spread", "scores", "score",
-                                             per_sample=True))
+        estimator.replace("score", KeyedStep(lambda spread, sigma: np.ones(len(spread)), ("spread", "sigma"),
+                                             "scores", "score", per_sample=True))
         return estimator
 
     by_matrix = with_perfect_keypoints(KeypointPose6D(run_dir, K))

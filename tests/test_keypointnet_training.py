@@ -334,7 +334,7 @@ def test_keypoint_demo_trains_evaluates_and_reports(mesh_path, tmp_path, capsys)
     report = run_keypoint_demo(tmp_path, mesh_path, mesh_scale=1e-3, test_images=3, workers=0, steps=10,
                                progress=False, overrides=TINY)
     result = report["modes"]["supervised"]
-    for variant in ("pnp", "pnp_depth_from_box"):
+    for variant in ("pnp", "pnp_13_crops", "pnp_depth_from_box"):
         assert result[variant]["count"] == 3 and 0.0 <= result[variant]["recall_0.1d"] <= 1.0
         assert result[variant]["metric"] == "ADD"
         # 10 steps leave too few usable lifted keypoints: every image is a reported miss, not a crash

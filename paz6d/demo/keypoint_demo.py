@@ -9,8 +9,9 @@ Outputs in ``out_dir``: ``keypointnet_<mode>/`` (run directories that
 :class:`~paz6d.keypointnet.pipeline.KeypointPose6D` loads), ``keypoint_report.json`` (every number),
 ``keypoint_recall.png`` (ADD(-S) recall against threshold) and ``keypoint_<mode>_examples.png``
 (crops with predicted keypoints, the ground-truth 3D box in green and the estimate in red).
-Each mode is scored twice: plain PnP (``pnp``) and PnP with the depth fitted to the ground-truth
-box (``pnp_depth_from_box``, see :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`).
+Each mode is scored three times (:data:`EVALUATIONS`): PnP on one crop per box (``pnp``, the
+pipeline's default), on 13 crops per box (``pnp_13_crops``) and on one crop with the depth fitted to the
+ground-truth box (``pnp_depth_from_box``); see :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`.
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ from paz6d.keypointnet.config import KeypointTraining
 from paz6d.keypointnet.train import train_keypointnet
 
 TEST_SEED_OFFSET = 1_000_003  # test images never share a seed with training/validation views
+MANY_CROPS = 13
+#: ``(report key, depth_from_box, crops per box)`` of each scoring of a mode.
+EVALUATIONS = (("pnp", False, 1), (f"pnp_{MANY_CROPS}_crops", False, MANY_CROPS), ("pnp_depth_from_box", True, 1))
 
 
 def mode_run_dir(out_dir: str | Path, mode: str) -> Path:
@@ -35,14 +39,15 @@ def mode_run_dir(out_dir: str | Path, mode: str) -> Path:
 
 
 def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object_diameter: float, camera,
-                           symmetric: bool = False, depth_from_box: bool = False, chunk: int = 25) -> tuple[dict, list]:
+                           symmetric: bool = False, depth_from_box: bool = False, crops: int = 1,
+                           chunk: int = 25) -> tuple[dict, list]:
     """Scores :class:`KeypointPose6D` on rendered test images with their ground-truth boxes.
 
     Args:
         test: :class:`~paz6d.keypointnet.views.TestImages`.
         points: ``(N, 3)`` model points in metres (for ADD / ADD-S).
         symmetric: score with ADD-S (ADI) instead of ADD.
-        depth_from_box: the :class:`KeypointPose6D` option of that name.
+        depth_from_box, crops: the :class:`KeypointPose6D` options of those names.
     Returns:
         ``(metrics, poses)``: the :func:`~paz6d.demo.report.score_poses` summary (PnP failures are its
         ``failures``) plus ``milliseconds_per_crop``, ``error`` (why no image could be estimated, e.g.
@@ -56,7 +61,7 @@ def evaluate_keypoint_pose(run_dir: str | Path, test, points: np.ndarray, object
     problem = None
     started = time.perf_counter()
     try:
-        estimator = KeypointPose6D(run_dir, camera, depth_from_box=depth_from_box)
+        estimator = KeypointPose6D(run_dir, camera, crops=crops, depth_from_box=depth_from_box)
     except PnPError as error:  # e.g. too few usable lifted keypoints: every image is a miss
         problem = str(error)
     else:
@@ -167,13 +172,13 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
     curves = {}
     for mode, run_dir in runs.items():
         evaluations = {}
-        for variant, from_box in (("pnp", False), ("pnp_depth_from_box", True)):
+        for variant, from_box, crops in EVALUATIONS:
             metrics, poses = evaluate_keypoint_pose(run_dir, test, points, object_diameter, sampling.camera,
-                                                    symmetric, depth_from_box=from_box)
+                                                    symmetric, depth_from_box=from_box, crops=crops)
             curves[f"{mode}, {variant}"] = np.array([np.inf if value is None else value for value in metrics["errors_m"]])
             report["modes"][mode][variant] = {key: value for key, value in metrics.items() if key != "errors_m"}
             evaluations[variant] = metrics
-            if not from_box and metrics["error"] is None:
+            if variant == "pnp" and metrics["error"] is None:
                 _examples_png(out_dir / f"keypoint_{mode}_examples.png", run_dir, test, poses, sampling.camera, points)
         write_report(keypointnet_run_dir.evaluation_path(run_dir), evaluations)
     _recall_png(out_dir / "keypoint_recall.png", curves, object_diameter, "ADD-S" if symmetric else "ADD")
@@ -186,11 +191,13 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
 def _print_summary(report: dict, out_dir: Path) -> None:
     rows = []
     for mode, result in report["modes"].items():
-        plain, boxed = result["pnp"], result["pnp_depth_from_box"]
+        plain, boxed, cropped = result["pnp"], result["pnp_depth_from_box"], result[f"pnp_{MANY_CROPS}_crops"]
         rows += [(f"KeypointNet ({mode}): test images", f"{plain['count']}"),
                  ("keypoint re-projection (median)", number(result["training"].get("reprojection_px_median"),
                                                             unit=" px", digits=2)),
                  *pose_rows(plain, ", PnP"),
+                 (f"{cropped['metric']} recall @ 0.1 d, PnP, {MANY_CROPS} crops per box",
+                  number(cropped["recall_0.1d"], 100, " %")),
                  (f"{boxed['metric']} recall @ 0.1 d, PnP + depth_from_box", number(boxed["recall_0.1d"], 100, " %"))]
         if plain["error"]:
             rows.append(("why no estimate, PnP", plain["error"]))

@@ -33,6 +33,11 @@ CONFIGS: dict[str, dict] = {
                   "pair_angle": (30.0, 180.0), "pair_angle_ramp": 0.4, "anchor_start": 0.2, "anchor_every": 250,
                   "anchor_views": 256},
 }
+#: Test-time crops ``(shift x, shift y, scale)`` of the box, shifts in box widths/heights: the plain box
+#: first, then 6 % shifts along each axis, ±6 % scales, 4 % diagonal shifts and ±12 % scales.
+CROP_JITTERS = ((0.0, 0.0, 1.0), (0.06, 0.0, 1.0), (-0.06, 0.0, 1.0), (0.0, 0.06, 1.0), (0.0, -0.06, 1.0),
+                (0.0, 0.0, 0.94), (0.0, 0.0, 1.06), (0.04, 0.04, 1.0), (-0.04, 0.04, 1.0), (0.04, -0.04, 1.0),
+                (-0.04, -0.04, 1.0), (0.0, 0.0, 0.88), (0.0, 0.0, 1.12))
 MODES = ("discovery", "supervised")
 PRECISIONS = ("float32", "bfloat16")  # compute dtype of the network body (see build_keypointnet)
 LIFTINGS = ("triangulate", "median")

@@ -9,7 +9,12 @@ Example:
     >>> estimator = KeypointPose6D("runs/keypoints", camera)          # doctest: +SKIP
     >>> pose = estimator(image, (210, 140, 330, 260))                  # doctest: +SKIP
     >>> estimator.names                                                # doctest: +SKIP
-    ['crop', 'predict', 'decode', 'score', 'to_image', 'to_keypoints2d', 'solve_pnp']
+    ['jitter', 'crop', 'predict', 'decode', 'to_image', 'merge_crops', 'score', 'to_keypoints2d', 'solve_pnp']
+    >>> KeypointPose6D("runs/keypoints", camera, crops=13)(image, box)  # doctest: +SKIP
+
+With ``crops > 1`` each box is cropped several times, shifted and scaled a little
+(:data:`CROP_JITTERS`); the keypoints are averaged and their scatter over the crops weights PnP (the
+most accurate setting, ``crops`` network inputs per object; see ``docs/keypointnet.md``).
 """
 
 from __future__ import annotations
@@ -24,15 +29,81 @@ from paz6d.backend.boxes import check_box_in_image
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.checks import as_array
 from paz6d.backend.image import as_image
-from paz6d.backend.pnp import PnPError
+from paz6d.backend.pnp import PnPError, solve_pnp_weighted
 from paz6d.backend.square_crop import square_window
 from paz6d.keypointnet import run_dir as run_files
+from paz6d.keypointnet.config import CROP_JITTERS
 from paz6d.keypointnet.keypoints import DECODERS, decode_keypoints, keypoint_spread
 from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
 from paz6d.processors.pose import DepthFromBox, SolvePnP
 from paz6d.processors.predict import Predict
 from paz6d.processors.refine import RefineWithDepth
+
+#: Smallest keypoint uncertainty (crop pixels) used to weight PnP.
+MIN_SIGMA = 0.5
+
+
+class JitterBoxes(Processor):
+    """``(images, boxes)`` lists of ``B`` -> the same repeated ``count`` times per sample (``B * count``
+    entries, sample-major), the boxes moved by the first ``count`` of :data:`CROP_JITTERS`."""
+
+    def __init__(self, count: int, name: str | None = None):
+        super().__init__(name)
+        if not 1 <= int(count) <= len(CROP_JITTERS):
+            raise ValueError(f"crops: expected 1 to {len(CROP_JITTERS)} test-time crops, got {count}")
+        self.jitters = np.asarray(CROP_JITTERS[:int(count)])
+
+    def call(self, images: list, boxes: list) -> tuple[list, list]:
+        moved = []
+        for box in boxes:
+            x_min, y_min, x_max, y_max = box.to_array() if isinstance(box, Box2D) else np.asarray(box, float)
+            width, height = x_max - x_min, y_max - y_min
+            centre_x = 0.5 * (x_min + x_max) + self.jitters[:, 0] * width
+            centre_y = 0.5 * (y_min + y_max) + self.jitters[:, 1] * height
+            half_width, half_height = 0.5 * width * self.jitters[:, 2], 0.5 * height * self.jitters[:, 2]
+            moved.extend(np.stack([centre_x - half_width, centre_y - half_height, centre_x + half_width,
+                                   centre_y + half_height], axis=1))
+        return [image for image in images for _ in self.jitters], moved
+
+
+class MergeCrops(Processor):
+    """Keypoints of ``count`` crops per sample -> one set per sample, and how uncertain each keypoint is.
+
+    Inputs are lists of ``B * count`` entries (sample-major): image ``points (N, 2)``, ``spread (N,)`` in
+    pixels of each crop, ``windows``. Outputs are lists of ``B``: ``points`` (the crops' mean, weighted by
+    ``1 / spread²``), ``spread`` (mean) and ``sigma`` (the keypoint's uncertainty, at least
+    :data:`MIN_SIGMA`: the spread for one crop, the RMS scatter of the crops' keypoints around their mean
+    for several), both in pixels of the sample's plain crop, and the plain crop's ``windows``.
+
+    Args:
+        count: crops per sample.
+        size: side of the crops in pixels.
+    """
+
+    def __init__(self, count: int, size: int, name: str | None = None):
+        super().__init__(name)
+        self.count, self.size = int(count), int(size)
+
+    def call(self, points: list, spread: list, windows: list) -> tuple[list, list, list, list]:
+        merged_points, merged_spread, sigmas, plain_windows = [], [], [], []
+        for start in range(0, len(points), self.count):
+            sides = np.array([window[2] for window in windows[start:start + self.count]], dtype=np.float64)
+            spread_image = np.asarray(spread[start:start + self.count], np.float64) * sides[:, None] / self.size
+            keypoints = np.asarray(points[start:start + self.count], np.float64)
+            to_plain_crop = self.size / sides[0]
+            weights = 1.0 / np.maximum(spread_image * to_plain_crop, MIN_SIGMA) ** 2
+            mean = (keypoints * weights[..., None]).sum(axis=0) / weights.sum(axis=0)[:, None]
+            if self.count == 1:
+                sigma = spread_image[0] * to_plain_crop
+            else:
+                sigma = np.sqrt(((keypoints - mean) ** 2).sum(axis=-1).mean(axis=0) / 2.0) * to_plain_crop
+            merged_points.append(mean)
+            merged_spread.append(spread_image.mean(axis=0) * to_plain_crop)
+            sigmas.append(np.maximum(sigma, MIN_SIGMA))
+            plain_windows.append(windows[start])
+        return merged_points, merged_spread, sigmas, plain_windows
+
 
 class DecodeKeypoints(Processor):
     """KeypointNet outputs ``{"uv", "probabilities", ...}`` -> keypoints ``(B, N, 2)`` in crop pixels
@@ -55,49 +126,65 @@ class DecodeKeypoints(Processor):
 
 
 class ScoreKeypoints(Processor):
-    """Keypoint spreads ``(N,)`` (crop pixels) -> scores ``(N,)``: ``1 / (1 + spread)``, and 0 for keypoints
-    whose 3D point is not ``usable`` or whose spread exceeds ``max_spread``."""
+    """Keypoint spreads and uncertainties ``(N,)`` (crop pixels, :class:`MergeCrops`) -> scores ``(N,)``:
+    ``1 / (1 + sigma)``, and 0 for keypoints whose 3D point is not ``usable`` or whose spread exceeds
+    ``max_spread``."""
 
     def __init__(self, usable, max_spread: float, name: str | None = None):
         super().__init__(name)
         self.usable, self.max_spread = np.asarray(usable, dtype=bool), float(max_spread)
 
-    def call(self, spread) -> np.ndarray:
+    def call(self, spread, sigma) -> np.ndarray:
         spread = np.asarray(spread, dtype=np.float64)
-        scores = 1.0 / (1.0 + spread)
+        scores = 1.0 / (1.0 + np.asarray(sigma, dtype=np.float64))
         scores[(spread > self.max_spread) | ~self.usable] = 0.0
         return scores
 
 
 class KeypointPnP(Processor):
-    """``(keypoints: Keypoints2D, window, camera) -> Pose6D``: RANSAC PnP (EPnP, then Levenberg–Marquardt)
-    of the keypoints with a positive score against ``points_model``.
+    """``(keypoints: Keypoints2D, window, camera) -> Pose6D``: PnP of the keypoints with a positive score
+    against ``points_model``: RANSAC EPnP, then Levenberg–Marquardt on the reprojection error, each keypoint
+    weighted by its uncertainty when ``weighted``.
+
+    A score is ``1 / (1 + sigma)`` with ``sigma`` the keypoint's uncertainty in crop pixels
+    (:class:`ScoreKeypoints`); weighted, each keypoint's pixel covariance is ``(sigma * side / input_size)² I``
+    (:func:`~paz6d.backend.pnp.solve_pnp_weighted`, Huber loss at 3 standard deviations).
 
     Args:
         points_model: ``(N, 3)`` metres, object frame, in keypoint order.
         ransac_threshold: RANSAC inlier threshold in pixels *of the crop*, scaled by ``window[2] / input_size``.
         input_size: side of the network's crops.
         min_keypoints: fewest usable keypoints accepted.
+        weighted: weight the keypoints by their uncertainty (else all alike).
         class_name: written into the poses.
     Raises:
         PnPError: fewer than ``min_keypoints`` usable keypoints, or no PnP solution.
     """
 
     def __init__(self, points_model, ransac_threshold: float, input_size: int, min_keypoints: int = 4,
-                 class_name: str | None = None, name: str | None = None):
+                 weighted: bool = True, class_name: str | None = None, name: str | None = None):
         super().__init__(name)
         self.points_model = as_array(points_model, "points_model", (3,))
         self.ransac_threshold, self.input_size = float(ransac_threshold), int(input_size)
-        self.min_keypoints = int(min_keypoints)
+        self.min_keypoints, self.weighted, self.class_name = int(min_keypoints), bool(weighted), class_name
         self.solve = SolvePnP(method="epnp", ransac=True, class_name=class_name)
 
     def call(self, keypoints: Keypoints2D, window: tuple[int, int, int], camera: Camera) -> Pose6D:
-        usable = np.asarray(keypoints.scores) > 0
+        scores = np.asarray(keypoints.scores, dtype=np.float64)
+        usable = scores > 0
         if usable.sum() < self.min_keypoints:
             raise PnPError(f"keypoints: only {int(usable.sum())} of {len(usable)} keypoints are usable "
                            f"(need at least {self.min_keypoints} for PnP)")
-        threshold = self.ransac_threshold * window[2] / self.input_size
-        return self.solve(self.points_model[usable], keypoints.points[usable], camera, threshold)
+        to_image = window[2] / self.input_size
+        threshold = self.ransac_threshold * to_image
+        if not self.weighted:
+            return self.solve(self.points_model[usable], keypoints.points[usable], camera, threshold)
+        sigma = np.maximum(1.0 / scores[usable] - 1.0, MIN_SIGMA) * to_image
+        solution = solve_pnp_weighted(self.points_model[usable], np.asarray(keypoints.points)[usable], camera.K,
+                                      sigma[:, None, None] ** 2 * np.eye(2), "epnp", True, camera.distortion,
+                                      threshold)
+        return Pose6D.from_rotation_vector(solution.rotation_vector, solution.translation, self.class_name,
+                                           solution.inlier_fraction)
 
 
 def surface_points_of_run(run_dir: str | Path, count: int = 2000, seed: int = 0) -> np.ndarray:
@@ -123,11 +210,16 @@ class KeypointPose6D(SequentialProcessor):
     The steps pass a dict of per-sample lists (a batch) along; each is a
     :class:`~paz6d.abstract.KeyedStep` that reads and writes named values:
 
-    - ``crop``: ``images``, ``boxes`` -> ``crops``, ``windows`` (:class:`~paz6d.processors.crops.SquareCrop`);
+    - ``jitter``: ``images``, ``boxes`` -> ``crop_images``, ``crop_boxes``, ``crops`` entries per sample
+      (:class:`JitterBoxes`);
+    - ``crop``: ``crop_images``, ``crop_boxes`` -> ``crops``, ``windows``
+      (:class:`~paz6d.processors.crops.SquareCrop`);
     - ``predict``: ``crops`` -> ``outputs`` (:class:`~paz6d.processors.predict.Predict`);
     - ``decode``: ``outputs`` -> ``uv``, ``spread`` (:class:`DecodeKeypoints`);
-    - ``score``: ``spread`` -> ``scores`` (:class:`ScoreKeypoints`);
     - ``to_image``: ``uv``, ``windows`` -> ``points`` (:class:`~paz6d.processors.crops.CropToImage`);
+    - ``merge_crops``: ``points``, ``spread``, ``windows`` -> ``points``, ``spread``, ``sigma``, ``windows``,
+      one entry per sample (:class:`MergeCrops`);
+    - ``score``: ``spread``, ``sigma`` -> ``scores`` (:class:`ScoreKeypoints`);
     - ``to_keypoints2d``: ``points``, ``scores`` -> ``keypoints`` (:class:`~paz6d.processors.keypoints.ToKeypoints2D`);
     - ``solve_pnp``: ``keypoints``, ``windows``, ``cameras`` -> ``poses`` (:class:`KeypointPnP`);
     - ``depth_from_box`` (only with ``depth_from_box=True``): ``poses``, ``boxes``, ``cameras`` -> ``poses``
@@ -151,6 +243,9 @@ class KeypointPose6D(SequentialProcessor):
         min_keypoints: fewest usable keypoints accepted (PnP needs 4).
         decode: ``"local"`` (expectation around each map's peak, :func:`local_expectation`) or
             ``"global"`` (the network's expectation over the whole map).
+        crops: crops per box (1 to 13, :data:`CROP_JITTERS`): more are more accurate (the keypoints are
+            averaged and their scatter weights PnP) and take that many network inputs.
+        weighted_pnp: weight each keypoint in PnP by its uncertainty (:class:`KeypointPnP`).
         depth_from_box: after PnP, move the object along its viewing ray until its projected
             silhouette box has the size of ``box2d`` (:class:`~paz6d.processors.pose.DepthFromBox`). Much
             more accurate in depth when boxes are tight (ground truth, unoccluded objects); wrong for
@@ -160,7 +255,8 @@ class KeypointPose6D(SequentialProcessor):
 
     def __init__(self, run_dir: str | Path, camera: Camera | np.ndarray | None = None, ransac_threshold: float = 5.0,
                  max_spread: float | None = None, min_keypoints: int = 4, decode: str = "local",
-                 depth_from_box: bool = False, class_name: str | None = None):
+                 crops: int = 1, weighted_pnp: bool = True, depth_from_box: bool = False,
+                 class_name: str | None = None):
         super().__init__(name="KeypointPose6D")
         from paz6d.keypointnet.model import inference_function
 
@@ -183,16 +279,20 @@ class KeypointPose6D(SequentialProcessor):
         self.hull_points = run_files.read_object(self.run_dir)["hull_points"] if depth_from_box else None
         self.class_name = class_name if class_name is not None else config.get("class_name")
         max_spread = self.input_size / 4.0 if max_spread is None else float(max_spread)
-        self.add(KeyedStep(SquareCrop(self.margin, self.input_size), ("images", "boxes"), ("crops", "windows"),
-                           "crop", per_sample=True))
+        self.add(KeyedStep(JitterBoxes(crops), ("images", "boxes"), ("crop_images", "crop_boxes"), "jitter"))
+        self.add(KeyedStep(SquareCrop(self.margin, self.input_size), ("crop_images", "crop_boxes"),
+                           ("crops", "windows"), "crop", per_sample=True))
         self.add(KeyedStep(Predict(inference_function(self.model)), "crops", "outputs", "predict"))
         self.add(KeyedStep(DecodeKeypoints(self.stride, decode), "outputs", ("uv", "spread"), "decode"))
-        self.add(KeyedStep(ScoreKeypoints(self.usable, max_spread), "spread", "scores", "score", per_sample=True))
         self.add(KeyedStep(CropToImage(self.input_size), ("uv", "windows"), "points", "to_image", per_sample=True))
+        self.add(KeyedStep(MergeCrops(crops, self.input_size), ("points", "spread", "windows"),
+                           ("points", "spread", "sigma", "windows"), "merge_crops"))
+        self.add(KeyedStep(ScoreKeypoints(self.usable, max_spread), ("spread", "sigma"), "scores", "score",
+                           per_sample=True))
         self.add(KeyedStep(ToKeypoints2D(self.class_name), ("points", "scores"), "keypoints", "to_keypoints2d",
                            per_sample=True))
         self.add(KeyedStep(KeypointPnP(self.points_model, ransac_threshold, self.input_size, min_keypoints,
-                                       self.class_name), ("keypoints", "windows", "cameras"), "poses", "solve_pnp",
+                                       weighted_pnp, self.class_name), ("keypoints", "windows", "cameras"), "poses", "solve_pnp",
                            per_sample=True, failures=(PnPError,)))
         if depth_from_box:
             self.add(KeyedStep(DepthFromBox(self.hull_points), ("poses", "boxes", "cameras"), "poses",
@@ -231,8 +331,8 @@ class KeypointPose6D(SequentialProcessor):
     # -- public API -----------------------------------------------------------------------------
     def detect_batch(self, images, boxes, cameras: Sequence | None = None) -> list[Keypoints2D]:
         """Keypoints in image pixels for each ``(image, box)`` (the steps before ``solve_pnp``); scores
-        are ``1 / (1 + spread_px)`` (spread in crop pixels), and keypoints with an unusable 3D point or
-        a spread above ``max_spread`` get score 0."""
+        are ``1 / (1 + sigma)`` (uncertainty in crop pixels, :class:`MergeCrops`), and keypoints with an
+        unusable 3D point or a spread above ``max_spread`` get score 0."""
         if len(images) == 0 and len(boxes) == 0:
             return []
         return self.run_steps(self._values(images, boxes, cameras), stop="solve_pnp")["keypoints"]
