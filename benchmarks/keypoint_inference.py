@@ -4,7 +4,8 @@ For the quick and the full KeypointNet configurations (random weights: speed doe
 them) it measures, on a 640x480 image with a 150x120 px box:
 
 * ``KeypointPose6D(image, box)`` end to end, one crop per call (target <= 30 ms), with the network
-  run through its compiled ``tf.function`` (what the pipeline does);
+  run through its compiled ``tf.function`` (what the pipeline does); the same with unweighted PnP
+  (``weighted_pnp=False``) and with 13 crops per box (``crops=13``);
 * the network alone, compiled vs the obvious alternatives: the eager ``model(x)`` call and Keras'
   ``model.predict(x)``;
 * ``estimate_batch`` with 25 crops per call, per crop.
@@ -51,21 +52,25 @@ def measure(name: str, repeats: int, batch: int) -> dict:
     keras.utils.set_random_seed(0)
     settings = CONFIGS[name]
     with tempfile.TemporaryDirectory() as folder:
-        estimator = KeypointPose6D(_random_run(Path(folder), settings), DEFAULT_CAMERA, max_spread=1e9)
+        run_dir = _random_run(Path(folder), settings)
+        estimator, unweighted, many_crops = (KeypointPose6D(run_dir, DEFAULT_CAMERA, max_spread=1e9, **options)
+                                             for options in ({}, {"weighted_pnp": False}, {"crops": 13}))
     image = np.random.default_rng(1).integers(0, 256, (480, 640, 3), dtype=np.uint8)
     box = (250.0, 180.0, 400.0, 300.0)
     size = settings["input_size"]
     crop = np.random.default_rng(2).uniform(0, 255, (1, size, size, 3)).astype(np.float32)
     infer = estimator["predict"].processor.function  # the compiled network the pipeline's predict step runs
 
-    def end_to_end():
+    def end_to_end(pipeline):
         try:
-            estimator(image, box)
+            pipeline(image, box)
         except ValueError:  # random weights may leave PnP without a solution; the work is done either way
             pass
 
     result = {"config": name, "input_size": size,
-              "end_to_end_ms": 1000 * median_seconds(end_to_end, repeats),
+              "end_to_end_ms": 1000 * median_seconds(lambda: end_to_end(estimator), repeats),
+              "unweighted_pnp_ms": 1000 * median_seconds(lambda: end_to_end(unweighted), repeats),
+              "crops_13_ms": 1000 * median_seconds(lambda: end_to_end(many_crops), repeats),
               "network_compiled_ms": 1000 * median_seconds(lambda: infer(crop), repeats),
               "network_eager_ms": 1000 * median_seconds(lambda: estimator.model(crop, training=False), repeats),
               "network_predict_ms": 1000 * median_seconds(lambda: estimator.model.predict(crop, verbose=0), repeats)}
@@ -85,7 +90,8 @@ def main() -> None:
     for name in args.configs:
         r = measure(name, args.repeats, args.batch)
         print(f"{name:5s} {r['input_size']}x{r['input_size']}: end to end {r['end_to_end_ms']:.1f} ms/crop "
-              f"(target <= 30); network compiled {r['network_compiled_ms']:.1f} ms vs eager "
+              f"(target <= 30; unweighted PnP {r['unweighted_pnp_ms']:.1f}, 13 crops {r['crops_13_ms']:.1f}); "
+              f"network compiled {r['network_compiled_ms']:.1f} ms vs eager "
               f"{r['network_eager_ms']:.1f} ms ({r['network_eager_ms'] / r['network_compiled_ms']:.1f}x) vs "
               f"model.predict {r['network_predict_ms']:.1f} ms ({r['network_predict_ms'] / r['network_compiled_ms']:.1f}x); "
               f"batch of {args.batch}: {r['batch_ms_per_crop']:.1f} ms/crop "

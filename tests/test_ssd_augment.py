@@ -7,7 +7,7 @@ import pytest
 
 from paz6d.abstract import SequentialProcessor
 from paz6d.synthesis.box_augment import (AnnotatedImage, Expand, PhotometricDistortion, RandomFlip,
-                                         RandomSampleCrop, ssd_augmentation)
+                                         RandomSampleCrop, WhiteBalance, ssd_augmentation)
 from paz6d.synthesis.photo_backgrounds import photo_collage, sample_photographs, write_backgrounds
 
 
@@ -68,10 +68,28 @@ def test_photometric_distortion_changes_colours_only_and_is_seeded():
     assert any(changed)
 
 
+def test_white_balance_tints_grey_with_reciprocal_red_and_blue_gains_in_range():
+    grey = AnnotatedImage(np.full((6, 8, 3), 100, np.uint8), np.array([[1.0, 1.0, 5.0, 4.0]]), np.array([2]))
+    balance = WhiteBalance(0.3, probability=1.0, seed=3)
+    gains = []
+    for _ in range(40):
+        tinted = balance(grey)
+        np.testing.assert_array_equal(tinted.boxes, grey.boxes)
+        red, green, blue = tinted.image[0, 0].astype(float)
+        assert green == 100 and (tinted.image == tinted.image[0, 0]).all()
+        assert red * blue == pytest.approx(100 * 100, rel=0.02)  # t and 1 / t
+        gains.append(red / 100)
+    assert 1 / 1.3 - 0.01 <= min(gains) < 0.9 and 1.3 + 0.01 >= max(gains) > 1.1
+    assert WhiteBalance(0.3, probability=0.0, seed=3)(grey) is grey
+    with pytest.raises(ValueError, match="strength: expected a gain change >= 0"):
+        WhiteBalance(-0.1)
+
+
 def test_ssd_augmentation_is_a_named_sequence_and_reproducible():
     chain = ssd_augmentation(seed=1)
     assert isinstance(chain, SequentialProcessor)
     assert chain.names == ["photometric", "expand", "crop", "flip"]
+    assert ssd_augmentation(white_balance=0.2).names == ["photometric", "white_balance", "expand", "crop", "flip"]
     again = ssd_augmentation(seed=1)
     for _ in range(3):
         a, b = chain(_sample()), again(_sample())

@@ -100,7 +100,8 @@ def train_ssd(job: SSDTraining) -> dict:
     run_files.write_detector(job.out, settings["architecture"], data.class_names, spec.to_dict(), SSD_VARIANCES)
     optimizer = keras.optimizers.AdamW(_schedule(keras, settings), weight_decay=settings["weight_decay"],
                                        global_clipnorm=10.0)
-    augmentation = partial(ssd_augmentation, settings["expand_ratio"], settings["expand_probability"])
+    augmentation = partial(ssd_augmentation, settings["expand_ratio"], settings["expand_probability"],
+                           white_balance=settings.get("white_balance", 0.0))
 
     def make_batch(step: int):
         images, targets = training_batch(data, augmentation, job.seed, step, settings["batch_size"],

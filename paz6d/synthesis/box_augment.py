@@ -89,6 +89,26 @@ class PhotometricDistortion(RandomProcessor):
         return replace(sample, image=image)
 
 
+class WhiteBalance(RandomProcessor):
+    """A colour cast, as from a camera's white balance or a warm or cold light: with ``probability``, the red
+    channel times ``t`` and the blue channel times ``1 / t``, ``log t`` uniform in ``±log(1 + strength)``
+    (clipped to 0..255). Unlike saturation and hue changes, it tints grey and white surfaces. Boxes are
+    unchanged."""
+
+    def __init__(self, strength: float = 0.25, probability: float = 0.5, seed=None, name: str | None = None):
+        super().__init__(seed, name)
+        if not (np.isfinite(strength) and strength >= 0):
+            raise ValueError(f"strength: expected a gain change >= 0 (0.25 = red/blue gains up to 1.25x), got {strength}")
+        self.strength, self.probability = float(strength), float(probability)
+
+    def call(self, sample: AnnotatedImage) -> AnnotatedImage:
+        if self.generator.random() >= self.probability:
+            return sample
+        gain = np.exp(self.generator.uniform(-1.0, 1.0) * np.log1p(self.strength))
+        image = sample.image.astype(np.float32) * np.array([gain, 1.0, 1.0 / gain], np.float32)
+        return replace(sample, image=np.clip(np.rint(image), 0, 255).astype(np.uint8))
+
+
 class Expand(RandomProcessor):
     """SSD's zoom-out: with ``probability``, puts the image at a random place in a canvas ``r`` times its
     size (``r`` uniform in ``[1, max_ratio]``) filled with ``fill`` (RGB), and shifts the boxes."""
@@ -177,10 +197,14 @@ class RandomFlip(RandomProcessor):
 
 
 def ssd_augmentation(expand_ratio: float = 4.0, expand_probability: float = 0.5, flip: bool = True,
-                     seed=None) -> SequentialProcessor:
-    """The paper's chain: ``photometric`` → ``expand`` → ``crop`` → ``flip`` (named steps)."""
-    steps = [PhotometricDistortion(name="photometric"),
-             Expand(expand_ratio, expand_probability, name="expand"),
+                     white_balance: float = 0.0, seed=None) -> SequentialProcessor:
+    """The paper's chain: ``photometric`` → ``expand`` → ``crop`` → ``flip`` (named steps), with a
+    ``white_balance`` step (:class:`WhiteBalance` of that strength) after ``photometric`` when it is
+    positive."""
+    steps = [PhotometricDistortion(name="photometric")]
+    if white_balance > 0:
+        steps.append(WhiteBalance(white_balance, name="white_balance"))
+    steps += [Expand(expand_ratio, expand_probability, name="expand"),
              RandomSampleCrop(name="crop")]
     if flip:
         steps.append(RandomFlip(name="flip"))
