@@ -112,6 +112,9 @@ class GenerationConfig:
     elevation_degrees: tuple[float, float] = option((-90.0, 90.0), "viewpoint elevation range (degrees), "
                                                     "view-sphere", metavar=("MIN", "MAX"))
     distractors: int = option(2, "maximum number of unannotated distractor primitives per image")
+    neutral_distractors: float = option(0.0, "share of primitive distractors coloured white to mid grey (like "
+                                              "white cups, bowls and boxes in real clutter); the rest get random "
+                                              "saturated colours")
     occluder_probability: float = option(0.3, "chance that a primitive is put between the camera and an object")
     occluders: int = option(1, "occluder draws per image, each with --occluder-probability on a random object")
     distractor_style: str = option(
@@ -194,6 +197,8 @@ class GenerationConfig:
         low, high = _range(self.light_count, "light_count", minimum=0, maximum=MAX_PER_IMAGE)
         if int(low) != low or int(high) != high:
             raise ValueError(f"light_count: expected integers, got {self.light_count}")
+        if not 0 <= self.neutral_distractors <= 1:
+            raise ValueError(f"neutral_distractors: expected a share in [0, 1], got {self.neutral_distractors}")
         if not 0 <= self.color_jitter < 1:
             raise ValueError(f"color_jitter: expected 0 <= j < 1, got {self.color_jitter}")
         if not math.isfinite(self.noise_std) or self.noise_std < 0:
@@ -225,6 +230,8 @@ class GenerationConfig:
         data["scale"] = data.pop("mesh_scale")  # the key data sets made before the field's rename hold
         if data["scene"] == "floating":
             data.pop("scene")  # data sets made before scene styles existed are floating ones
+        if data["neutral_distractors"] == 0:
+            data.pop("neutral_distractors")  # nor do those made before this field existed
         if data["occluders"] == 1 and data["distractor_style"] == "primitive":
             data.pop("occluders")  # nor do those made before these two fields existed
             data.pop("distractor_style")

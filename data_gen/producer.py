@@ -82,7 +82,7 @@ class ImageProducer:
             scene = sample_scene(generator, assets, config)
         lighting = random_lighting(generator, "scene", config.light_count, float(np.mean(assets.distance)))
         object_tints = random_tints(generator, len(scene.object_indices), config.color_jitter)
-        clutter_tints = random_colors(generator, len(scene.clutter_indices))
+        clutter_tints = random_colors(generator, len(scene.clutter_indices), config.neutral_distractors)
         textured = ~assets.distractor_tinted[np.asarray(scene.clutter_indices, dtype=np.int64)]
         if np.any(textured):  # photo-textured distractors keep their texture's colours, jittered like objects
             clutter_tints[textured] = random_tints(generator, int(textured.sum()), config.color_jitter)

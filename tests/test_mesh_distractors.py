@@ -80,6 +80,11 @@ def test_config_checks_the_new_fields(lmo_mesh, tmp_path):
     # Defaults leave the fingerprint of data sets made before these fields unchanged (they still resume).
     assert "occluders" not in _config(lmo_mesh, tmp_path).fingerprint()
     assert _config(lmo_mesh, tmp_path, occluders=2).fingerprint()["occluders"] == 2
+    assert "neutral_distractors" not in _config(lmo_mesh, tmp_path).fingerprint()
+    assert _config(lmo_mesh, tmp_path, neutral_distractors=0.3).fingerprint()["neutral_distractors"] == 0.3
+    for share in (-0.1, 1.5):
+        with pytest.raises(ValueError, match=r"neutral_distractors: expected a share in \[0, 1\]"):
+            _config(lmo_mesh, tmp_path, neutral_distractors=share)
 
 
 def test_occluders_draws_one_occluder_per_draw(lmo_mesh, tmp_path):

@@ -223,6 +223,12 @@ def test_distractor_library_and_colours():
     assert max(np.linalg.norm(mesh.vertices, axis=1).max() for mesh in library) < 0.1
     colors = occluders.random_colors(np.random.default_rng(0), 20)
     assert colors.shape == (20, 3) and colors.min() >= 0.05 and colors.max() <= 1.0
+    # a share of 0 draws nothing more: the colours (and data sets made before the option) are unchanged
+    np.testing.assert_array_equal(occluders.random_colors(np.random.default_rng(0), 20, 0.0), colors)
+    mixed = occluders.random_colors(np.random.default_rng(1), 2000, 0.4)
+    grey = (mixed.max(axis=1) / mixed.min(axis=1) <= 1.04 / 0.96 + 1e-9) & (mixed.min(axis=1) >= 0.48)
+    assert 0.37 < grey.mean() < 0.45  # the neutral share, plus the few random colours that happen to be grey
+    assert mixed.max() <= 1.0 and np.all(occluders.random_colors(np.random.default_rng(2), 50, 1.0).min(axis=1) >= 0.48)
 
 
 def test_occluder_pose_lies_between_the_camera_and_the_object():

@@ -27,9 +27,16 @@ def distractor_library(size: float) -> list[trimesh.Trimesh]:
     return library
 
 
-def random_colors(generator: np.random.Generator, count: int) -> np.ndarray:
-    """``(count, 3)`` saturated random colours (linear factors) for white distractor primitives."""
-    return generator.uniform(0.05, 1.0, size=(count, 3))
+def random_colors(generator: np.random.Generator, count: int, neutral_share: float = 0.0) -> np.ndarray:
+    """``(count, 3)`` random colours (linear factors) for white distractor primitives: each channel uniform in
+    0.05..1, or, for a ``neutral_share`` of them, a white to mid-grey level in 0.5..1 with each channel
+    within ±4 % of it."""
+    colors = generator.uniform(0.05, 1.0, size=(count, 3))
+    if neutral_share > 0:
+        neutral = generator.random(count) < neutral_share
+        levels = generator.uniform(0.5, 1.0, size=(count, 1)) * generator.uniform(0.96, 1.04, size=(count, 3))
+        colors[neutral] = np.minimum(levels[neutral], 1.0)
+    return colors
 
 
 def occluder_pose(generator: np.random.Generator, target_centre: np.ndarray, target_radius: float,
