@@ -87,7 +87,7 @@ def main() -> None:
     import_tensorflow()
     from paz6d.assets.demo_object import write_demo_object, write_symmetric_demo_object
     from paz6d.backend.mesh import diameter, load_mesh
-    from paz6d.demo.keypoint_demo import TEST_SEED_OFFSET, run_keypoint_demo
+    from paz6d.demo.keypoint_demo import MANY_CROPS, TEST_SEED_OFFSET, run_keypoint_demo
     from paz6d.keypointnet.config import KeypointTraining
     from paz6d.keypointnet.views import ViewSampling, render_test_images
 
@@ -146,7 +146,7 @@ def main() -> None:
     (args.out / "proxy.json").write_text(json.dumps(report, indent=2, default=str))
     mode = report["modes"][args.mode]
     print(json.dumps({**{variant: {key: mode[variant].get(key) for key in ("recall_0.1d", "rotation_error_deg")}
-                         for variant in ("pnp", "pnp_13_crops")},
+                         for variant in ("pnp", f"pnp_{MANY_CROPS}_crops")},
                       "training": {key: mode["training"].get(key) for key in
                                    ("reprojection_px_median", "cross_view_px_median", "usable_keypoints",
                                     "chart_accuracy")},

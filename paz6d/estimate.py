@@ -36,7 +36,7 @@ from paz6d.backend.files import write_json_atomically
 from paz6d.backend.paths import check_output_file, check_outputs_apart, check_plain_name
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
-from paz6d.keypointnet.config import CROP_JITTERS
+from paz6d.keypointnet.config import CROP_JITTERS, check_crops
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION, read_targets
 from paz6d.ssd import run_dir as ssd_run_dir
@@ -484,8 +484,7 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
     check_plain_name(args.split, "--split")
     if not 0.0 <= args.min_visible <= 1.0:
         raise ValueError(f"--min-visible: expected a visible fraction in [0, 1], got {args.min_visible}")
-    if not 1 <= args.keypoint_crops <= len(CROP_JITTERS):
-        raise ValueError(f"--keypoint-crops: expected 1 to {len(CROP_JITTERS)} crops per box, got {args.keypoint_crops}")
+    check_crops(args.keypoint_crops, "--keypoint-crops")
     if not 0.0 <= args.score_threshold <= 1.0:
         raise ValueError(f"--score-threshold: expected a score in [0, 1], got {args.score_threshold}")
     if args.detections_out is not None and args.detector is None:

@@ -38,6 +38,19 @@ CONFIGS: dict[str, dict] = {
 CROP_JITTERS = ((0.0, 0.0, 1.0), (0.06, 0.0, 1.0), (-0.06, 0.0, 1.0), (0.0, 0.06, 1.0), (0.0, -0.06, 1.0),
                 (0.0, 0.0, 0.94), (0.0, 0.0, 1.06), (0.04, 0.04, 1.0), (-0.04, 0.04, 1.0), (0.04, -0.04, 1.0),
                 (-0.04, -0.04, 1.0), (0.0, 0.0, 0.88), (0.0, 0.0, 1.12))
+
+
+def check_crops(count: int, name: str = "crops") -> int:
+    """``int(count)`` test-time crops per box, when ``count`` is 1 to ``len(CROP_JITTERS)``.
+
+    Raises:
+        ValueError: naming ``name`` (the option or flag) and the range.
+    """
+    if not 1 <= count <= len(CROP_JITTERS):
+        raise ValueError(f"{name}: expected 1 to {len(CROP_JITTERS)} test-time crops per box, got {count}")
+    return int(count)
+
+
 MODES = ("discovery", "supervised")
 PRECISIONS = ("float32", "bfloat16")  # compute dtype of the network body (see build_keypointnet)
 LIFTINGS = ("triangulate", "median")

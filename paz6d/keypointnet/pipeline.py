@@ -29,14 +29,14 @@ from paz6d.backend.boxes import check_box_in_image
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.checks import as_array
 from paz6d.backend.image import as_image
-from paz6d.backend.pnp import PnPError, solve_pnp_weighted
+from paz6d.backend.pnp import PnPError
 from paz6d.backend.square_crop import square_window
 from paz6d.keypointnet import run_dir as run_files
-from paz6d.keypointnet.config import CROP_JITTERS
+from paz6d.keypointnet.config import CROP_JITTERS, check_crops
 from paz6d.keypointnet.keypoints import DECODERS, decode_keypoints, keypoint_spread
 from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
-from paz6d.processors.pose import DepthFromBox, SolvePnP
+from paz6d.processors.pose import DepthFromBox, SolvePnP, SolveWeightedPnP
 from paz6d.processors.predict import Predict
 from paz6d.processors.refine import RefineWithDepth
 
@@ -50,9 +50,7 @@ class JitterBoxes(Processor):
 
     def __init__(self, count: int, name: str | None = None):
         super().__init__(name)
-        if not 1 <= int(count) <= len(CROP_JITTERS):
-            raise ValueError(f"crops: expected 1 to {len(CROP_JITTERS)} test-time crops, got {count}")
-        self.jitters = np.asarray(CROP_JITTERS[:int(count)])
+        self.jitters = np.asarray(CROP_JITTERS[:check_crops(count)])
 
     def call(self, images: list, boxes: list) -> tuple[list, list]:
         moved = []
@@ -89,17 +87,16 @@ class MergeCrops(Processor):
         merged_points, merged_spread, sigmas, plain_windows = [], [], [], []
         for start in range(0, len(points), self.count):
             sides = np.array([window[2] for window in windows[start:start + self.count]], dtype=np.float64)
-            spread_image = np.asarray(spread[start:start + self.count], np.float64) * sides[:, None] / self.size
+            spread_plain = np.asarray(spread[start:start + self.count], np.float64) * sides[:, None] / sides[0]
             keypoints = np.asarray(points[start:start + self.count], np.float64)
-            to_plain_crop = self.size / sides[0]
-            weights = 1.0 / np.maximum(spread_image * to_plain_crop, MIN_SIGMA) ** 2
+            weights = 1.0 / np.maximum(spread_plain, MIN_SIGMA) ** 2
             mean = (keypoints * weights[..., None]).sum(axis=0) / weights.sum(axis=0)[:, None]
             if self.count == 1:
-                sigma = spread_image[0] * to_plain_crop
-            else:
-                sigma = np.sqrt(((keypoints - mean) ** 2).sum(axis=-1).mean(axis=0) / 2.0) * to_plain_crop
+                sigma = spread_plain[0]
+            else:  # image pixels -> pixels of the plain crop
+                sigma = np.sqrt(((keypoints - mean) ** 2).sum(axis=-1).mean(axis=0) / 2.0) * self.size / sides[0]
             merged_points.append(mean)
-            merged_spread.append(spread_image.mean(axis=0) * to_plain_crop)
+            merged_spread.append(spread_plain.mean(axis=0))
             sigmas.append(np.maximum(sigma, MIN_SIGMA))
             plain_windows.append(windows[start])
         return merged_points, merged_spread, sigmas, plain_windows
@@ -148,7 +145,7 @@ class KeypointPnP(Processor):
 
     A score is ``1 / (1 + sigma)`` with ``sigma`` the keypoint's uncertainty in crop pixels
     (:class:`ScoreKeypoints`); weighted, each keypoint's pixel covariance is ``(sigma * side / input_size)² I``
-    (:func:`~paz6d.backend.pnp.solve_pnp_weighted`, Huber loss at 3 standard deviations).
+    (:class:`~paz6d.processors.pose.SolveWeightedPnP`, Huber loss at 3 standard deviations).
 
     Args:
         points_model: ``(N, 3)`` metres, object frame, in keypoint order.
@@ -166,8 +163,9 @@ class KeypointPnP(Processor):
         super().__init__(name)
         self.points_model = as_array(points_model, "points_model", (3,))
         self.ransac_threshold, self.input_size = float(ransac_threshold), int(input_size)
-        self.min_keypoints, self.weighted, self.class_name = int(min_keypoints), bool(weighted), class_name
+        self.min_keypoints, self.weighted = int(min_keypoints), bool(weighted)
         self.solve = SolvePnP(method="epnp", ransac=True, class_name=class_name)
+        self.solve_weighted = SolveWeightedPnP(class_name=class_name)
 
     def call(self, keypoints: Keypoints2D, window: tuple[int, int, int], camera: Camera) -> Pose6D:
         scores = np.asarray(keypoints.scores, dtype=np.float64)
@@ -180,11 +178,8 @@ class KeypointPnP(Processor):
         if not self.weighted:
             return self.solve(self.points_model[usable], keypoints.points[usable], camera, threshold)
         sigma = np.maximum(1.0 / scores[usable] - 1.0, MIN_SIGMA) * to_image
-        solution = solve_pnp_weighted(self.points_model[usable], np.asarray(keypoints.points)[usable], camera.K,
-                                      sigma[:, None, None] ** 2 * np.eye(2), "epnp", True, camera.distortion,
-                                      threshold)
-        return Pose6D.from_rotation_vector(solution.rotation_vector, solution.translation, self.class_name,
-                                           solution.inlier_fraction)
+        return self.solve_weighted(self.points_model[usable], keypoints.points[usable],
+                                   sigma[:, None, None] ** 2 * np.eye(2), camera, threshold)
 
 
 def surface_points_of_run(run_dir: str | Path, count: int = 2000, seed: int = 0) -> np.ndarray:

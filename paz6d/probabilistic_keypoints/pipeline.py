@@ -23,11 +23,12 @@ from paz6d.abstract import Box2D, KeyedStep, Keypoints2D, Pose6D, Processor, Seq
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.checks import as_array
 from paz6d.backend.image import as_image
-from paz6d.backend.pnp import PnPError, solve_pnp_weighted
+from paz6d.backend.pnp import PnPError
 from paz6d.probabilistic_keypoints import run_dir as run_files
 from paz6d.probabilistic_keypoints.config import RANSAC_THRESHOLD, ROBUST_SCALE
 from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
+from paz6d.processors.pose import SolveWeightedPnP
 from paz6d.processors.predict import Predict
 
 
@@ -59,7 +60,7 @@ class CovariancesToImage(Processor):
 
 class WeightedPnP(Processor):
     """``(keypoints: Keypoints2D, covariances (N, 2, 2), window, camera) -> Pose6D`` by
-    :func:`~paz6d.backend.pnp.solve_pnp_weighted` (RANSAC threshold in crop pixels, scaled to the image).
+    :class:`~paz6d.processors.pose.SolveWeightedPnP` (RANSAC threshold in crop pixels, scaled to the image).
 
     Args:
         points_model: ``(N, 3)`` metres, object frame, in keypoint order.
@@ -71,14 +72,11 @@ class WeightedPnP(Processor):
         super().__init__(name)
         self.points_model = as_array(points_model, "points_model", (3,))
         self.input_size, self.ransac_threshold = int(input_size), float(ransac_threshold)
-        self.robust_scale, self.class_name = robust_scale, class_name
+        self.solve = SolveWeightedPnP(robust_scale, class_name)
 
     def call(self, keypoints: Keypoints2D, covariances, window: tuple[int, int, int], camera: Camera) -> Pose6D:
         threshold = self.ransac_threshold * window[2] / self.input_size
-        solution = solve_pnp_weighted(self.points_model, keypoints.points, camera.K, covariances, "epnp", True,
-                                      camera.distortion, threshold, self.robust_scale)
-        return Pose6D.from_rotation_vector(solution.rotation_vector, solution.translation, self.class_name,
-                                           solution.inlier_fraction)
+        return self.solve(self.points_model, keypoints.points, covariances, camera, threshold)
 
 
 class ProbabilisticKeypointPose6D(SequentialProcessor):

@@ -8,7 +8,7 @@ from paz6d.abstract.messages import Box2D, Pose6D
 from paz6d.abstract.processor import Processor
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.checks import as_points
-from paz6d.backend.pnp import solve_pnp
+from paz6d.backend.pnp import solve_pnp, solve_pnp_weighted
 from paz6d.backend.square_crop import projected_box
 
 
@@ -36,6 +36,30 @@ class SolvePnP(Processor):
         threshold = self.reprojection_threshold if reprojection_threshold is None else reprojection_threshold
         solution = solve_pnp(points3d, points2d, camera.K, self.method, self.ransac, camera.distortion, self.refine,
                              threshold, seed=self.seed)
+        return Pose6D.from_rotation_vector(solution.rotation_vector, solution.translation, self.class_name,
+                                           solution.inlier_fraction)
+
+
+class SolveWeightedPnP(Processor):
+    """``(points3d (N, 3) metres, points2d (N, 2) px, covariances (N, 2, 2) px², camera, reprojection_threshold)``
+    to a :class:`Pose6D` whose ``score`` is the inlier fraction: RANSAC EPnP with that threshold (pixels),
+    then the refinement weighted by the covariances (see :func:`paz6d.backend.pnp.solve_pnp_weighted`).
+
+    Args:
+        robust_scale: Huber knee in standard deviations (``None``: plain least squares).
+        class_name: written into the poses.
+
+    The camera's distortion is used.
+    """
+
+    def __init__(self, robust_scale: float | None = 3.0, class_name: str | None = None, name: str | None = None):
+        super().__init__(name)
+        self.robust_scale, self.class_name = robust_scale, class_name
+
+    def call(self, points3d, points2d, covariances, camera: Camera, reprojection_threshold: float) -> Pose6D:
+        camera = as_camera(camera)
+        solution = solve_pnp_weighted(points3d, points2d, camera.K, covariances, "epnp", True, camera.distortion,
+                                      reprojection_threshold, self.robust_scale)
         return Pose6D.from_rotation_vector(solution.rotation_vector, solution.translation, self.class_name,
                                            solution.inlier_fraction)
 
