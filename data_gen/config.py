@@ -115,6 +115,10 @@ class GenerationConfig:
     neutral_distractors: float = option(0.0, "share of primitive distractors coloured white to mid grey (like "
                                               "white cups, bowls and boxes in real clutter); the rest get random "
                                               "saturated colours")
+    object_colored_distractors: float = option(0.0, "share of primitive distractors painted in a colour of the "
+                                                    "annotated meshes (a random vertex colour, jittered like "
+                                                    "the objects): the objects' colours on other shapes, so a "
+                                                    "detector cannot tell objects by colour alone")
     occluder_probability: float = option(0.3, "chance that a primitive is put between the camera and an object")
     occluders: int = option(1, "occluder draws per image, each with --occluder-probability on a random object")
     distractor_style: str = option(
@@ -199,6 +203,12 @@ class GenerationConfig:
             raise ValueError(f"light_count: expected integers, got {self.light_count}")
         if not 0 <= self.neutral_distractors <= 1:
             raise ValueError(f"neutral_distractors: expected a share in [0, 1], got {self.neutral_distractors}")
+        if not 0 <= self.object_colored_distractors <= 1:
+            raise ValueError(f"object_colored_distractors: expected a share in [0, 1], got "
+                             f"{self.object_colored_distractors}")
+        if self.neutral_distractors + self.object_colored_distractors > 1:
+            raise ValueError(f"neutral_distractors + object_colored_distractors: expected shares summing to at most "
+                             f"1, got {self.neutral_distractors} + {self.object_colored_distractors}")
         if not 0 <= self.color_jitter < 1:
             raise ValueError(f"color_jitter: expected 0 <= j < 1, got {self.color_jitter}")
         if not math.isfinite(self.noise_std) or self.noise_std < 0:
@@ -230,8 +240,9 @@ class GenerationConfig:
         data["scale"] = data.pop("mesh_scale")  # the key data sets made before the field's rename hold
         if data["scene"] == "floating":
             data.pop("scene")  # data sets made before scene styles existed are floating ones
-        if data["neutral_distractors"] == 0:
-            data.pop("neutral_distractors")  # nor do those made before this field existed
+        for name in ("neutral_distractors", "object_colored_distractors"):
+            if data[name] == 0:
+                data.pop(name)  # nor do those made before these fields existed
         if data["occluders"] == 1 and data["distractor_style"] == "primitive":
             data.pop("occluders")  # nor do those made before these two fields existed
             data.pop("distractor_style")

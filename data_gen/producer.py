@@ -19,7 +19,7 @@ from paz6d.datasets.bop.writer import depth_png_from_lengths, gt_info_entry, pos
 from paz6d.synthesis.augment import RandomGaussianBlur, RandomImageNoise, share_generator
 from paz6d.synthesis.backgrounds import background_image
 from paz6d.synthesis.lighting import random_lighting, random_tints
-from paz6d.synthesis.occluders import random_colors
+from paz6d.synthesis.occluders import mesh_palettes, random_colors
 from paz6d.synthesis.photo_backgrounds import sample_photographs
 from paz6d.synthesis.scene import ZNEAR, sample_scene
 from paz6d.synthesis.tabletop import sample_tabletop_scene
@@ -67,6 +67,7 @@ class ImageProducer:
         self.renderer = Renderer(config.width, config.height, platform=config.platform, znear=ZNEAR, zfar=zfar,
                                  antialias=config.antialias)
         self.degrade = degradation(config)
+        self.palettes = mesh_palettes(self.assets.meshes) if config.object_colored_distractors > 0 else []
         self.photographs = sample_photographs() if config.scene == "tabletop" else []  # table textures
 
     def close(self) -> None:
@@ -82,7 +83,8 @@ class ImageProducer:
             scene = sample_scene(generator, assets, config)
         lighting = random_lighting(generator, "scene", config.light_count, float(np.mean(assets.distance)))
         object_tints = random_tints(generator, len(scene.object_indices), config.color_jitter)
-        clutter_tints = random_colors(generator, len(scene.clutter_indices), config.neutral_distractors)
+        clutter_tints = random_colors(generator, len(scene.clutter_indices), config.neutral_distractors,
+                                      self.palettes, config.object_colored_distractors, config.color_jitter)
         textured = ~assets.distractor_tinted[np.asarray(scene.clutter_indices, dtype=np.int64)]
         if np.any(textured):  # photo-textured distractors keep their texture's colours, jittered like objects
             clutter_tints[textured] = random_tints(generator, int(textured.sum()), config.color_jitter)

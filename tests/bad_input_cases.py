@@ -432,6 +432,7 @@ def generate_cases() -> list[Case]:
         "--distractors": [(("-1",), ""), (("1000000",), "")],
         "--occluder-probability": [(("2",), ""), (("nan",), ""), (("-0.5",), "")],
         "--neutral-distractors": [(("2",), "share in [0, 1]"), (("nan",), "share in [0, 1]")],
+        "--object-colored-distractors": [(("2",), "share in [0, 1]"), (("nan",), "share in [0, 1]")],
         "--light-count": [(("-1", "2"), ""), (("2", "1"), ""), (("0", "100000"), "")],
         "--color-jitter": [(("1",), ""), (("nan",), ""), (("-0.1",), "")],
         "--blur-probability": [(("-0.1",), ""), (("inf",), "")],

@@ -85,6 +85,41 @@ def test_config_checks_the_new_fields(lmo_mesh, tmp_path):
     for share in (-0.1, 1.5):
         with pytest.raises(ValueError, match=r"neutral_distractors: expected a share in \[0, 1\]"):
             _config(lmo_mesh, tmp_path, neutral_distractors=share)
+    assert "object_colored_distractors" not in _config(lmo_mesh, tmp_path).fingerprint()
+    assert _config(lmo_mesh, tmp_path, object_colored_distractors=0.5).fingerprint()["object_colored_distractors"] == 0.5
+    for share in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match=r"object_colored_distractors: expected a share in \[0, 1\]"):
+            _config(lmo_mesh, tmp_path, object_colored_distractors=share)
+    with pytest.raises(ValueError, match="neutral_distractors \\+ object_colored_distractors: expected shares summing"):
+        _config(lmo_mesh, tmp_path, neutral_distractors=0.6, object_colored_distractors=0.6)
+
+
+def test_object_coloured_distractors_take_the_meshes_colours(lmo_mesh, tmp_path):
+    from data_gen.producer import ImageProducer
+
+    config = _config(lmo_mesh, tmp_path, distractors=6, object_colored_distractors=1.0)
+    producer = ImageProducer(config)
+    try:
+        palette = producer.palettes[0]
+        assert len(producer.palettes) == 1 and len(palette) == len(producer.assets.meshes[0].vertices)
+        calls = []
+        render = producer.renderer.render
+        producer.renderer.render = lambda *args, **kwargs: calls.append(kwargs) or render(*args, **kwargs)
+        for index in range(4):
+            producer.render(index)
+        clutter = np.concatenate([call["tints"][call["masked_objects"]:] for call in calls])
+        assert len(clutter) >= 4
+        # every distractor is a vertex colour of the mesh times the objects' colour jitter (at most 1)
+        low, high = palette[None] * (1 - config.color_jitter), np.minimum(palette[None] * (1 + config.color_jitter), 1)
+        close = np.all((clutter[:, None] >= low - 1e-9) & (clutter[:, None] <= high + 1e-9), axis=2)
+        assert close.any(axis=1).all()
+        plain = ImageProducer(dataclasses.replace(config, object_colored_distractors=0.0), producer.assets)
+        try:
+            assert plain.palettes == []
+        finally:
+            plain.close()
+    finally:
+        producer.close()
 
 
 def test_occluders_draws_one_occluder_per_draw(lmo_mesh, tmp_path):

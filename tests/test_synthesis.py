@@ -231,6 +231,38 @@ def test_distractor_library_and_colours():
     assert mixed.max() <= 1.0 and np.all(occluders.random_colors(np.random.default_rng(2), 50, 1.0).min(axis=1) >= 0.48)
 
 
+def test_palette_colours_paint_a_share_of_the_distractors():
+    palettes = [np.array([[0.8, 0.2, 0.1]]), np.zeros((0, 3)), np.array([[0.9, 0.9, 0.85], [0.1, 0.4, 0.1]])]
+    rows = np.concatenate([p for p in palettes if len(p)])
+    exact = occluders.random_colors(np.random.default_rng(3), 200, palettes=palettes, palette_share=1.0)
+    assert all(np.any(np.all(np.isclose(color, rows), axis=1)) for color in exact)  # jitter 0: palette rows
+    jittered = occluders.random_colors(np.random.default_rng(3), 500, palettes=palettes, palette_share=1.0, jitter=0.2)
+    ratios = np.min([np.max(np.abs(jittered / row[None] - 1), axis=1) for row in rows], axis=0)
+    assert ratios.max() <= 0.2 + 1e-9 and jittered.max() <= 1.0
+    # with a neutral share too, each distractor gets one kind: neutral first, then palette, then random
+    mixed = occluders.random_colors(np.random.default_rng(4), 3000, 0.3, palettes, 0.5)
+    from_palette = np.array([np.any(np.all(np.isclose(color, rows), axis=1)) for color in mixed])
+    grey = (mixed.max(axis=1) / mixed.min(axis=1) <= 1.04 / 0.96 + 1e-9) & (mixed.min(axis=1) >= 0.48)
+    assert 0.46 < from_palette.mean() < 0.54 and 0.28 < (grey & ~from_palette).mean() < 0.36
+    # no palette colour (or share 0) draws nothing more than before the option existed
+    plain = occluders.random_colors(np.random.default_rng(5), 20, 0.3)
+    np.testing.assert_array_equal(occluders.random_colors(np.random.default_rng(5), 20, 0.3, [np.zeros((0, 3))], 0.5),
+                                  plain)
+    np.testing.assert_array_equal(occluders.random_colors(np.random.default_rng(5), 20, 0.3, palettes, 0.0), plain)
+
+
+def test_mesh_palettes_are_the_vertex_colours(shared_data):
+    import trimesh
+
+    ape = trimesh.load(shared_data / "bop_lmo" / "models" / "obj_000001.ply")
+    textured = trimesh.load(shared_data / "meshes" / "fuze.obj", force="mesh")
+    palettes = occluders.mesh_palettes([ape, trimesh.creation.box(), textured])
+    np.testing.assert_allclose(palettes[0], np.asarray(ape.visual.vertex_colors)[:, :3] / 255.0)
+    assert palettes[1].shape == (0, 3)  # no colours: nothing to paint with
+    assert palettes[2].shape == (len(textured.vertices), 3) and 0 <= palettes[2].min() and palettes[2].max() <= 1
+    assert palettes[2].std(axis=0).max() > 0.05  # sampled from the texture, not one flat colour
+
+
 def test_occluder_pose_lies_between_the_camera_and_the_object():
     target = np.array([0.02, -0.01, 0.5])
     for seed in range(20):

@@ -3,6 +3,8 @@ the camera and an object) and flat polygons drawn over a crop."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import cv2
 import numpy as np
 import trimesh
@@ -27,16 +29,47 @@ def distractor_library(size: float) -> list[trimesh.Trimesh]:
     return library
 
 
-def random_colors(generator: np.random.Generator, count: int, neutral_share: float = 0.0) -> np.ndarray:
+def random_colors(generator: np.random.Generator, count: int, neutral_share: float = 0.0,
+                  palettes: Sequence[np.ndarray] = (), palette_share: float = 0.0, jitter: float = 0.0) -> np.ndarray:
     """``(count, 3)`` random colours (linear factors) for white distractor primitives: each channel uniform in
     0.05..1, or, for a ``neutral_share`` of them, a white to mid-grey level in 0.5..1 with each channel
-    within ±4 % of it."""
+    within ±4 % of it, or, for a ``palette_share`` of the others, a colour of a random palette (a random
+    row of it, each channel times ``U(1 - jitter, 1 + jitter)``, at most 1). The shares add up to at most
+    1; nothing more is drawn when both are 0.
+
+    Args:
+        palettes: colour sets ``(N, 3)`` in 0..1, e.g. :func:`mesh_palettes` of the annotated objects, so
+            that some clutter has the objects' colours but not their shapes.
+    """
     colors = generator.uniform(0.05, 1.0, size=(count, 3))
+    palettes = [palette for palette in palettes if len(palette)]
+    palette_share = palette_share if palettes else 0.0
+    if neutral_share <= 0 and palette_share <= 0:
+        return colors
+    draws = generator.random(count)  # one draw per distractor picks its kind
     if neutral_share > 0:
-        neutral = generator.random(count) < neutral_share
         levels = generator.uniform(0.5, 1.0, size=(count, 1)) * generator.uniform(0.96, 1.04, size=(count, 3))
+        neutral = draws < neutral_share
         colors[neutral] = np.minimum(levels[neutral], 1.0)
+    if palette_share > 0:
+        for row in np.flatnonzero((draws >= neutral_share) & (draws < neutral_share + palette_share)):
+            palette = palettes[int(generator.integers(len(palettes)))]
+            color = palette[int(generator.integers(len(palette)))]
+            colors[row] = np.minimum(color * generator.uniform(1 - jitter, 1 + jitter, size=3), 1.0)
     return colors
+
+
+def mesh_palettes(meshes: Sequence[trimesh.Trimesh]) -> list[np.ndarray]:
+    """Per mesh, its vertex colours ``(N, 3)`` in 0..1 (a texture sampled at the vertices; ``(0, 3)`` for a
+    mesh with neither)."""
+    palettes = []
+    for mesh in meshes:
+        visual = mesh.visual
+        if getattr(visual, "kind", None) == "texture":
+            visual = visual.to_color()
+        colors = np.asarray(visual.vertex_colors) if getattr(visual, "kind", None) == "vertex" else np.zeros((0, 4))
+        palettes.append(colors[:, :3].astype(np.float64) / 255.0)
+    return palettes
 
 
 def occluder_pose(generator: np.random.Generator, target_centre: np.ndarray, target_radius: float,
