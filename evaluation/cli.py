@@ -46,6 +46,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     coco.add_argument("--iou-type", choices=("bbox", "segm"), default="bbox", help="box or mask IoU")
     coco.add_argument("--out", required=True, type=Path, help="output JSON (stats + per-class AP)")
     coco.add_argument("--plots", type=Path, help="directory for PNG precision-recall and per-class AP plots")
+    coco.add_argument("--errors", action="store_true",
+                      help="also break down each class's best-scoring detections (as many as it has objects) into "
+                           "correct, duplicate, localization, other-class and background errors, and its recall at "
+                           "IoU 0.5 at any score (boxes only)")
 
     voc = subparsers.add_parser("voc", help="PASCAL VOC AP (11-point or all-point)",
                                 description="PASCAL VOC AP per class and mAP from XML/text annotations.")
@@ -81,9 +85,17 @@ def _run_coco(args: argparse.Namespace) -> int:
     print(f"  {'class':<24s} {'AP':>7s}")
     for name, value in per_class.items():
         print(f"  {name:<24s} {'-' if value is None else f'{value:.3f}':>7s}")
-    write_json_atomically(args.out, {"iou_type": args.iou_type, "ground_truth": str(args.gt), "results": str(args.results),
-                       "stat_names": list(coco.STAT_NAMES), "stats": [float(v) for v in evaluation.stats],
-                       "per_class_ap": per_class}, indent=2)
+    report = {"iou_type": args.iou_type, "ground_truth": str(args.gt), "results": str(args.results),
+              "stat_names": list(coco.STAT_NAMES), "stats": [float(v) for v in evaluation.stats],
+              "per_class_ap": per_class}
+    if args.errors:
+        from evaluation.detection_errors import detection_errors
+
+        truth = coco.CocoGroundTruth.from_file(args.gt)
+        errors = detection_errors(truth, coco.CocoDetections.from_file(args.results, truth))
+        print(errors.table())
+        report["errors"] = errors.to_dict()
+    write_json_atomically(args.out, report, indent=2)
     print(f"wrote {args.out}")
     if args.plots is not None:
         for path in detection_plots.plot_coco(evaluation, args.plots):

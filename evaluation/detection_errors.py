@@ -1,0 +1,132 @@
+"""Where a detector's errors come from, per class (after Hoiem et al., "Diagnosing Error in Object
+Detectors", ECCV 2012): what its best-scoring detections hit, and how many objects it finds at all.
+
+For each category with ``n`` non-crowd ground-truth boxes, its detections are matched greedily in score
+order (each to the free ground truth of that category in the same image with the highest IoU >= 0.5),
+and the ``n`` best-scoring ones (as many as there are objects: a perfect detector's top ``n`` are all
+correct) are sorted into :data:`ERROR_KINDS`:
+
+* ``correct``: matched;
+* ``duplicate``: IoU >= 0.5 with an object of the category that a better detection already took;
+* ``localization``: IoU in [0.1, 0.5) with an object of the category;
+* ``other_class``: IoU >= 0.1 with an object of another category (confusion with a known object);
+* ``background``: none of these (a false positive on something that is not annotated).
+
+Detections on crowd regions (at least half of the detection inside one) are left out. ``recall`` is
+the share of objects matched by a detection of any score. Boxes are ``[x, y, w, h]`` pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from evaluation.coco import CocoDetections, CocoGroundTruth
+from paz6d.backend import boxes as boxes_backend
+
+ERROR_KINDS = ("correct", "duplicate", "localization", "other_class", "background")
+MATCH_IOU = 0.5
+NEAR_IOU = 0.1
+
+
+@dataclass
+class DetectionErrors:
+    """Per category (rows in ``category_names`` order, those with objects only).
+
+    Attributes:
+        category_names: K names.
+        objects: (K,) non-crowd ground-truth boxes.
+        recall: (K,) share of them found by a detection of any score at IoU >= 0.5.
+        top: (K, len(ERROR_KINDS)) kinds of the ``objects[k]`` best-scoring detections (fewer when there
+            are fewer detections).
+    """
+
+    category_names: tuple[str, ...]
+    objects: np.ndarray
+    recall: np.ndarray
+    top: np.ndarray
+
+    def to_dict(self) -> dict:
+        """``{name: {"objects", "recall", kind: count, ...}}``."""
+        return {name: {"objects": int(count), "recall": float(recall),
+                       **{kind: int(value) for kind, value in zip(ERROR_KINDS, row)}}
+                for name, count, recall, row in zip(self.category_names, self.objects, self.recall, self.top)}
+
+    def table(self) -> str:
+        """A plain-text table, one row per category."""
+        lines = [f"{'class':<24s} {'objects':>7s} {'recall':>6s}  top detections: "
+                 + " ".join(f"{kind:>12s}" for kind in ERROR_KINDS)]
+        for name, count, recall, row in zip(self.category_names, self.objects, self.recall, self.top):
+            lines.append(f"{name:<24s} {count:7d} {recall:6.2f}  {'':16s}" + " ".join(f"{v:12d}" for v in row))
+        return "\n".join(lines)
+
+
+def _iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
+    """``(N, M)`` IoU of ``[x, y, w, h]`` boxes."""
+    return boxes_backend.iou_matrix(boxes_backend.convert(boxes_a, "xywh", "xyxy"),
+                                    boxes_backend.convert(boxes_b, "xywh", "xyxy"))
+
+
+def _inside_share(box: np.ndarray, regions: np.ndarray) -> np.ndarray:
+    """``(M,)`` share of the area of one ``[x, y, w, h]`` box inside each region (COCO's IoU with a crowd)."""
+    width = np.minimum(box[0] + box[2], regions[:, 0] + regions[:, 2]) - np.maximum(box[0], regions[:, 0])
+    height = np.minimum(box[1] + box[3], regions[:, 1] + regions[:, 3]) - np.maximum(box[1], regions[:, 1])
+    return np.clip(width, 0, None) * np.clip(height, 0, None) / max(box[2] * box[3], 1e-12)
+
+
+def detection_errors(ground_truth: CocoGroundTruth, detections: CocoDetections) -> DetectionErrors:
+    """The per-category error breakdown of ``detections`` (boxes) against ``ground_truth``.
+
+    Raises:
+        ValueError: results without boxes.
+    """
+    if detections.boxes is None:
+        raise ValueError(f"{detections.source}: the error breakdown needs boxes (bbox), the results carry masks only")
+    names, objects, recalls, tops = [], [], [], []
+    for k, category_id in enumerate(ground_truth.category_ids.tolist()):
+        own = (ground_truth.category_index == k)
+        count = int(np.sum(own & ~ground_truth.is_crowd))
+        if count == 0:
+            continue
+        rows = np.flatnonzero(detections.category_ids == category_id)
+        rows = rows[np.argsort(-detections.scores[rows], kind="stable")]
+        kinds, found = _classify(ground_truth, detections, rows, k)
+        names.append(ground_truth.category_names[k])
+        objects.append(count)
+        recalls.append(found / count)
+        tops.append(np.bincount(kinds[:count], minlength=len(ERROR_KINDS)))
+    return DetectionErrors(tuple(names), np.asarray(objects, dtype=np.int64), np.asarray(recalls, dtype=np.float64),
+                           np.asarray(tops, dtype=np.int64).reshape(-1, len(ERROR_KINDS)))
+
+
+def _classify(ground_truth: CocoGroundTruth, detections: CocoDetections, rows: np.ndarray,
+              category: int) -> tuple[np.ndarray, int]:
+    """Kind index of each detection of ``rows`` (score order; crowd hits dropped) and the objects found."""
+    taken: set[int] = set()
+    kinds = []
+    for row in rows:
+        image = detections.image_index[row]
+        box = detections.boxes[row][None]
+        in_image = np.flatnonzero(ground_truth.image_index == image)
+        same = in_image[ground_truth.category_index[in_image] == category]
+        crowd = same[ground_truth.is_crowd[same]]
+        same = same[~ground_truth.is_crowd[same]]
+        iou = _iou(box, ground_truth.boxes[same])[0] if len(same) else np.zeros(0)
+        free = np.array([index not in taken for index in same.tolist()], dtype=bool)
+        if np.any(free & (iou >= MATCH_IOU)):
+            best = int(np.argmax(np.where(free, iou, -1.0)))
+            taken.add(int(same[best]))
+            kinds.append(0)
+            continue
+        if len(crowd) and _inside_share(box[0], ground_truth.boxes[crowd]).max() >= MATCH_IOU:
+            continue
+        if np.any(iou >= MATCH_IOU):
+            kinds.append(1)
+        elif np.any(iou >= NEAR_IOU):
+            kinds.append(2)
+        else:
+            others = in_image[(ground_truth.category_index[in_image] != category) & ~ground_truth.is_crowd[in_image]]
+            near_other = len(others) and _iou(box, ground_truth.boxes[others]).max() >= NEAR_IOU
+            kinds.append(3 if near_other else 4)
+    return np.asarray(kinds, dtype=np.int64), len(taken)
