@@ -279,7 +279,11 @@ def test_pipeline_steps_can_be_replaced_and_the_camera_given_per_call(toy_run):
     wider = Camera(views["K"] * [[0.8], [0.8], [1]], TOY.render_size, TOY.render_size)
     moved = estimator(image, box, camera=wider)
     assert moved.translation[2] < reference.translation[2]  # a shorter focal length: the same box is nearer
-    assert estimator.estimate_batch([image, image], [box, box], [None, wider]) == [reference, moved]
+    # a batch of two goes through other float32 kernels than one image: scores may differ in the last bits
+    for batched, single in zip(estimator.estimate_batch([image, image], [box, box], [None, wider]), [reference, moved]):
+        np.testing.assert_allclose(batched.quaternion, single.quaternion, atol=1e-6)
+        np.testing.assert_allclose(batched.translation, single.translation, atol=1e-6)
+        assert batched.score == pytest.approx(single.score, rel=1e-5)
     # without the depth-free refinement (a replaced pose step) the translation comes from the box alone
     old = estimator.replace("pose_from_codebook", KeyedStep(
         PosesFromCodebook(estimator.codebook, estimator.hull_points, refine=False),
