@@ -77,7 +77,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def _run_coco(args: argparse.Namespace) -> int:
     from evaluation import coco, detection_plots
 
-    evaluation = coco.evaluate_files(args.gt, args.results, args.iou_type)
+    if args.errors:  # both files are needed again for the breakdown: read them once
+        truth, detections = coco.read_files(args.gt, args.results)
+        evaluation = coco.evaluate(truth, detections, args.iou_type)
+    else:
+        evaluation = coco.evaluate_files(args.gt, args.results, args.iou_type)
     per_class = evaluation.per_category_ap()
     print(f"COCO {args.iou_type} evaluation of {args.results} against {args.gt}")
     for name, value in zip(coco.STAT_NAMES, evaluation.stats):
@@ -91,8 +95,7 @@ def _run_coco(args: argparse.Namespace) -> int:
     if args.errors:
         from evaluation.detection_errors import detection_errors
 
-        truth = coco.CocoGroundTruth.from_file(args.gt)
-        errors = detection_errors(truth, coco.CocoDetections.from_file(args.results, truth))
+        errors = detection_errors(truth, detections)
         print(errors.table())
         report["errors"] = errors.to_dict()
     write_json_atomically(args.out, report, indent=2)

@@ -672,11 +672,17 @@ def _cyclic_collector_paused():
             gc.enable()
 
 
+def read_files(ground_truth_path: str | Path, results_path: str | Path) -> tuple[CocoGroundTruth, CocoDetections]:
+    """A COCO ground-truth file and a results file for it, parsed with the cyclic collector paused."""
+    with _cyclic_collector_paused():
+        ground_truth = CocoGroundTruth.from_file(ground_truth_path)
+        return ground_truth, CocoDetections.from_file(results_path, ground_truth)
+
+
 def evaluate_files(ground_truth_path: str | Path, results_path: str | Path, iou_type: str = "bbox") -> CocoEvaluation:
     """Loads a COCO ground-truth file and a results file and evaluates them (see :func:`evaluate`)."""
     with _cyclic_collector_paused():
-        ground_truth = CocoGroundTruth.from_file(ground_truth_path)
-        detections = CocoDetections.from_file(results_path, ground_truth)
+        ground_truth, detections = read_files(ground_truth_path, results_path)
         evaluation = evaluate(ground_truth, detections, iou_type)
         del ground_truth, detections  # freed before the collector resumes, so it does not walk them once more
     return evaluation

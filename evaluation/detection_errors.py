@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from evaluation.coco import CocoDetections, CocoGroundTruth
-from paz6d.backend import boxes as boxes_backend
+from evaluation.coco_masks import box_iou
 
 ERROR_KINDS = ("correct", "duplicate", "localization", "other_class", "background")
 MATCH_IOU = 0.5
@@ -62,19 +62,6 @@ class DetectionErrors:
         return "\n".join(lines)
 
 
-def _iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
-    """``(N, M)`` IoU of ``[x, y, w, h]`` boxes."""
-    return boxes_backend.iou_matrix(boxes_backend.convert(boxes_a, "xywh", "xyxy"),
-                                    boxes_backend.convert(boxes_b, "xywh", "xyxy"))
-
-
-def _inside_share(box: np.ndarray, regions: np.ndarray) -> np.ndarray:
-    """``(M,)`` share of the area of one ``[x, y, w, h]`` box inside each region (COCO's IoU with a crowd)."""
-    width = np.minimum(box[0] + box[2], regions[:, 0] + regions[:, 2]) - np.maximum(box[0], regions[:, 0])
-    height = np.minimum(box[1] + box[3], regions[:, 1] + regions[:, 3]) - np.maximum(box[1], regions[:, 1])
-    return np.clip(width, 0, None) * np.clip(height, 0, None) / max(box[2] * box[3], 1e-12)
-
-
 def detection_errors(ground_truth: CocoGroundTruth, detections: CocoDetections) -> DetectionErrors:
     """The per-category error breakdown of ``detections`` (boxes) against ``ground_truth``.
 
@@ -106,27 +93,22 @@ def _classify(ground_truth: CocoGroundTruth, detections: CocoDetections, rows: n
     taken: set[int] = set()
     kinds = []
     for row in rows:
-        image = detections.image_index[row]
-        box = detections.boxes[row][None]
-        in_image = np.flatnonzero(ground_truth.image_index == image)
-        same = in_image[ground_truth.category_index[in_image] == category]
-        crowd = same[ground_truth.is_crowd[same]]
-        same = same[~ground_truth.is_crowd[same]]
-        iou = _iou(box, ground_truth.boxes[same])[0] if len(same) else np.zeros(0)
+        in_image = np.flatnonzero(ground_truth.image_index == detections.image_index[row])
+        crowd = ground_truth.is_crowd[in_image]
+        # COCO's box IoU: against a crowd region, the share of the detection inside it
+        iou = box_iou(detections.boxes[row], ground_truth.boxes[in_image], crowd)[0]
+        own = (ground_truth.category_index[in_image] == category)
+        same, same_iou = in_image[own & ~crowd], iou[own & ~crowd]
         free = np.array([index not in taken for index in same.tolist()], dtype=bool)
-        if np.any(free & (iou >= MATCH_IOU)):
-            best = int(np.argmax(np.where(free, iou, -1.0)))
-            taken.add(int(same[best]))
+        if np.any(free & (same_iou >= MATCH_IOU)):
+            taken.add(int(same[np.argmax(np.where(free, same_iou, -1.0))]))
             kinds.append(0)
+        elif np.any(iou[own & crowd] >= MATCH_IOU):
             continue
-        if len(crowd) and _inside_share(box[0], ground_truth.boxes[crowd]).max() >= MATCH_IOU:
-            continue
-        if np.any(iou >= MATCH_IOU):
+        elif np.any(same_iou >= MATCH_IOU):
             kinds.append(1)
-        elif np.any(iou >= NEAR_IOU):
+        elif np.any(same_iou >= NEAR_IOU):
             kinds.append(2)
         else:
-            others = in_image[(ground_truth.category_index[in_image] != category) & ~ground_truth.is_crowd[in_image]]
-            near_other = len(others) and _iou(box, ground_truth.boxes[others]).max() >= NEAR_IOU
-            kinds.append(3 if near_other else 4)
+            kinds.append(3 if np.any(iou[~own & ~crowd] >= NEAR_IOU) else 4)
     return np.asarray(kinds, dtype=np.int64), len(taken)
