@@ -114,3 +114,33 @@ def test_photo_collages_are_seeded_and_written(tmp_path):
     assert [path.name for path in paths] == [f"background_0000{i}.jpg" for i in range(3)]
     with pytest.raises(ValueError, match="photographs"):
         photo_collage(np.random.default_rng(0), [], 64, 48)
+
+
+def test_photo_collage_layout_sets_piece_count_and_size():
+    flat = [np.zeros((60, 60, 3), np.uint8), np.full((60, 60, 3), 255, np.uint8)]  # every crop is one colour
+    assert photo_collage(np.random.default_rng(0), flat, 200, 200, pieces=(0, 0)).std() == 0
+    changed = []
+    for seed in range(20):  # one piece of exactly 50 x 50 px: it changes at most 2,500 pixels
+        collage = photo_collage(np.random.default_rng(seed), flat, 200, 200, pieces=(1, 1), piece_size=(0.25, 0.25))
+        base = collage[0, 0] if (collage == collage[0, 0]).all(axis=2).mean() > 0.5 else collage[-1, -1]
+        changed.append(int((collage != base).any(axis=2).sum()))
+    assert max(changed) == 2500 and min(changed) == 0
+
+    def edge_share(pieces, piece_size):  # share of pixels next to a piece border
+        shares = []
+        for seed in range(10):
+            collage = photo_collage(np.random.default_rng(seed), flat, 200, 200, pieces, piece_size).astype(int)
+            shares.append((np.abs(np.diff(collage, axis=1)).sum(axis=2) > 0).mean())
+        return float(np.mean(shares))
+
+    assert edge_share((30, 40), (0.03, 0.1)) > 2 * edge_share((2, 3), (0.4, 0.45))
+
+
+@pytest.mark.parametrize("pieces, piece_size, field", [((5, 2), (0.1, 0.2), "pieces"), ((-1, 2), (0.1, 0.2), "pieces"),
+                                                       ((1, 2), (0.0, 0.2), "piece_size"),
+                                                       ((1, 2), (0.3, 0.2), "piece_size"),
+                                                       ((1, 2), (0.1, 1.5), "piece_size")])
+def test_photo_collage_layout_errors_name_the_field(tmp_path, pieces, piece_size, field):
+    with pytest.raises(ValueError, match=field):
+        write_backgrounds(tmp_path, 1, 32, 32, pieces=pieces, piece_size=piece_size)
+    assert not list(tmp_path.iterdir())  # nothing written

@@ -53,10 +53,29 @@ def _random_crop(generator: np.random.Generator, photograph: np.ndarray, width: 
                            interpolation=cv2.INTER_AREA)
 
 
+#: Default number of pasted pieces (min, max) and their side as a share of the collage's side (min, max).
+PIECES = (4, 16)
+PIECE_SIZE = (0.05, 0.45)
+
+
+def check_collage_layout(pieces: tuple[int, int], piece_size: tuple[float, float]) -> None:
+    """Raises ``ValueError`` naming ``pieces``/``piece_size`` unless ``0 <= min <= max`` pieces and
+    ``0 < min <= max <= 1`` for the side shares."""
+    if len(pieces) != 2 or not 0 <= int(pieces[0]) <= int(pieces[1]):
+        raise ValueError(f"pieces: expected (min, max) with 0 <= min <= max, got {tuple(pieces)}")
+    if len(piece_size) != 2 or not 0 < float(piece_size[0]) <= float(piece_size[1]) <= 1:
+        raise ValueError(f"piece_size: expected (min, max) shares of the side with 0 < min <= max <= 1, "
+                         f"got {tuple(piece_size)}")
+
+
 def photo_collage(generator: np.random.Generator, photographs: Sequence[np.ndarray], width: int, height: int,
-                  pieces: tuple[int, int] = (4, 16)) -> np.ndarray:
+                  pieces: tuple[int, int] = PIECES, piece_size: tuple[float, float] = PIECE_SIZE) -> np.ndarray:
     """``(height, width, 3)`` uint8: a crop of one photograph covered by ``pieces`` (min, max) rectangles,
-    each a crop of a random photograph (5-45 % of the image side, colour-scaled by 0.6-1.4 per channel).
+    each a crop of a random photograph (``piece_size``: width and height each a uniform share of the
+    image's, default 5-45 %), colour-scaled by 0.6-1.4 per channel.
+
+    Many small pieces on a large collage (e.g. 20-60 pieces of 3-25 % on 1280 x 960) keep more fine
+    detail once ``paz6d generate`` crops and shrinks it to the image size (``docs/ssd.md``).
 
     Args:
         generator: draws everything.
@@ -66,10 +85,11 @@ def photo_collage(generator: np.random.Generator, photographs: Sequence[np.ndarr
         raise ValueError("photographs: expected at least one image")
     if int(width) < 1 or int(height) < 1:
         raise ValueError(f"width/height: expected positive pixel sizes, got {width}, {height}")
+    check_collage_layout(pieces, piece_size)
     canvas = _random_crop(generator, photographs[int(generator.integers(len(photographs)))], width, height)
     for _ in range(int(generator.integers(pieces[0], pieces[1] + 1))):
-        piece_width = max(2, int(generator.uniform(0.05, 0.45) * width))
-        piece_height = max(2, int(generator.uniform(0.05, 0.45) * height))
+        piece_width = max(2, int(generator.uniform(*piece_size) * width))
+        piece_height = max(2, int(generator.uniform(*piece_size) * height))
         piece = _random_crop(generator, photographs[int(generator.integers(len(photographs)))], piece_width,
                              piece_height)
         piece = np.clip(piece * generator.uniform(0.6, 1.4, 3), 0, 255).astype(np.uint8)
@@ -81,17 +101,19 @@ def photo_collage(generator: np.random.Generator, photographs: Sequence[np.ndarr
     return canvas
 
 
-def write_backgrounds(folder: str | Path, count: int, width: int = 640, height: int = 480, seed: int = 0) -> list[Path]:
+def write_backgrounds(folder: str | Path, count: int, width: int = 640, height: int = 480, seed: int = 0,
+                      pieces: tuple[int, int] = PIECES, piece_size: tuple[float, float] = PIECE_SIZE) -> list[Path]:
     """Writes ``count`` collages ``folder/background_XXXXX.jpg`` (collage ``i`` drawn from
-    ``SeedSequence([seed, i])``); returns their paths."""
+    ``SeedSequence([seed, i])``, see :func:`photo_collage`); returns their paths."""
     if int(count) < 1:
         raise ValueError(f"count: expected a positive number of backgrounds, got {count}")
+    check_collage_layout(pieces, piece_size)
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     photographs = sample_photographs()
     paths = []
     for index in range(int(count)):
-        collage = photo_collage(np.random.default_rng([seed, index]), photographs, width, height)
+        collage = photo_collage(np.random.default_rng([seed, index]), photographs, width, height, pieces, piece_size)
         path = folder / f"background_{index:05d}.jpg"
         write_bytes_atomically(path, encode_image(collage, ".jpg", (cv2.IMWRITE_JPEG_QUALITY, 92)))
         paths.append(path)
@@ -99,15 +121,24 @@ def write_backgrounds(folder: str | Path, count: int, width: int = 640, height: 
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m paz6d.synthesis.photo_backgrounds OUT [--count N] [--width W] [--height H] [--seed S]``."""
+    """``python -m paz6d.synthesis.photo_backgrounds OUT [--count N] [--width W] [--height H] [--seed S]
+    [--pieces MIN MAX] [--piece-size MIN MAX]``."""
     parser = argparse.ArgumentParser(description="write photographic collage backgrounds for paz6d generate")
     parser.add_argument("out", type=Path, help="output folder")
     parser.add_argument("--count", type=int, default=200, help="number of backgrounds (default: 200)")
     parser.add_argument("--width", type=int, default=640, help="width in pixels (default: 640)")
     parser.add_argument("--height", type=int, default=480, help="height in pixels (default: 480)")
     parser.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
+    parser.add_argument("--pieces", type=int, nargs=2, default=PIECES, metavar=("MIN", "MAX"),
+                        help=f"pasted pieces per collage (default: {PIECES[0]} {PIECES[1]})")
+    parser.add_argument("--piece-size", type=float, nargs=2, default=PIECE_SIZE, metavar=("MIN", "MAX"),
+                        help=f"piece side as a share of the collage side (default: {PIECE_SIZE[0]} {PIECE_SIZE[1]})")
     args = parser.parse_args(argv)
-    paths = write_backgrounds(args.out, args.count, args.width, args.height, args.seed)
+    try:
+        paths = write_backgrounds(args.out, args.count, args.width, args.height, args.seed, tuple(args.pieces),
+                                  tuple(args.piece_size))
+    except ValueError as error:
+        parser.error(str(error))
     print(f"{len(paths)} backgrounds written to {args.out}")
     return 0
 
