@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
 from paz6d.abstract import SequentialProcessor
-from paz6d.synthesis.box_augment import (AnnotatedImage, Expand, PhotometricDistortion, RandomFlip,
+from paz6d.synthesis.box_augment import (AnnotatedImage, Expand, Grayscale, PhotometricDistortion, RandomFlip,
                                          RandomSampleCrop, WhiteBalance, ssd_augmentation)
 from paz6d.synthesis.photo_backgrounds import photo_collage, sample_photographs, write_backgrounds
 
@@ -85,11 +86,27 @@ def test_white_balance_tints_grey_with_reciprocal_red_and_blue_gains_in_range():
         WhiteBalance(-0.1)
 
 
+def test_grayscale_replaces_every_channel_with_the_luminance():
+    image = np.random.default_rng(0).integers(0, 256, (5, 7, 3), dtype=np.uint8)
+    sample = AnnotatedImage(image, np.array([[1.0, 1.0, 5.0, 4.0]]), np.array([2]))
+    grey = Grayscale(probability=1.0, seed=0)(sample)
+    expected = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)  # OpenCV's BT.601 weights as the oracle
+    for channel in range(3):
+        np.testing.assert_allclose(grey.image[..., channel].astype(int), expected.astype(int), atol=1)
+    np.testing.assert_array_equal(grey.boxes, sample.boxes)
+    assert Grayscale(probability=0.0, seed=0)(sample) is sample
+    changed = [Grayscale(probability=0.3, seed=seed)(sample) is not sample for seed in range(200)]
+    assert 0.2 < np.mean(changed) < 0.4
+    with pytest.raises(ValueError, match="probability: expected a share"):
+        Grayscale(probability=1.5)
+
+
 def test_ssd_augmentation_is_a_named_sequence_and_reproducible():
     chain = ssd_augmentation(seed=1)
     assert isinstance(chain, SequentialProcessor)
     assert chain.names == ["photometric", "expand", "crop", "flip"]
     assert ssd_augmentation(white_balance=0.2).names == ["photometric", "white_balance", "expand", "crop", "flip"]
+    assert ssd_augmentation(grayscale=0.2).names == ["photometric", "grayscale", "expand", "crop", "flip"]
     again = ssd_augmentation(seed=1)
     for _ in range(3):
         a, b = chain(_sample()), again(_sample())

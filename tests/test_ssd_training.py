@@ -19,8 +19,8 @@ from paz6d.datasets.bop.coco_ground_truth import bop_split_to_coco, coco_image_i
 from paz6d.run_dirs import method_of
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.dataset import load_detection_set
-from paz6d.ssd.config import SSDTraining
-from paz6d.ssd.train import train_ssd
+from paz6d.ssd.config import CONFIGS, SSDTraining
+from paz6d.ssd.train import augmentation_factory, train_ssd
 
 TINY = {"input_size": 128, "width": 0.25, "learning_rate": 5e-3, "warmup_steps": 0, "expand_probability": 0.0,
         "checkpoint_every": 30, "sample_every": 30}
@@ -43,6 +43,14 @@ def trained(generated, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("ssd_run") / "run"
     train_ssd(SSDTraining(dataset=generated, out=out, steps=60, batch_size=4, progress=False, overrides=TINY))
     return out
+
+
+def test_optional_augmentations_follow_the_run_settings():
+    assert augmentation_factory(CONFIGS["quick"])().names == ["photometric", "expand", "crop", "flip"]
+    chain = augmentation_factory({**CONFIGS["quick"], "white_balance": 0.3, "grayscale": 0.2})()
+    assert chain.names == ["photometric", "white_balance", "grayscale", "expand", "crop", "flip"]
+    assert chain["grayscale"].probability == 0.2 and chain["white_balance"].strength == 0.3
+    assert chain["expand"].max_ratio == CONFIGS["quick"]["expand_ratio"]
 
 
 def test_training_lowers_the_loss_and_writes_the_run_directory(trained):

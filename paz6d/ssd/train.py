@@ -76,6 +76,14 @@ def _sample_drawer(images: list[np.ndarray], spec, class_names: tuple[str, ...],
     return draw
 
 
+def augmentation_factory(settings: dict):
+    """A factory of :func:`ssd_augmentation` chains (one per batch) with a run's settings: the config's expand
+    ratio and probability, and
+    the optional ``white_balance`` strength and ``grayscale`` probability (``SSDTraining.overrides``; 0: off)."""
+    return partial(ssd_augmentation, settings["expand_ratio"], settings["expand_probability"],
+                   white_balance=settings.get("white_balance", 0.0), grayscale=settings.get("grayscale", 0.0))
+
+
 def train_ssd(job: SSDTraining) -> dict:
     """Trains (or resumes) one SSD run and writes everything ``DetectSingleShot`` needs.
 
@@ -100,8 +108,7 @@ def train_ssd(job: SSDTraining) -> dict:
     run_files.write_detector(job.out, settings["architecture"], data.class_names, spec.to_dict(), SSD_VARIANCES)
     optimizer = keras.optimizers.AdamW(_schedule(keras, settings), weight_decay=settings["weight_decay"],
                                        global_clipnorm=10.0)
-    augmentation = partial(ssd_augmentation, settings["expand_ratio"], settings["expand_probability"],
-                           white_balance=settings.get("white_balance", 0.0))
+    augmentation = augmentation_factory(settings)
 
     def make_batch(step: int):
         images, targets = training_batch(data, augmentation, job.seed, step, settings["batch_size"],

@@ -109,6 +109,24 @@ class WhiteBalance(RandomProcessor):
         return replace(sample, image=np.clip(np.rint(image), 0, 255).astype(np.uint8))
 
 
+class Grayscale(RandomProcessor):
+    """With ``probability``, the image's luminance (ITU-R BT.601 weights) in all three channels: the boxes'
+    objects must then be told apart by shape and shading, not colour. Boxes are unchanged."""
+
+    def __init__(self, probability: float = 0.2, seed=None, name: str | None = None):
+        super().__init__(seed, name)
+        if not 0 <= probability <= 1:
+            raise ValueError(f"probability: expected a share in [0, 1], got {probability}")
+        self.probability = float(probability)
+
+    def call(self, sample: AnnotatedImage) -> AnnotatedImage:
+        if self.generator.random() >= self.probability:
+            return sample
+        luminance = sample.image.astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
+        grey = np.clip(np.rint(luminance), 0, 255).astype(np.uint8)
+        return replace(sample, image=np.repeat(grey[..., None], 3, axis=2))
+
+
 class Expand(RandomProcessor):
     """SSD's zoom-out: with ``probability``, puts the image at a random place in a canvas ``r`` times its
     size (``r`` uniform in ``[1, max_ratio]``) filled with ``fill`` (RGB), and shifts the boxes."""
@@ -197,13 +215,15 @@ class RandomFlip(RandomProcessor):
 
 
 def ssd_augmentation(expand_ratio: float = 4.0, expand_probability: float = 0.5, flip: bool = True,
-                     white_balance: float = 0.0, seed=None) -> SequentialProcessor:
+                     white_balance: float = 0.0, grayscale: float = 0.0, seed=None) -> SequentialProcessor:
     """The paper's chain: ``photometric`` → ``expand`` → ``crop`` → ``flip`` (named steps), with a
-    ``white_balance`` step (:class:`WhiteBalance` of that strength) after ``photometric`` when it is
-    positive."""
+    ``white_balance`` step (:class:`WhiteBalance` of that strength) and a ``grayscale`` step
+    (:class:`Grayscale` with that probability) after ``photometric`` when they are positive."""
     steps = [PhotometricDistortion(name="photometric")]
     if white_balance > 0:
         steps.append(WhiteBalance(white_balance, name="white_balance"))
+    if grayscale > 0:
+        steps.append(Grayscale(grayscale, name="grayscale"))
     steps += [Expand(expand_ratio, expand_probability, name="expand"),
              RandomSampleCrop(name="crop")]
     if flip:
