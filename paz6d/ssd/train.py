@@ -78,8 +78,8 @@ def _sample_drawer(images: list[np.ndarray], spec, class_names: tuple[str, ...],
 
 def augmentation_factory(settings: dict):
     """A factory of :func:`ssd_augmentation` chains (one per batch) with a run's settings: the config's expand
-    ratio and probability, and
-    the optional ``white_balance`` strength and ``grayscale`` probability (``SSDTraining.overrides``; 0: off)."""
+    ratio and probability, and the optional ``white_balance`` strength and ``grayscale`` probability
+    (``SSDTraining.overrides``; 0: off)."""
     return partial(ssd_augmentation, settings["expand_ratio"], settings["expand_probability"],
                    white_balance=settings.get("white_balance", 0.0), grayscale=settings.get("grayscale", 0.0))
 

@@ -122,9 +122,8 @@ class Grayscale(RandomProcessor):
     def call(self, sample: AnnotatedImage) -> AnnotatedImage:
         if self.generator.random() >= self.probability:
             return sample
-        luminance = sample.image.astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
-        grey = np.clip(np.rint(luminance), 0, 255).astype(np.uint8)
-        return replace(sample, image=np.repeat(grey[..., None], 3, axis=2))
+        grey = image_backend.convert_color_space(sample.image, "RGB", "GRAY")
+        return replace(sample, image=image_backend.convert_color_space(grey, "GRAY", "RGB"))
 
 
 class Expand(RandomProcessor):
