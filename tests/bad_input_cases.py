@@ -1010,7 +1010,10 @@ def train_cases() -> list[Case]:
         "--test-images": [(("0",), ""), (("-2",), "")],
         "--steps": [(("0",), "")],
         "--workers": [(("-1",), "")],
+        "--scene-crops": [(("1.5",), ""), (("-0.1",), "")],
     })
+    found.append(Case("demo-train-images-0-with-scene-crops", (*DEMO, "--scene-crops", "0.25", "--train-images", "0"),
+                      None, ("--train-images",)))
     found += _flag_cases("benchmark-lmo-", BENCHMARK_LMO, {  # every case fails before any stage runs
         "--lmo": [(("{case}/none",), "none")],
         "--method": [(("pvnet",), "")],

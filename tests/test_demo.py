@@ -49,10 +49,14 @@ def test_demo_smoke_run(tmp_path):
     toy = replace(QUICK, crop_size=16, latent_size=16, filters=(8, 16), kernel_size=3, render_size=40, views=24,
                   in_plane=6, steps=20, batch_size=8, learning_rate=2e-3, bootstrap_fraction=0.25,
                   checkpoint_every=10, sample_every=10, log_every=5, augmentation=Augmentation())
-    report = run_demo(tmp_path, toy, test_images=3, workers=0, grid_rows=2)
+    report = run_demo(tmp_path, toy, test_images=3, workers=0, grid_rows=2, train_images=4, scene_crops=0.5)
     for name in ("report.json", "recall_curves.png", "estimates_grid.png", "mesh/obj_000001.ply",
-                 "mesh/models_info.json", "model/model.keras", "model/codebook.npz"):
+                 "mesh/models_info.json", "model/model.keras", "model/codebook.npz", "model/pairs.npz"):
         assert (tmp_path / name).is_file(), name
+    # the AAE was trained on crops of the generated training scenes (seed 0), not of the test images
+    assert json.loads((tmp_path / "model" / "config.json").read_text())["dataset"] == str((tmp_path / "train_data").resolve())
+    assert len(list((tmp_path / "train_data" / "train").glob("*/rgb/*"))) == 4
+    assert report["train_images"] == 4 and report["scene_crops"] == 0.5
     stored = json.loads((tmp_path / "report.json").read_text())
     metrics = stored["metrics"]
     estimates = stored["estimates"]
@@ -80,7 +84,8 @@ def test_demo_smoke_run(tmp_path):
     from paz6d.demo.command import DemoOptions, run_demos
     from paz6d.demo.ood_set import CONDITIONS
 
-    again = run_demos(DemoOptions(out=tmp_path, test_images=3, workers=1, ood_images=2), toy)
+    again = run_demos(DemoOptions(out=tmp_path, test_images=3, workers=1, ood_images=2, train_images=4,
+                                  scene_crops=0.5), toy)
     stored = json.loads((tmp_path / "report.json").read_text())
     assert again["training"]["steps"] == 20 and stored["training"]["model_samples_per_second"] is None
     assert stored["metrics"]["recall_0.1d"] == metrics["recall_0.1d"]
@@ -103,9 +108,11 @@ def test_demo_keypoints_option_runs_the_keypoint_demo_on_the_demo_mesh(tmp_path,
 
     calls = {}
     mesh = tmp_path / "mesh" / "obj_000001.ply"
-    monkeypatch.setattr(demo, "run_demo", lambda out, config, test_images, workers, platform:
-                        calls.setdefault("aae", (out, test_images)) and {"files": {"mesh": str(mesh),
-                                                                                   "model": str(out / "model")}})
+    def fake_run_demo(out, config, test_images, workers, platform, train_images, scene_crops):
+        calls.setdefault("aae", (out, test_images, train_images, scene_crops))
+        return {"files": {"mesh": str(mesh), "model": str(out / "model")}}
+
+    monkeypatch.setattr(demo, "run_demo", fake_run_demo)
     monkeypatch.setattr(keypoint_demo, "run_keypoint_demo",
                         lambda out_dir, mesh_path, **options: calls.setdefault("keypoints", (out_dir, mesh_path, options)))
     monkeypatch.setattr(ood_check, "run_check", lambda out, mesh_path, models, count, mesh_scale, workers:
@@ -116,15 +123,18 @@ def test_demo_keypoints_option_runs_the_keypoint_demo_on_the_demo_mesh(tmp_path,
     out_dir, mesh_path, options = calls["keypoints"]
     assert out_dir == tmp_path / "keypoints" and mesh_path == mesh
     assert options["mesh_scale"] == 0.001 and options["test_images"] == 7
+    assert calls["aae"][1:] == (7, 2000, 0.0)  # rendered views only by default
     models, count = calls["ood"]
     assert count == 5 and [(m.name, m.kind) for m in models] == [("AAE", "aae"), ("KeypointNet", "keypointnet")]
     assert models[1].run_dir == tmp_path / "keypoints" / "keypointnet_supervised"
     assert "ood_check" in json.loads((tmp_path / "report.json").read_text())
     (tmp_path / "plain").mkdir()
-    args = build_parser().parse_args(["demo", "--out", str(tmp_path / "plain")])
+    args = build_parser().parse_args(["demo", "--out", str(tmp_path / "plain"), "--scene-crops", "0.25",
+                                      "--train-images", "300"])
     calls.clear()
     args._run(args)
     assert "keypoints" not in calls and [m.name for m in calls["ood"][0]] == ["AAE"]
+    assert calls["aae"][2:] == (300, 0.25)
 
 
 def test_one_scorer_one_key_set_and_unmeasured_values_written_as_null(tmp_path, capsys):

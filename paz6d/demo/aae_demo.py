@@ -4,9 +4,11 @@
    millimetres + ``models_info.json``, BOP units);
 2. generates held-out synthetic test images with ``data_gen`` (random lights, backgrounds,
    distractors, occluders; a seed different from training);
-3. trains an Augmented Autoencoder with the quick config (``DIR/model/``, an ``ImplicitPose6D`` run dir);
-4. estimates the pose of every test instance from its ground-truth box;
-5. scores them with :func:`paz6d.demo.report.score_poses` (ADD recall at 0.1 d, rotation/translation
+3. with ``scene_crops > 0``, generates training scenes the same way (seed 0, ``DIR/train_data``): that
+   share of the AAE's training inputs is cut from them, so it sees real occlusion by the generator's occluders;
+4. trains an Augmented Autoencoder with the quick config (``DIR/model/``, an ``ImplicitPose6D`` run dir);
+5. estimates the pose of every test instance from its ground-truth box;
+6. scores them with :func:`paz6d.demo.report.score_poses` (ADD recall at 0.1 d, rotation/translation
    errors, AUC of the ADD accuracy curve up to 10 cm; the demo object is asymmetric) and writes
    ``DIR/report.json``, a printed table and PNGs (recall curves, input / reconstruction / estimate grid).
 
@@ -155,14 +157,29 @@ def _print_table(report: dict) -> None:
                 ("total time", number(report["timings"]["total_seconds"], 1 / 60, " min"))])
 
 
+def _generate_scenes(mesh_path: Path, out: Path, num_images: int, seed: int, split: str, workers: int,
+                     platform: str | None) -> None:
+    """``num_images`` single-object scenes of the demo object (the generator's default randomisation)."""
+    from data_gen.config import GenerationConfig
+    from data_gen.generator import generate
+
+    generate(GenerationConfig(meshes=(mesh_path,), out=out, num_images=num_images, seed=seed, split=split,
+                              mesh_scale=1.0 / MM_PER_M, objects_per_image=(1, 1), platform=platform),
+             workers=max(1, workers))
+
+
 def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, platform: str | None = None,
-             grid_rows: int = 8) -> dict:
-    """Runs the whole demo into ``out`` and returns the report (also written to ``out/report.json``)."""
+             grid_rows: int = 8, train_images: int = 0, scene_crops: float = 0.0) -> dict:
+    """Runs the whole demo into ``out`` and returns the report (also written to ``out/report.json``).
+
+    Args:
+        train_images / scene_crops: training scenes generated, and the share of AAE training inputs cut
+            from them (0: rendered views only, no training scenes); ``paz6d demo --scene-crops``
+            (:class:`~paz6d.demo.command.DemoOptions`).
+    """
     from paz6d.backend.tensorflow_guard import import_tensorflow
 
     import_tensorflow()  # first: rendering in this process (overlays) is then safe next to TensorFlow
-    from data_gen.config import GenerationConfig
-    from data_gen.generator import generate
     from paz6d.assets.demo_object import OBJECT_ID, write_demo_object
     from paz6d.aae.config import QUICK
     from paz6d.aae.train import train_aae
@@ -170,30 +187,40 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     config = QUICK if config is None else config
     if int(test_images) <= 0:
         raise ValueError(f"test_images: expected a positive number of images, got {test_images}")
+    if not 0.0 <= scene_crops <= 1.0:
+        raise ValueError(f"scene_crops: expected a share in [0, 1], got {scene_crops}")
+    if scene_crops > 0 and int(train_images) <= 0:
+        raise ValueError(f"train_images: expected a positive number of images for scene_crops, got {train_images}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     timings = {}
     started = time.perf_counter()
 
-    _stage("1/5 demo object")
+    _stage("1/6 demo object")
     mesh_path = write_demo_object(out / "mesh")
     print(f"wrote {mesh_path} and {out / 'mesh' / 'models_info.json'}")
 
-    _stage(f"2/5 held-out test images ({test_images}, seed {TEST_SEED})")
+    _stage(f"2/6 held-out test images ({test_images}, seed {TEST_SEED})")
     tick = time.perf_counter()
-    generation = GenerationConfig(meshes=(mesh_path,), out=out / "test_data", num_images=test_images,
-                                  seed=TEST_SEED, split="test", mesh_scale=1.0 / MM_PER_M, objects_per_image=(1, 1),
-                                  platform=platform)
-    generate(generation, workers=max(1, workers))
+    _generate_scenes(mesh_path, out / "test_data", test_images, TEST_SEED, "test", workers, platform)
     timings["test_data_seconds"] = time.perf_counter() - tick
 
-    _stage(f"3/5 training the Augmented Autoencoder ({config.steps} steps, seed {TRAIN_SEED})")
+    scenes = None
+    if scene_crops > 0:
+        _stage(f"3/6 training scenes ({train_images}, seed {TRAIN_SEED}; {scene_crops:.0%} of the AAE's inputs)")
+        tick = time.perf_counter()
+        scenes = out / "train_data"
+        _generate_scenes(mesh_path, scenes, train_images, TRAIN_SEED, "train", workers, platform)
+        timings["train_data_seconds"] = time.perf_counter() - tick
+
+    _stage(f"4/6 training the Augmented Autoencoder ({config.steps} steps, seed {TRAIN_SEED})")
     tick = time.perf_counter()
     training = train_aae(mesh_path, out / "model", config, mesh_scale=1.0 / MM_PER_M, seed=TRAIN_SEED, workers=workers,
-                         platform=platform)
+                         platform=platform, dataset=scenes, object_id=OBJECT_ID,
+                         pair_fraction=scene_crops)
     timings["training_seconds"] = time.perf_counter() - tick
 
-    _stage("4/5 estimating poses from ground-truth boxes")
+    _stage("5/6 estimating poses from ground-truth boxes")
     tick = time.perf_counter()
     targets = _test_targets(out / "test_data")
     if not targets:
@@ -201,7 +228,7 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     poses, seconds_per_estimate, estimator = _estimate(out / "model", targets)
     timings["estimation_seconds"] = time.perf_counter() - tick
 
-    _stage("5/5 scoring and plots")
+    _stage("6/6 scoring and plots")
 
     points = aae_run_dir.read_object(out / "model")["vertices"]
     diameter = load_models_info(out / "mesh" / "models_info.json")[OBJECT_ID].diameter
@@ -215,6 +242,7 @@ def run_demo(out: Path, config=None, test_images: int = 200, workers: int = 2, p
     timings["total_seconds"] = time.perf_counter() - started
     report = {"metrics": metrics, "training": training, "seconds_per_estimate": seconds_per_estimate,
               "timings": timings, "test_images": test_images, "test_seed": TEST_SEED, "train_seed": TRAIN_SEED,
+              "train_images": int(train_images) if scenes else 0, "scene_crops": float(scene_crops),
               "config": config.to_dict(), "cpu_count": os.cpu_count(),
               "load_average_1min_at_end": os.getloadavg()[0],
               "targets": {"instances_evaluated": len(targets), "min_visible_fraction": MIN_VISIBLE_FRACTION},

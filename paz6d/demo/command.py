@@ -25,6 +25,10 @@ class DemoOptions:
 
     out: Path = option(Path("demo_output"), "output folder (re-run to resume)")
     test_images: int = option(200, "held-out synthetic test images")
+    scene_crops: float = option(0.0, "share of the AAE's training inputs cut from --train-images generated training "
+                                     "scenes (real occlusion by the generator's occluders; 0: rendered views only, no "
+                                     "training scenes; measured in docs/aae.md)")
+    train_images: int = option(2000, "training scenes generated when --scene-crops > 0")
     steps: int | None = option(None, "AAE training steps (default: the quick config's)")
     workers: int = option(2, "rendering processes")
     platform: str | None = option(None, "OpenGL platform of the renderers (default: auto)", choices=PLATFORMS)
@@ -39,6 +43,10 @@ class DemoOptions:
             raise ValueError(f"workers: expected a positive number of rendering processes, got {self.workers}")
         if self.test_images < 1:
             raise ValueError(f"test_images: expected a positive number of images, got {self.test_images}")
+        if not 0.0 <= self.scene_crops <= 1.0:
+            raise ValueError(f"scene_crops: expected a share in [0, 1], got {self.scene_crops}")
+        if self.scene_crops > 0 and self.train_images < 1:
+            raise ValueError(f"train_images: expected a positive number of images, got {self.train_images}")
         if self.ood_images < 1:
             raise ValueError(f"ood_images: expected a positive number of views, got {self.ood_images}")
 
@@ -55,7 +63,8 @@ def run_demos(options: DemoOptions, config=QUICK, keypoint_overrides: dict | Non
     from paz6d.demo import aae_demo, keypoint_demo, ood_check  # here: they load OpenCV, the renderers, TensorFlow
 
     out = Path(options.out)
-    report = aae_demo.run_demo(out, config, options.test_images, options.workers, options.platform)
+    report = aae_demo.run_demo(out, config, options.test_images, options.workers, options.platform,
+                               train_images=options.train_images, scene_crops=options.scene_crops)
     mesh = Path(report["files"]["mesh"])
     models = [ood_check.PoseModel("AAE", "aae", Path(report["files"]["model"]))]
     if options.keypoints:
