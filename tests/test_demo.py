@@ -54,7 +54,8 @@ def test_demo_smoke_run(tmp_path):
                  "mesh/models_info.json", "model/model.keras", "model/codebook.npz", "model/pairs.npz"):
         assert (tmp_path / name).is_file(), name
     # the AAE was trained on crops of the generated training scenes (seed 0), not of the test images
-    assert json.loads((tmp_path / "model" / "config.json").read_text())["dataset"] == str((tmp_path / "train_data").resolve())
+    stored_run = json.loads((tmp_path / "model" / "config.json").read_text())
+    assert stored_run["dataset"] == str((tmp_path / "train_data").resolve())
     assert len(list((tmp_path / "train_data" / "train").glob("*/rgb/*"))) == 4
     assert report["train_images"] == 4 and report["scene_crops"] == 0.5
     stored = json.loads((tmp_path / "report.json").read_text())
