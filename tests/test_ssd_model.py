@@ -41,6 +41,22 @@ def test_light_priors_of_the_first_layer_match_hand_computed_values():
     assert model.output_shape == (None, len(priors), 7)
 
 
+@pytest.mark.parametrize("top_down", [False, True])
+def test_top_down_path_gives_the_finest_map_context_beyond_its_receptive_field(top_down):
+    model, spec = build_ssd(3, "light", 256, width=0.25, top_down=top_down)
+    assert model.output_shape == (None, len(priors_for(spec)), 7)
+    assert any(layer.name.startswith("topdown_") for layer in model.layers) == top_down
+    images = np.random.default_rng(0).normal(size=(1, 256, 256, 3)).astype(np.float32)
+    changed = images.copy()
+    changed[0, 70:90, 70:90] += 3.0  # about 80 px from the first cell: outside the stride-8 map's own field
+    first_cell = slice(0, spec.priors_per_cell[0])
+    before = np.asarray(model(images, training=False))[0, first_cell]
+    after = np.asarray(model(changed, training=False))[0, first_cell]
+    # without the path the first cell cannot see the change at all (exactly equal); with it, it moves by more
+    # than float round-off (activations are small at initialisation, so the bound is relative)
+    assert (np.abs(after - before).max() > 1e-6 * np.abs(before).max()) == top_down
+
+
 def test_l2_normalization_scales_unit_vectors():
     layer = L2Normalization(20.0)
     values = np.array([[[[3.0, 4.0]]]], np.float32)
@@ -56,6 +72,8 @@ def test_builder_errors_name_the_argument():
         build_ssd(3, "ssd300", 320)
     with pytest.raises(SSDModelError, match="input_size"):
         build_ssd(3, "light", 300)
+    with pytest.raises(SSDModelError, match="top_down"):
+        build_ssd(3, "ssd300", top_down=True)
     with pytest.raises(SSDModelError, match="priors"):
         PriorSpec.from_dict({"input_size": 320})
 

@@ -185,8 +185,9 @@ def _separable(x, filters: int, name: str, strides: int = 1):
     return keras.layers.ReLU(name=f"{name}_pw_relu")(x)
 
 
-def _light_body(inputs, width: float) -> list:
-    """Depthwise-separable body: six feature maps of stride 8, 16, 32, 64, 128 and a 1x1 map."""
+def _light_body(inputs, width: float, top_down: bool = False) -> list:
+    """Depthwise-separable body: six feature maps of stride 8, 16, 32, 64, 128 and a 1x1 map; with
+    ``top_down``, the maps of stride 8, 16 and 32 pass through :func:`_top_down`."""
     def channels(count: int) -> int:
         return max(8, int(round(count * width / 8)) * 8)
 
@@ -207,7 +208,22 @@ def _light_body(inputs, width: float) -> list:
     x = _conv(stride128, channels(64), 1, "extra3_1")
     last = keras.layers.GlobalAveragePooling2D(keepdims=True, name="extra3_pool")(x)
     last = _conv(last, channels(128), 1, "extra3_2")
+    if top_down:
+        stride8, stride16, stride32 = _top_down([stride8, stride16, stride32], channels(128))
     return [stride8, stride16, stride32, stride64, stride128, last]
+
+
+def _top_down(features: list, filters: int) -> list:
+    """A feature-pyramid top-down path (Lin et al., "Feature Pyramid Networks for Object Detection",
+    CVPR 2017) over maps of strides ``s, 2s, 4s, ...``: each map, projected to ``filters`` channels by a
+    1x1 conv, plus the 2x-upsampled merged map above it, then a depthwise-separable 3x3. The fine maps,
+    shallow in the body, get the context of the deep ones."""
+    merged = [_conv(features[-1], filters, 1, f"lateral_{len(features) - 1}")]
+    for index in range(len(features) - 2, -1, -1):
+        lateral = _conv(features[index], filters, 1, f"lateral_{index}")
+        above = keras.layers.UpSampling2D(2, interpolation="nearest", name=f"topdown_up_{index}")(merged[0])
+        merged.insert(0, keras.layers.Add(name=f"topdown_add_{index}")([lateral, above]))
+    return [_separable(x, filters, f"topdown_{index}") for index, x in enumerate(merged)]
 
 
 def _heads(features: list, spec: PriorSpec, num_classes: int, separable: bool):
@@ -228,7 +244,7 @@ def _heads(features: list, spec: PriorSpec, num_classes: int, separable: bool):
 
 
 def build_ssd(num_classes: int, architecture: str = "light", input_size: int | None = None,
-              width: float = 1.0) -> tuple[object, PriorSpec]:
+              width: float = 1.0, top_down: bool = False) -> tuple[object, PriorSpec]:
     """An SSD network and its prior layout.
 
     Args:
@@ -236,6 +252,7 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
         architecture: ``"ssd300"``, ``"ssd512"`` or ``"light"``.
         input_size: ``light`` only (multiple of 64, default 320); the VGG models use 300 / 512.
         width: ``light`` only: channel multiplier of the body.
+        top_down: ``light`` only: a feature-pyramid top-down path over its three finest maps.
     Returns:
         ``(model, spec)``: ``model(images (B, S, S, 3)) -> (B, P, 4 + num_classes)``; ``spec`` gives the priors.
     Raises:
@@ -248,10 +265,12 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
                             f"{paper_priors(architecture).input_size} images, got {input_size}")
     if not 0.1 <= float(width) <= 4.0:
         raise SSDModelError(f"width: expected a channel multiplier in [0.1, 4], got {width}")
+    if top_down and architecture != "light":
+        raise SSDModelError(f"top_down: only the light network has a top-down path, not {architecture}")
     spec = paper_priors(architecture, input_size)
     inputs = keras.Input((spec.input_size, spec.input_size, 3), name="image")
     if architecture == "light":
-        features = _light_body(inputs, float(width))
+        features = _light_body(inputs, float(width), bool(top_down))
     else:
         features, fc7 = _vgg16_body(inputs)
         features += _vgg_extras(fc7, 2 if architecture == "ssd300" else 4, 2 if architecture == "ssd300" else 0)

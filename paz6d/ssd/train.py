@@ -103,7 +103,7 @@ def train_ssd(job: SSDTraining) -> dict:
     _prepare_run_dir(job, settings, data.class_names)
     keras.utils.set_random_seed(job.seed)
     model, spec = build_ssd(len(data.class_names) + 1, settings["architecture"], settings["input_size"],
-                            settings["width"])
+                            settings["width"], settings.get("top_down", False))
     priors = priors_for(spec)
     run_files.write_detector(job.out, settings["architecture"], data.class_names, spec.to_dict(), SSD_VARIANCES)
     optimizer = keras.optimizers.AdamW(_schedule(keras, settings), weight_decay=settings["weight_decay"],
