@@ -152,6 +152,28 @@ def test_prior_boxes_ssd300_layout():
     assert unclipped.max() > 1
 
 
+def test_prior_boxes_on_a_rectangular_input_match_a_brute_force_loop():
+    width, height = 96.0, 64.0
+    maps, steps = [(8, 12), (4, 6)], [(8.0, 8.0), (16.0, 16.0)]
+    mins, maxs, ratios = [10.0, 30.0], [30.0, 50.0], [[2.0], [3.0]]
+    expected = []
+    for (rows, cols), (step_x, step_y), low, high, extra in zip(maps, steps, mins, maxs, ratios):
+        for row in range(rows):
+            for col in range(cols):
+                cx, cy = (col + 0.5) * step_x, (row + 0.5) * step_y
+                shapes = [(low, low), (np.sqrt(low * high),) * 2]
+                for ratio in extra:
+                    shapes += [(low * np.sqrt(ratio), low / np.sqrt(ratio)), (low / np.sqrt(ratio), low * np.sqrt(ratio))]
+                expected += [(cx / width, cy / height, w / width, h / height) for w, h in shapes]
+    priors = boxes.prior_boxes((width, height), maps, steps, mins, maxs, ratios, clip_to_image=False)
+    np.testing.assert_allclose(priors, expected, atol=1e-12)
+    square = boxes.prior_boxes(64, [8, 4], [8, 16], mins, maxs, ratios)
+    np.testing.assert_array_equal(square, boxes.prior_boxes((64, 64), [(8, 8), (4, 4)], [(8, 8), (16, 16)], mins,
+                                                             maxs, ratios))
+    with pytest.raises(ValueError, match="expected a number or a pair"):
+        boxes.prior_boxes((64, 64, 3), [8], [8], [10], [20], [[2]])
+
+
 def test_match_assigns_best_prior_to_every_object_and_thresholds_the_rest():
     priors = boxes.prior_boxes(300, [5], [60], [60], [100], [[2]])
     truth = np.array([[0.0, 0.0, 0.24, 0.24], [0.62, 0.6, 0.7, 0.66], [0.15, 0.62, 0.45, 0.78]])

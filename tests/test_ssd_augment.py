@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from paz6d.abstract import SequentialProcessor
-from paz6d.synthesis.box_augment import (AnnotatedImage, Expand, Grayscale, PhotometricDistortion, RandomFlip,
-                                         RandomSampleCrop, WhiteBalance, ssd_augmentation)
+from paz6d.synthesis.box_augment import (FILL, AnnotatedImage, Expand, Grayscale, PhotometricDistortion, RandomFlip,
+                                         RandomSampleCrop, RandomScaleCrop, WhiteBalance, ssd_augmentation)
 from paz6d.synthesis.photo_backgrounds import photo_collage, sample_photographs, write_backgrounds
 
 
@@ -57,6 +57,30 @@ def test_random_sample_crop_keeps_boxes_whose_centre_is_inside():
             colour = (250, 10, 10) if class_id == 1 else (10, 250, 10)
             assert np.all(_patch(out, index) == colour)  # clipped boxes still cover only their object
     assert RandomSampleCrop(min_ious=(None,), seed=0)(sample) is sample
+
+
+def test_random_scale_crop_rescales_within_its_range_and_keeps_boxes_on_their_objects():
+    sample = _sample()
+    crop = RandomScaleCrop(64, scale=(0.6, 1.6), seed=0)
+    widths = []
+    for seed in range(30):
+        crop.reseed(seed)
+        out = crop(sample)
+        assert out.image.shape == (64, 64, 3)
+        assert np.all(out.boxes >= 0) and np.all(out.boxes <= 64)
+        for index, class_id in enumerate(out.class_ids):
+            x0, y0, x1, y1 = out.boxes[index]
+            inner = out.image[int(np.ceil(y0)) + 1:int(y1) - 1, int(np.ceil(x0)) + 1:int(x1) - 1].astype(int)
+            colour = (250, 10, 10) if class_id == 1 else (10, 250, 10)
+            assert np.abs(inner - colour).max() <= 2  # (interpolated) object colour inside its box
+            if x0 > 0 and x1 < 64 and class_id == 1:
+                widths.append((x1 - x0) / 30)  # the red patch is 30 px wide
+    assert 0.6 - 1e-9 <= min(widths) and max(widths) <= 1.6 + 1e-9 and max(widths) - min(widths) > 0.3
+    small = RandomScaleCrop(256, scale=(1.0, 1.0), seed=0)(sample)  # 120 x 90 image on a 256 canvas
+    assert small.image.shape == (256, 256, 3) and len(small.boxes) == 2
+    assert np.sum(np.all(small.image == FILL, axis=-1)) == 256 * 256 - 120 * 90
+    with pytest.raises(ValueError, match="scale: expected 0 < lower <= upper"):
+        RandomScaleCrop(64, scale=(1.2, 0.8))
 
 
 def test_photometric_distortion_changes_colours_only_and_is_seeded():

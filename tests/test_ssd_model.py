@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from paz6d.backend import boxes as boxes_backend
 from paz6d.ssd.encoding import decode_outputs, encode_targets, select_detections, softmax
-from paz6d.ssd.model import (L2Normalization, PriorSpec, SSDModelError, build_ssd, load_ssd, paper_priors,
-                             priors_for, save_ssd)
+from paz6d.ssd.model import (L2Normalization, PriorSpec, SSDModelError, build_ssd, light_feature_maps, load_ssd,
+                             paper_priors, priors_for, save_ssd)
 
 
 @pytest.mark.parametrize("architecture, priors, maps", [("ssd300", 8732, (38, 19, 10, 5, 3, 1)),
@@ -148,3 +148,23 @@ def test_decode_outputs_inverts_the_encoding_and_checks_shapes():
     np.testing.assert_allclose(kept[0], truth[0], atol=1e-5)
     with pytest.raises(ValueError, match="outputs: expected shape"):
         decode_outputs(outputs[:, :5], priors)
+
+
+def test_an_any_size_light_model_runs_on_whole_images_with_priors_of_their_shape(tmp_path):
+    model, spec = build_ssd(3, "light", 128, width=0.25, any_size=True)
+    assert priors_for(spec, (128, 128)).tolist() == priors_for(spec).tolist()
+    for height, width in ((128, 192), (192, 320)):
+        output = np.asarray(model(np.zeros((1, height, width, 3), np.float32)))
+        priors = priors_for(spec, (height, width))
+        assert output.shape == (1, len(priors), 7)
+        rows, cols = light_feature_maps(height, width)[0]
+        assert (rows, cols) == (height // 8, width // 8)
+        # first cell of the first map: centre (4, 4) pixels; sides stay the trained ones in pixels
+        np.testing.assert_allclose(priors[0] * [width, height, width, height], [4, 4, spec.min_sizes[0], spec.min_sizes[0]])
+    loaded = load_ssd(save_ssd(model, tmp_path / "any.keras"), spec, 3)
+    np.testing.assert_allclose(np.asarray(loaded(np.ones((1, 128, 192, 3), np.float32))),
+                               np.asarray(model(np.ones((1, 128, 192, 3), np.float32))), atol=1e-5)
+    with pytest.raises(SSDModelError, match="any_size: only the light network"):
+        build_ssd(3, "ssd300", any_size=True)
+    with pytest.raises(SSDModelError, match="input_size: expected a multiple of 64"):
+        priors_for(spec, (100, 128))

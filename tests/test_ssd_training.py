@@ -20,7 +20,7 @@ from paz6d.run_dirs import method_of
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.dataset import load_detection_set
 from paz6d.ssd.config import CONFIGS, SSDTraining
-from paz6d.ssd.train import augmentation_factory, train_ssd
+from paz6d.ssd.train import augmentation_factory, image_scale, train_ssd
 
 TINY = {"input_size": 128, "width": 0.25, "learning_rate": 5e-3, "warmup_steps": 0, "expand_probability": 0.0,
         "checkpoint_every": 30, "sample_every": 30}
@@ -51,6 +51,49 @@ def test_optional_augmentations_follow_the_run_settings():
     assert chain.names == ["photometric", "white_balance", "grayscale", "expand", "crop", "flip"]
     assert chain["grayscale"].probability == 0.2 and chain["white_balance"].strength == 0.3
     assert chain["expand"].max_ratio == CONFIGS["quick"]["expand_ratio"]
+
+
+def test_scale_crops_train_on_windows_and_detect_on_whole_images(generated, tmp_path):
+    from paz6d.backend.image import load_image
+    from paz6d.pipelines import DetectSingleShot
+    from paz6d.synthesis.box_augment import RandomScaleCrop
+
+    settings = {**CONFIGS["quick"], **TINY, "scale_crops": [0.5, 2.0]}
+    chain = augmentation_factory(settings)()
+    assert chain.names == ["photometric", "flip", "crop"]
+    assert isinstance(chain["crop"], RandomScaleCrop) and chain["crop"].size == 128
+    assert image_scale(settings) == pytest.approx(1.0) and image_scale(CONFIGS["quick"]) is None
+    with pytest.raises(ValueError, match="scale_crops: expected a factor range"):
+        image_scale({"scale_crops": [2.0, 1.0]})
+    out = tmp_path / "run"
+    train_ssd(SSDTraining(dataset=generated, out=out, steps=20, batch_size=4, progress=False,
+                          overrides={**TINY, "scale_crops": [0.5, 2.0], "checkpoint_every": 20, "sample_every": 20}))
+    assert run_files.read_detector(out)["image_scale"] == pytest.approx(1.0)
+    detect = DetectSingleShot(out, score_threshold=0.0, max_detections=5)
+    assert detect.names == ["check", "resize", "normalize", "predict", "decode", "nms", "to_pixels", "to_boxes2d"]
+    image = load_image(next((generated / "train" / "000000" / "rgb").iterdir()))  # 160 x 120
+    values = detect.run_steps({"image": image})
+    assert values["canvas_size"] == (192, 128) and values["resized"].shape == (128, 192, 3)
+    boxes = values["detections"]
+    assert 1 <= len(boxes) <= 5
+    assert all(0 <= box.x_min <= box.x_max <= 160 and 0 <= box.y_min <= box.y_max <= 120 for box in boxes)
+
+
+def test_canvas_decoding_maps_zero_offsets_to_the_priors_in_image_pixels():
+    from paz6d.ssd.model import paper_priors, priors_for
+    from paz6d.ssd.pipeline import CanvasToPixels, DecodeCanvasBoxes, ScaleAndPad
+
+    spec = paper_priors("light", 128)
+    image = np.zeros((120, 160, 3), np.uint8)
+    canvas, canvas_size = ScaleAndPad(0.5)(image)  # 80 x 60 scaled, padded to the smallest input, 128 x 128
+    assert canvas_size == (128, 128) and canvas.shape == (128, 128, 3)
+    np.testing.assert_array_equal(ScaleAndPad(2.0)(image)[1], (320, 256))
+    priors = priors_for(spec, (128, 128))
+    outputs = np.zeros((len(priors), 4 + 3))
+    boxes, _ = DecodeCanvasBoxes(spec)(outputs, canvas_size)
+    pixels = CanvasToPixels(0.5)(boxes[:1], canvas_size, (160, 120))
+    side = spec.min_sizes[0] / 0.5  # first prior: a min_size square around canvas pixel (4, 4)
+    np.testing.assert_allclose(pixels[0], np.clip([8 - side / 2, 8 - side / 2, 8 + side / 2, 8 + side / 2], 0, None))
 
 
 def test_training_lowers_the_loss_and_writes_the_run_directory(trained):
@@ -113,6 +156,10 @@ def test_corrupt_run_directory_is_refused(trained, tmp_path):
     (broken / "detector.json").write_text(json.dumps({"architecture": "light", "class_names": [], "priors": {},
                                                       "variances": [0.1, 0.1, 0.2, 0.2]}))
     with pytest.raises(ValueError, match="class_names: expected a non-empty list"):
+        DetectSingleShot(broken)
+    detector = json.loads((trained / "detector.json").read_text())
+    (broken / "detector.json").write_text(json.dumps({**detector, "image_scale": -1}))
+    with pytest.raises(ValueError, match=r"detector.json: image_scale: expected a positive number or null, got -1"):
         DetectSingleShot(broken)
     (broken / "detector.json").write_text((trained / "detector.json").read_text())
     (broken / "model.keras").unlink()

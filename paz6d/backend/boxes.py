@@ -206,42 +206,56 @@ def nms_per_class(boxes, scores, class_ids, iou_threshold: float = 0.45, score_t
     return nms(shifted, scores, iou_threshold, score_threshold, max_outputs)
 
 
-def prior_boxes(image_size: float, feature_map_sizes: Sequence[int], steps: Sequence[float],
+def prior_boxes(image_size, feature_map_sizes: Sequence, steps: Sequence,
                 min_sizes: Sequence[float], max_sizes: Sequence[float],
                 aspect_ratios: Sequence[Sequence[float]], clip_to_image: bool = True) -> np.ndarray:
     """SSD prior (anchor) boxes, normalized ``cxcywh`` ``(P, 4)``.
 
-    For each feature map ``k`` of size ``f × f`` and each cell ``(i, j)`` (row-major), the cell
-    centre is ``((j + 0.5) * step / image_size, (i + 0.5) * step / image_size)`` and the priors are,
-    in order: a square of side ``min_size``, a square of side ``sqrt(min_size * max_size)``, then
-    for each ratio ``r`` a ``min_size*sqrt(r) × min_size/sqrt(r)`` box and its transpose.
+    For each feature map ``k`` of ``rows × cols`` cells and each cell ``(i, j)`` (row-major), the cell
+    centre is ``((j + 0.5) * step_x / width, (i + 0.5) * step_y / height)`` and the priors are, in
+    order: a square of side ``min_size``, a square of side ``sqrt(min_size * max_size)``, then for each
+    ratio ``r`` a ``min_size*sqrt(r) × min_size/sqrt(r)`` box and its transpose.
 
     Args:
-        image_size: side of the square network input in pixels (e.g. 300).
-        feature_map_sizes, steps, min_sizes, max_sizes, aspect_ratios: one entry per feature map;
-            sizes and steps in pixels.
+        image_size: the network input in pixels: its side (square, e.g. 300) or ``(width, height)``.
+        feature_map_sizes: per map, its side or ``(rows, cols)``.
+        steps: per map, pixels between neighbouring cell centres, or ``(step_x, step_y)``.
+        min_sizes, max_sizes, aspect_ratios: one entry per feature map; sizes in pixels.
         clip_to_image: clip the coordinates to ``[0, 1]``.
     """
     lengths = {len(feature_map_sizes), len(steps), len(min_sizes), len(max_sizes), len(aspect_ratios)}
     if len(lengths) != 1:
         raise ValueError("feature_map_sizes/steps/min_sizes/max_sizes/aspect_ratios: expected one entry per "
                          f"feature map, got lengths {[len(feature_map_sizes), len(steps), len(min_sizes), len(max_sizes), len(aspect_ratios)]}")
-    if image_size <= 0:
+    width, height = _pair(image_size)
+    if width <= 0 or height <= 0:
         raise ValueError(f"image_size: expected a positive size in pixels, got {image_size}")
+    scale = np.array([width, height], dtype=np.float64)
     priors = []
     for size, step, min_size, max_size, ratios in zip(feature_map_sizes, steps, min_sizes, max_sizes, aspect_ratios):
-        rows, cols = np.meshgrid(np.arange(size), np.arange(size), indexing="ij")
-        centers = np.stack([(cols.ravel() + 0.5) * step, (rows.ravel() + 0.5) * step], axis=-1) / image_size
+        rows, cols = (int(v) for v in _pair(size))
+        grid_rows, grid_cols = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+        centers = np.stack([grid_cols.ravel() + 0.5, grid_rows.ravel() + 0.5], axis=-1) * np.asarray(_pair(step)) / scale
         shapes = [(min_size, min_size), (np.sqrt(min_size * max_size),) * 2]
         for ratio in ratios:
             root = np.sqrt(ratio)
             shapes += [(min_size * root, min_size / root), (min_size / root, min_size * root)]
-        shapes = np.asarray(shapes, dtype=np.float64) / image_size
+        shapes = np.asarray(shapes, dtype=np.float64) / scale
         per_cell = np.concatenate([np.repeat(centers, len(shapes), axis=0),
                                    np.tile(shapes, (len(centers), 1))], axis=-1)
         priors.append(per_cell)
     priors = np.concatenate(priors, axis=0)
     return np.clip(priors, 0.0, 1.0) if clip_to_image else priors
+
+
+def _pair(value) -> tuple[float, float]:
+    """``value`` twice when it is a number, else its two entries."""
+    values = np.ravel(np.asarray(value, dtype=np.float64))
+    if values.size == 1:
+        return float(values[0]), float(values[0])
+    if values.size != 2:
+        raise ValueError(f"expected a number or a pair of numbers, got {value!r}")
+    return float(values[0]), float(values[1])
 
 
 def match(boxes, priors, iou_threshold: float = 0.5) -> np.ndarray:

@@ -62,13 +62,13 @@ def output_names(model) -> set[str]:
 
 
 def compiled_inference(model, output: str | None = None):
-    """``model`` compiled for inference: ``images (B, S, S, C) float32 -> outputs`` (``outputs[output]``
-    with ``output``), one ``tf.function`` trace for any batch size (``S``, ``C``: the model's input);
-    several times faster than eager calls."""
+    """``model`` compiled for inference: ``images (B, H, W, C) float32 -> outputs`` (``outputs[output]``
+    with ``output``), one ``tf.function`` trace for any batch size (``H``, ``W``, ``C``: the model's input;
+    a model with free ``H``, ``W`` takes any); several times faster than eager calls."""
     tf = import_tensorflow()
-    size, channels = model.input_shape[1], model.input_shape[3]
+    height, width, channels = model.input_shape[1:4]
 
-    @tf.function(input_signature=[tf.TensorSpec((None, size, size, channels), tf.float32)], reduce_retracing=True)
+    @tf.function(input_signature=[tf.TensorSpec((None, height, width, channels), tf.float32)], reduce_retracing=True)
     def infer(images):
         outputs = model(images, training=False)
         return outputs if output is None else outputs[output]

@@ -33,7 +33,7 @@ def check_light_input_size(size: int, error: type[ValueError] = ValueError) -> i
 #: Data set formats ``paz6d train ssd --format`` reads (``paz6d.ssd.dataset.FORMATS``, kept here light).
 DATASET_FORMATS = ("auto", "generated", "voc", "coco", "openimages")
 #: Keys of a run's settings that must not change when it is resumed.
-FIXED_SETTINGS = ("architecture", "input_size", "width", "top_down", "iou_threshold")
+FIXED_SETTINGS = ("architecture", "input_size", "width", "top_down", "scale_crops", "iou_threshold")
 
 
 @dataclass

@@ -97,7 +97,7 @@ def paper_priors(architecture: str, input_size: int | None = None) -> PriorSpec:
                          ((2,), (2, 3), (2, 3), (2, 3), (2, 3), (2,), (2,)))
     if architecture == "light":
         size = check_light_input_size(320 if input_size is None else int(input_size), SSDModelError)
-        maps = (size // 8, size // 16, size // 32, size // 64, (size // 64 + 1) // 2, 1)
+        maps = tuple(rows for rows, _ in light_feature_maps(size, size))
         fractions = np.array([0.044, 0.094, 0.19, 0.34, 0.53, 0.75, 1.0])
         sides = tuple(float(v) for v in np.round(fractions * size, 1))
         return PriorSpec(size, maps, tuple(float(size) / m for m in maps), sides[:-1], sides[1:],
@@ -105,10 +105,31 @@ def paper_priors(architecture: str, input_size: int | None = None) -> PriorSpec:
     raise SSDModelError(f"architecture: expected one of {ARCHITECTURES}, got {architecture!r}")
 
 
-def priors_for(spec: PriorSpec) -> np.ndarray:
-    """Normalised ``cxcywh`` priors ``(P, 4)`` of ``spec`` (:func:`paz6d.backend.boxes.prior_boxes`)."""
-    return prior_boxes(spec.input_size, spec.feature_map_sizes, spec.steps, spec.min_sizes, spec.max_sizes,
-                       spec.aspect_ratios)
+def light_feature_maps(height: int, width: int) -> tuple[tuple[int, int], ...]:
+    """``(rows, cols)`` of the light network's six feature maps on a ``height × width`` input (multiples
+    of 64): strides 8, 16, 32 and 64, then half the stride-64 map (rounded up) and one global cell."""
+    def sides(length: int) -> tuple[int, ...]:
+        return length // 8, length // 16, length // 32, length // 64, (length // 64 + 1) // 2, 1
+    return tuple(zip(sides(int(height)), sides(int(width))))
+
+
+def priors_for(spec: PriorSpec, image_shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Normalised ``cxcywh`` priors ``(P, 4)`` of ``spec`` (:func:`paz6d.backend.boxes.prior_boxes`).
+
+    Args:
+        image_shape: ``(height, width)`` of another input than the square ``spec.input_size`` (the light
+            network on whole images, multiples of 64): its feature maps' cells, the same prior sides in
+            pixels, normalised by that input's width and height.
+    """
+    if image_shape is None:
+        return prior_boxes(spec.input_size, spec.feature_map_sizes, spec.steps, spec.min_sizes, spec.max_sizes,
+                           spec.aspect_ratios)
+    height, width = (check_light_input_size(int(v), SSDModelError) for v in image_shape)
+    maps = light_feature_maps(height, width)
+    if len(maps) != len(spec.feature_map_sizes):
+        raise SSDModelError(f"priors: a {len(spec.feature_map_sizes)}-map prior layout is not the light network's")
+    steps = tuple((width / cols, height / rows) for rows, cols in maps)
+    return prior_boxes((width, height), maps, steps, spec.min_sizes, spec.max_sizes, spec.aspect_ratios)
 
 
 def normalize_images(images) -> np.ndarray:
@@ -244,7 +265,7 @@ def _heads(features: list, spec: PriorSpec, num_classes: int, separable: bool):
 
 
 def build_ssd(num_classes: int, architecture: str = "light", input_size: int | None = None,
-              width: float = 1.0, top_down: bool = False) -> tuple[object, PriorSpec]:
+              width: float = 1.0, top_down: bool = False, any_size: bool = False) -> tuple[object, PriorSpec]:
     """An SSD network and its prior layout.
 
     Args:
@@ -253,6 +274,8 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
         input_size: ``light`` only (multiple of 64, default 320); the VGG models use 300 / 512.
         width: ``light`` only: channel multiplier of the body.
         top_down: ``light`` only: a feature-pyramid top-down path over its three finest maps.
+        any_size: ``light`` only: the model takes inputs of any height and width that are multiples of 64
+            (trained on ``input_size`` squares, run on whole images; priors from :func:`priors_for`).
     Returns:
         ``(model, spec)``: ``model(images (B, S, S, 3)) -> (B, P, 4 + num_classes)``; ``spec`` gives the priors.
     Raises:
@@ -265,10 +288,12 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
                             f"{paper_priors(architecture).input_size} images, got {input_size}")
     if not 0.1 <= float(width) <= 4.0:
         raise SSDModelError(f"width: expected a channel multiplier in [0.1, 4], got {width}")
-    if top_down and architecture != "light":
-        raise SSDModelError(f"top_down: only the light network has a top-down path, not {architecture}")
+    for name, value in (("top_down", top_down), ("any_size", any_size)):
+        if value and architecture != "light":
+            raise SSDModelError(f"{name}: only the light network offers it, not {architecture}")
     spec = paper_priors(architecture, input_size)
-    inputs = keras.Input((spec.input_size, spec.input_size, 3), name="image")
+    side = None if any_size else spec.input_size
+    inputs = keras.Input((side, side, 3), name="image")
     if architecture == "light":
         features = _light_body(inputs, float(width), bool(top_down))
     else:
@@ -276,7 +301,7 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
         features += _vgg_extras(fc7, 2 if architecture == "ssd300" else 4, 2 if architecture == "ssd300" else 0)
         if architecture == "ssd512":
             features.append(_vgg_extras_last(features[-1]))
-    sizes = tuple(int(feature.shape[1]) for feature in features)
+    sizes = spec.feature_map_sizes if any_size else tuple(int(feature.shape[1]) for feature in features)
     if sizes != spec.feature_map_sizes:
         raise SSDModelError(f"{architecture}: feature maps {sizes} differ from the prior layout {spec.feature_map_sizes}")
     outputs = _heads(features, spec, int(num_classes), separable=architecture == "light")
@@ -303,7 +328,11 @@ def load_ssd(path: str | Path, spec: PriorSpec, num_classes: int):
     path = Path(path)
     model = load_keras_model(path, SSDModelError)
     expected = (None, len(priors_for(spec)), 4 + int(num_classes))
-    if tuple(model.output_shape) != expected or tuple(model.input_shape[1:]) != (spec.input_size, spec.input_size, 3):
+    output_shape = tuple(model.output_shape)
+    if tuple(model.input_shape[1:3]) == (None, None):  # built with any_size: the output of a square input
+        output_shape = (None,) + tuple(model.compute_output_shape((1, spec.input_size, spec.input_size, 3)))[1:]
+    if output_shape != expected or tuple(model.input_shape[1:]) not in {(spec.input_size, spec.input_size, 3),
+                                                                        (None, None, 3)}:
         raise SSDModelError(f"{path}: expected an SSD with input {(spec.input_size,) * 2 + (3,)} and output "
                             f"{expected}, got {model.input_shape} -> {model.output_shape}")
     return model

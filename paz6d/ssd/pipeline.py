@@ -29,6 +29,7 @@ from paz6d.processors.image import NormalizeImage, ResizeImage
 from paz6d.processors.predict import Predict
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.encoding import BACKGROUND, decode_outputs, select_detections
+from paz6d.synthesis.box_augment import FILL
 
 
 class CheckImage(Processor):
@@ -67,6 +68,61 @@ class DecodeBoxes(Processor):
 
     def call(self, outputs) -> tuple[np.ndarray, np.ndarray]:
         return decode_outputs(outputs, self.priors, self.variances)
+
+
+class ScaleAndPad(Processor):
+    """``image (H, W, 3) -> (canvas, canvas_size)``: the image scaled by ``scale`` (aspect kept), then
+    padded right and below with :data:`~paz6d.synthesis.box_augment.FILL` to multiples of ``multiple``
+    pixels, at least ``minimum``; ``canvas_size = (width, height)`` of the canvas. The input of a light
+    network built with ``any_size`` (trained on :class:`~paz6d.synthesis.box_augment.RandomScaleCrop`
+    windows)."""
+
+    def __init__(self, scale: float, multiple: int = 64, minimum: int = 128, name: str | None = None):
+        super().__init__(name)
+        if not scale > 0:
+            raise ValueError(f"scale: expected a positive factor, got {scale}")
+        self.scale, self.multiple, self.minimum = float(scale), int(multiple), int(minimum)
+
+    def call(self, image) -> tuple[np.ndarray, tuple[int, int]]:
+        height, width = image.shape[:2]
+        size = (max(1, round(width * self.scale)), max(1, round(height * self.scale)))
+        scaled = image if size == (width, height) else cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
+        canvas_width, canvas_height = (max(self.minimum, -(-side // self.multiple) * self.multiple) for side in size)
+        canvas = np.empty((canvas_height, canvas_width, 3), np.uint8)
+        canvas[:] = FILL
+        canvas[:size[1], :size[0]] = scaled
+        return canvas, (canvas_width, canvas_height)
+
+
+class DecodeCanvasBoxes(Processor):
+    """``(outputs (P, 4 + C), canvas_size) -> (boxes (P, 4), probabilities (P, C))``: as
+    :class:`DecodeBoxes` with the priors of a ``canvas_size`` input (:func:`paz6d.ssd.model.priors_for`,
+    computed once per size); boxes normalised by the canvas."""
+
+    def __init__(self, spec, variances=boxes_backend.SSD_VARIANCES, name: str | None = None):
+        super().__init__(name)
+        self.spec, self.variances, self.priors = spec, tuple(variances), {}
+
+    def call(self, outputs, canvas_size) -> tuple[np.ndarray, np.ndarray]:
+        from paz6d.ssd.model import priors_for
+
+        width, height = canvas_size
+        if (width, height) not in self.priors:
+            self.priors[(width, height)] = priors_for(self.spec, (height, width))
+        return decode_outputs(outputs, self.priors[(width, height)], self.variances)
+
+
+class CanvasToPixels(Processor):
+    """``(boxes (K, 4) normalised by the canvas, canvas_size, image_size) -> boxes (K, 4)`` in pixels of
+    the image that :class:`ScaleAndPad` scaled by ``scale``, clipped to it."""
+
+    def __init__(self, scale: float, name: str | None = None):
+        super().__init__(name)
+        self.scale = float(scale)
+
+    def call(self, boxes, canvas_size, image_size) -> np.ndarray:
+        pixels = boxes_backend.denormalize(np.asarray(boxes, np.float64).reshape(-1, 4), canvas_size) / self.scale
+        return boxes_backend.clip(pixels, image_size)
 
 
 class NonMaximumSuppression(Processor):
@@ -112,6 +168,10 @@ class DetectSingleShot(SequentialProcessor):
                     ``class_ids``
     ==============  ==============================  ====================================  =========================
 
+    A run trained on :class:`~paz6d.synthesis.box_augment.RandomScaleCrop` windows (``image_scale`` in
+    ``detector.json``) runs on the whole image instead: ``resize`` is :class:`ScaleAndPad` (also writes
+    ``canvas_size``), ``decode`` :class:`DecodeCanvasBoxes` and ``to_pixels`` :class:`CanvasToPixels`.
+
     Args:
         run_dir: SSD run directory (:mod:`paz6d.ssd.run_dir`).
         score_threshold: detections scoring below it are dropped (use ~0.01 for mAP evaluation).
@@ -123,23 +183,45 @@ class DetectSingleShot(SequentialProcessor):
 
     def __init__(self, run_dir: str | Path, score_threshold: float = 0.3, iou_threshold: float = 0.45,
                  max_detections: int = 100):
+        model, detector = run_files.read_model(run_dir)
+        self.run_dir = Path(run_dir)
+        self._build(model, detector, score_threshold, iou_threshold, max_detections)
+
+    @classmethod
+    def from_model(cls, model, detector: dict, score_threshold: float = 0.3, iou_threshold: float = 0.45,
+                   max_detections: int = 100) -> "DetectSingleShot":
+        """The pipeline of a network in memory (e.g. during training) and its ``detector.json`` contents."""
+        pipeline = cls.__new__(cls)
+        pipeline.run_dir = None
+        pipeline._build(model, detector, score_threshold, iou_threshold, max_detections)
+        return pipeline
+
+    def _build(self, model, detector: dict, score_threshold: float, iou_threshold: float, max_detections: int):
         from paz6d.ssd.model import IMAGE_MEAN, IMAGE_STD, PriorSpec, inference_function, priors_for
 
-        model, detector = run_files.read_model(run_dir)
         spec = PriorSpec.from_dict(detector["priors"])
-        self.run_dir, self.model = Path(run_dir), model
-        self.class_names = tuple(detector["class_names"])
-        self.input_size = spec.input_size
-        super().__init__([
+        self.model, self.class_names = model, tuple(detector["class_names"])
+        self.input_size, self.image_scale = spec.input_size, detector.get("image_scale")
+        if self.image_scale is None:  # the whole image squeezed into the square input
+            resize = KeyedStep(ResizeImage((spec.input_size, spec.input_size)), "image", "resized", name="resize")
+            decode = KeyedStep(DecodeBoxes(priors_for(spec), detector["variances"]), "output",
+                               ("boxes", "probabilities"), name="decode")
+            to_pixels = KeyedStep(DenormalizeBoxes(), ("boxes", "image_size"), "boxes", name="to_pixels")
+        else:  # the whole image at the training windows' scale, padded
+            resize = KeyedStep(ScaleAndPad(self.image_scale), "image", ("resized", "canvas_size"), name="resize")
+            decode = KeyedStep(DecodeCanvasBoxes(spec, detector["variances"]), ("output", "canvas_size"),
+                               ("boxes", "probabilities"), name="decode")
+            to_pixels = KeyedStep(CanvasToPixels(self.image_scale), ("boxes", "canvas_size", "image_size"), "boxes",
+                                  name="to_pixels")
+        SequentialProcessor.__init__(self, [
             KeyedStep(CheckImage(), "image", ("image", "image_size"), name="check"),
-            KeyedStep(ResizeImage((spec.input_size, spec.input_size)), "image", "resized", name="resize"),
+            resize,
             KeyedStep(NormalizeImage(IMAGE_MEAN, IMAGE_STD), "resized", "input", name="normalize"),
             KeyedStep(PredictImage(inference_function(model)), "input", "output", name="predict"),
-            KeyedStep(DecodeBoxes(priors_for(spec), detector["variances"]), "output", ("boxes", "probabilities"),
-                      name="decode"),
+            decode,
             KeyedStep(NonMaximumSuppression(score_threshold, iou_threshold, max_detections),
                       ("boxes", "probabilities"), ("boxes", "scores", "class_ids"), name="nms"),
-            KeyedStep(DenormalizeBoxes(), ("boxes", "image_size"), "boxes", name="to_pixels"),
+            to_pixels,
             KeyedStep(ToBoxes2D((BACKGROUND,) + self.class_names), ("boxes", "scores", "class_ids"), "detections",
                       name="to_boxes2d"),
         ], name="DetectSingleShot")

@@ -3,7 +3,8 @@
 ``paz6d train ssd`` writes, and :class:`~paz6d.ssd.pipeline.DetectSingleShot` and ``paz6d detect`` read::
 
     RUN_DIR/detector.json   architecture, class_names (class id i is class_names[i - 1]; 0 = background),
-                            priors (input_size, feature maps, steps, sizes, aspect ratios), variances
+                            priors (input_size, feature maps, steps, sizes, aspect ratios), variances,
+                            optionally image_scale (the network runs on whole images scaled by it)
     RUN_DIR/model.keras     the network (loaded in Keras safe mode)
     RUN_DIR/config.json     the training settings (dataset, seed, schedule)
     RUN_DIR/metrics.json    training summary
@@ -40,13 +41,16 @@ def model_path(run_dir: str | Path) -> Path:
 
 
 def write_detector(run_dir: str | Path, architecture: str, class_names, priors: dict,
-                   variances=SSD_VARIANCES) -> Path:
+                   variances=SSD_VARIANCES, image_scale: float | None = None) -> Path:
     """Writes ``detector.json``: what the pipeline needs besides the weights.
 
     Args:
         architecture: ``"ssd300"``, ``"ssd512"`` or ``"light"``.
         class_names: object classes in class-id order (without the background).
         priors: :meth:`paz6d.ssd.model.PriorSpec.to_dict`.
+        image_scale: for a network trained on rescaled windows (``scale_crops``): the factor by which
+            whole images are scaled before they are padded and detected; ``None``: they are resized to
+            the square input.
     """
     class_names = [str(name) for name in class_names]
     if not class_names or len(set(class_names)) != len(class_names):
@@ -54,6 +58,8 @@ def write_detector(run_dir: str | Path, architecture: str, class_names, priors: 
     Path(run_dir).mkdir(parents=True, exist_ok=True)
     data = {"architecture": architecture, "class_names": class_names, "priors": priors,
             "variances": [float(v) for v in variances]}
+    if image_scale is not None:
+        data["image_scale"] = float(image_scale)
     return write_json_atomically(Path(run_dir) / DETECTOR_FILE, data, indent=2)
 
 
@@ -69,6 +75,9 @@ def read_detector(run_dir: str | Path) -> dict[str, Any]:
     if (not isinstance(variances, list) or len(variances) != 4
             or not all(isinstance(v, (int, float)) and v > 0 for v in variances)):
         raise ValueError(f"{path}: variances: expected 4 positive numbers, got {variances!r}")
+    scale = data.get("image_scale")
+    if scale is not None and not (isinstance(scale, (int, float)) and scale > 0):
+        raise ValueError(f"{path}: image_scale: expected a positive number or null, got {scale!r}")
     if not isinstance(data["priors"], dict):
         raise ValueError(f"{path}: priors: expected an object, got {type(data['priors']).__name__}")
     return data

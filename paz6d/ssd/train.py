@@ -28,12 +28,10 @@ from paz6d.backend.boxes import SSD_VARIANCES
 from paz6d.backend.draw import image_grid
 from paz6d.backend.files import finite_or_none
 from paz6d.backend.image import load_image, resize, save_image
-from paz6d.processors.boxes import ToBoxes2D
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.dataset import load_detection_set, training_batch
-from paz6d.ssd.encoding import BACKGROUND, decode_outputs, select_detections
 from paz6d.ssd.config import FIXED_SETTINGS, SSDTraining
-from paz6d.ssd.pipeline import draw_detections
+from paz6d.ssd.pipeline import DetectSingleShot, draw_detections
 from paz6d.synthesis.box_augment import ssd_augmentation
 from paz6d.training.presets import check_same_run
 
@@ -54,21 +52,14 @@ def _schedule(keras, settings: dict):
         warmup_target=settings["learning_rate"] if warmup else None, warmup_steps=warmup)
 
 
-def _sample_drawer(images: list[np.ndarray], spec, class_names: tuple[str, ...], variances):
-    """``sample_callback(model, step, path)``: detections (score >= 0.3) on a few training images."""
+def _sample_drawer(images: list[np.ndarray], detector: dict):
+    """``sample_callback(model, step, path)``: detections (score >= 0.3) on a few training images, by the
+    pipeline a run directory with ``detector`` (``detector.json``'s contents) would give."""
 
     def draw(model, step, path):
-        from paz6d.ssd.model import normalize_images, priors_for
-
-        priors = priors_for(spec)
-        inputs = normalize_images(np.stack([resize(image, (spec.input_size,) * 2) for image in images]))
-        outputs = np.asarray(model(inputs, training=False))
-        tiles = []
-        for image, output in zip(images, outputs):
-            boxes, scores, ids = select_detections(*decode_outputs(output, priors, variances), score_threshold=0.3)
-            height, width = image.shape[:2]
-            pixels = boxes * np.array([width, height, width, height])
-            tiles.append(draw_detections(image, ToBoxes2D((BACKGROUND,) + class_names)(pixels, scores, ids), class_names))
+        detect = DetectSingleShot.from_model(model, detector, score_threshold=0.3)
+        class_names = detect.class_names
+        tiles = [draw_detections(image, detect(image), class_names) for image in images]
         size = (tiles[0].shape[1], tiles[0].shape[0])  # data sets on disk mix image sizes: tile at the first's
         save_image(path, image_grid([tile if tile.shape[:2] == size[::-1] else resize(tile, size) for tile in tiles],
                                     columns=2))
@@ -78,10 +69,25 @@ def _sample_drawer(images: list[np.ndarray], spec, class_names: tuple[str, ...],
 
 def augmentation_factory(settings: dict):
     """A factory of :func:`ssd_augmentation` chains (one per batch) with a run's settings: the config's expand
-    ratio and probability, and the optional ``white_balance`` strength and ``grayscale`` probability
-    (``SSDTraining.overrides``; 0: off)."""
+    ratio and probability, the optional ``white_balance`` strength and ``grayscale`` probability
+    (``SSDTraining.overrides``; 0: off) and ``scale_crops`` (a factor range: input-sized windows of
+    rescaled images instead of whole images)."""
+    scale_crops = settings.get("scale_crops")
     return partial(ssd_augmentation, settings["expand_ratio"], settings["expand_probability"],
-                   white_balance=settings.get("white_balance", 0.0), grayscale=settings.get("grayscale", 0.0))
+                   white_balance=settings.get("white_balance", 0.0), grayscale=settings.get("grayscale", 0.0),
+                   scale_crops=None if scale_crops is None else tuple(scale_crops), crop_size=settings["input_size"])
+
+
+def image_scale(settings: dict) -> float | None:
+    """The factor whole images are scaled by for detection: the geometric mean of ``scale_crops``
+    (``None`` without it: images are resized to the square input)."""
+    scale_crops = settings.get("scale_crops")
+    if scale_crops is None:
+        return None
+    low, high = (float(v) for v in scale_crops)
+    if not 0 < low <= high:
+        raise ValueError(f"scale_crops: expected a factor range 0 < low <= high, got {scale_crops}")
+    return float(np.sqrt(low * high))
 
 
 def train_ssd(job: SSDTraining) -> dict:
@@ -102,10 +108,12 @@ def train_ssd(job: SSDTraining) -> dict:
     job.out.mkdir(parents=True, exist_ok=True)
     _prepare_run_dir(job, settings, data.class_names)
     keras.utils.set_random_seed(job.seed)
+    scale = image_scale(settings)
     model, spec = build_ssd(len(data.class_names) + 1, settings["architecture"], settings["input_size"],
-                            settings["width"], settings.get("top_down", False))
+                            settings["width"], settings.get("top_down", False), any_size=scale is not None)
     priors = priors_for(spec)
-    run_files.write_detector(job.out, settings["architecture"], data.class_names, spec.to_dict(), SSD_VARIANCES)
+    run_files.write_detector(job.out, settings["architecture"], data.class_names, spec.to_dict(), SSD_VARIANCES,
+                             image_scale=scale)
     optimizer = keras.optimizers.AdamW(_schedule(keras, settings), weight_decay=settings["weight_decay"],
                                        global_clipnorm=10.0)
     augmentation = augmentation_factory(settings)
@@ -124,7 +132,7 @@ def train_ssd(job: SSDTraining) -> dict:
     trainer = Trainer(model, optimizer, loss_fn, make_batch, job.out, settings["steps"],
                       checkpoint_every=settings["checkpoint_every"], log_every=10,
                       sample_every=settings["sample_every"],
-                      sample_callback=_sample_drawer(sample_images, spec, data.class_names, SSD_VARIANCES),
+                      sample_callback=_sample_drawer(sample_images, run_files.read_detector(job.out)),
                       progress=job.progress, prefetch=2, prefetch_workers=1)
     training = trainer.fit()
     save_ssd(model, run_files.model_path(job.out))

@@ -27,6 +27,8 @@ from paz6d.backend import image as image_backend
 #: SSD's random-crop modes: ``None`` keeps the whole image, a number is the least IoU the crop must
 #: have with some box, ``0.0`` any crop.
 CROP_MIN_IOUS = (None, 0.1, 0.3, 0.5, 0.7, 0.9, 0.0)
+#: Colour (RGB) of the canvas around a zoomed-out or padded image: about the mean of natural images.
+FILL = (124, 116, 104)
 
 
 @dataclass(frozen=True)
@@ -130,7 +132,7 @@ class Expand(RandomProcessor):
     """SSD's zoom-out: with ``probability``, puts the image at a random place in a canvas ``r`` times its
     size (``r`` uniform in ``[1, max_ratio]``) filled with ``fill`` (RGB), and shifts the boxes."""
 
-    def __init__(self, max_ratio: float = 4.0, probability: float = 0.5, fill=(124, 116, 104), seed=None,
+    def __init__(self, max_ratio: float = 4.0, probability: float = 0.5, fill=FILL, seed=None,
                  name: str | None = None):
         super().__init__(seed, name)
         if not max_ratio >= 1.0:
@@ -198,6 +200,44 @@ class RandomSampleCrop(RandomProcessor):
         return sample
 
 
+class RandomScaleCrop(RandomProcessor):
+    """A ``size × size`` window of the image rescaled by a factor log-uniform in ``scale``: a detector
+    trained on these sees the objects near their size in the whole images it will run on (at the
+    factor's geometric mean), where resizing whole images to a small square would shrink them. Where the
+    rescaled image is smaller than the window, it lies at a random place on a ``fill`` canvas. Boxes
+    whose centre lies in the window are kept, clipped and shifted; the others are dropped."""
+
+    def __init__(self, size: int, scale: tuple[float, float] = (0.7, 1.43), fill=FILL, seed=None,
+                 name: str | None = None):
+        super().__init__(seed, name)
+        if int(size) < 1:
+            raise ValueError(f"size: expected a positive window side in pixels, got {size}")
+        if not 0 < scale[0] <= scale[1]:
+            raise ValueError(f"scale: expected 0 < lower <= upper, got {scale}")
+        self.size, self.scale = int(size), (float(scale[0]), float(scale[1]))
+        self.fill = np.asarray(fill, dtype=np.uint8).reshape(3)
+
+    def call(self, sample: AnnotatedImage) -> AnnotatedImage:
+        factor = float(np.exp(self.generator.uniform(np.log(self.scale[0]), np.log(self.scale[1]))))
+        height, width = sample.image.shape[:2]
+        scaled_width, scaled_height = max(1, round(width * factor)), max(1, round(height * factor))
+        image = image_backend.resize(sample.image, (scaled_width, scaled_height))
+        boxes = sample.boxes * np.array([scaled_width / width, scaled_height / height] * 2)
+        # window origin in the rescaled image (negative: the image starts inside the window)
+        left = int(self.generator.integers(min(0, scaled_width - self.size), max(0, scaled_width - self.size) + 1))
+        top = int(self.generator.integers(min(0, scaled_height - self.size), max(0, scaled_height - self.size) + 1))
+        canvas = np.empty((self.size, self.size, 3), np.uint8)
+        canvas[:] = self.fill
+        x0, y0 = max(left, 0), max(top, 0)
+        x1, y1 = min(left + self.size, scaled_width), min(top + self.size, scaled_height)
+        canvas[y0 - top:y1 - top, x0 - left:x1 - left] = image[y0:y1, x0:x1]
+        boxes = boxes - np.array([left, top, left, top], np.float64)
+        centres = 0.5 * (boxes[:, :2] + boxes[:, 2:])
+        inside = np.all((centres > 0) & (centres < self.size), axis=1)
+        kept = boxes_backend.clip(boxes[inside], (self.size, self.size))
+        return AnnotatedImage(canvas, kept, sample.class_ids[inside])
+
+
 class RandomFlip(RandomProcessor):
     """Mirrors the image and its boxes left-right with ``probability``."""
 
@@ -214,19 +254,24 @@ class RandomFlip(RandomProcessor):
 
 
 def ssd_augmentation(expand_ratio: float = 4.0, expand_probability: float = 0.5, flip: bool = True,
-                     white_balance: float = 0.0, grayscale: float = 0.0, seed=None) -> SequentialProcessor:
+                     white_balance: float = 0.0, grayscale: float = 0.0, scale_crops: tuple | None = None,
+                     crop_size: int = 0, seed=None) -> SequentialProcessor:
     """The paper's chain: ``photometric`` → ``expand`` → ``crop`` → ``flip`` (named steps), with a
     ``white_balance`` step (:class:`WhiteBalance` of that strength) and a ``grayscale`` step
-    (:class:`Grayscale` with that probability) after ``photometric`` when they are positive."""
+    (:class:`Grayscale` with that probability) after ``photometric`` when they are positive. With
+    ``scale_crops`` (a factor range), ``expand`` and SSD's ``crop`` give way to ``flip`` then
+    :class:`RandomScaleCrop` windows of ``crop_size`` (named ``crop``)."""
     steps = [PhotometricDistortion(name="photometric")]
     if white_balance > 0:
         steps.append(WhiteBalance(white_balance, name="white_balance"))
     if grayscale > 0:
         steps.append(Grayscale(grayscale, name="grayscale"))
-    steps += [Expand(expand_ratio, expand_probability, name="expand"),
-             RandomSampleCrop(name="crop")]
-    if flip:
-        steps.append(RandomFlip(name="flip"))
+    if scale_crops is not None:
+        steps += [RandomFlip(name="flip")] if flip else []
+        steps.append(RandomScaleCrop(crop_size, tuple(scale_crops), name="crop"))
+    else:
+        steps += [Expand(expand_ratio, expand_probability, name="expand"), RandomSampleCrop(name="crop")]
+        steps += [RandomFlip(name="flip")] if flip else []
     chain = SequentialProcessor(steps, name="ssd_augmentation")
     if seed is not None:
         reseed(chain, seed)
