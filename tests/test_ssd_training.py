@@ -14,7 +14,7 @@ import pytest
 from data_gen.config import GenerationConfig
 from data_gen.generator import generate
 from paz6d.abstract import Box2D
-from paz6d.cli import main
+from paz6d.cli import build_parser, main
 from paz6d.datasets.bop.coco_ground_truth import bop_split_to_coco, coco_image_id
 from paz6d.run_dirs import method_of
 from paz6d.ssd import run_dir as run_files
@@ -63,8 +63,13 @@ def test_scale_crops_train_on_windows_and_detect_on_whole_images(generated, tmp_
     assert chain.names == ["photometric", "flip", "crop"]
     assert isinstance(chain["crop"], RandomScaleCrop) and chain["crop"].size == 128
     assert image_scale(settings) == pytest.approx(1.0) and image_scale(CONFIGS["quick"]) is None
-    with pytest.raises(ValueError, match="scale_crops: expected a factor range"):
-        image_scale({"scale_crops": [2.0, 1.0]})
+    flagged = build_parser().parse_args(["train", "ssd", "--dataset", "d", "--out", "o", "--scale-crops", "0.7", "1.4"])
+    assert tuple(flagged.scale_crops) == (0.7, 1.4)
+    assert SSDTraining(dataset="d", out="o", scale_crops=(0.7, 1.4)).settings()["scale_crops"] == [0.7, 1.4]
+    with pytest.raises(ValueError, match="scale_crops: expected a factor range 0 < LOW <= HIGH"):
+        SSDTraining(dataset="d", out="o", scale_crops=(2.0, 1.0))
+    with pytest.raises(ValueError, match="scale_crops: only the light network"):
+        SSDTraining(dataset="d", out="o", config="full", scale_crops=(0.7, 1.4))
     out = tmp_path / "run"
     train_ssd(SSDTraining(dataset=generated, out=out, steps=20, batch_size=4, progress=False,
                           overrides={**TINY, "scale_crops": [0.5, 2.0], "checkpoint_every": 20, "sample_every": 20}))

@@ -51,6 +51,10 @@ class SSDTraining:
     batch_size: int | None = option(None, "images per step (default: the config's)")
     input_size: int | None = option(None, "side of the square network input in pixels, light network only: a "
                                           "multiple of 64, at least 128 (default: the config's)")
+    scale_crops: tuple[float, float] | None = option(
+        None, "light network only: train on input-sized windows of images rescaled by a factor in [LOW, HIGH] "
+              "and detect on whole images at the factors' geometric mean (default: the config's)",
+        metavar=("LOW", "HIGH"))
     progress: bool = option(True, "progress bar")
     overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
 
@@ -73,4 +77,13 @@ class SSDTraining:
                                  f"{self.config!r} config's {settings['architecture']} is fixed at "
                                  f"{CONFIGS[self.config]['input_size']} px")
             check_light_input_size(settings["input_size"])
+        if self.scale_crops is not None:
+            settings["scale_crops"] = [float(v) for v in self.scale_crops]
+        scale_crops = settings.get("scale_crops")
+        if scale_crops is not None:
+            if settings["architecture"] != "light":
+                raise ValueError(f"scale_crops: only the light network runs on whole images; the {self.config!r} "
+                                 f"config's {settings['architecture']} takes square inputs")
+            if len(scale_crops) != 2 or not 0 < float(scale_crops[0]) <= float(scale_crops[1]):
+                raise ValueError(f"scale_crops: expected a factor range 0 < LOW <= HIGH, got {scale_crops}")
         return settings

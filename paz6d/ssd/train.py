@@ -82,12 +82,7 @@ def image_scale(settings: dict) -> float | None:
     """The factor whole images are scaled by for detection: the geometric mean of ``scale_crops``
     (``None`` without it: images are resized to the square input)."""
     scale_crops = settings.get("scale_crops")
-    if scale_crops is None:
-        return None
-    low, high = (float(v) for v in scale_crops)
-    if not 0 < low <= high:
-        raise ValueError(f"scale_crops: expected a factor range 0 < low <= high, got {scale_crops}")
-    return float(np.sqrt(low * high))
+    return None if scale_crops is None else float(np.sqrt(float(scale_crops[0]) * float(scale_crops[1])))
 
 
 def train_ssd(job: SSDTraining) -> dict:
