@@ -23,7 +23,7 @@ import numpy as np
 from paz6d.abstract import Box2D, KeyedStep, Processor, SequentialProcessor
 from paz6d.backend import boxes as boxes_backend
 from paz6d.backend.draw import draw_box, keypoint_colors
-from paz6d.backend.image import as_image
+from paz6d.backend.image import as_image, resize
 from paz6d.processors.boxes import ToBoxes2D
 from paz6d.processors.image import NormalizeImage, ResizeImage
 from paz6d.processors.predict import Predict
@@ -86,7 +86,7 @@ class ScaleAndPad(Processor):
     def call(self, image) -> tuple[np.ndarray, tuple[int, int]]:
         height, width = image.shape[:2]
         size = (max(1, round(width * self.scale)), max(1, round(height * self.scale)))
-        scaled = image if size == (width, height) else cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
+        scaled = image if size == (width, height) else resize(image, size)
         canvas_width, canvas_height = (max(self.minimum, -(-side // self.multiple) * self.multiple) for side in size)
         canvas = np.empty((canvas_height, canvas_width, 3), np.uint8)
         canvas[:] = FILL
@@ -203,19 +203,19 @@ class DetectSingleShot(SequentialProcessor):
         self.model, self.class_names = model, tuple(detector["class_names"])
         self.input_size, self.image_scale = spec.input_size, detector.get("image_scale")
         if self.image_scale is None:  # the whole image squeezed into the square input
-            resize = KeyedStep(ResizeImage((spec.input_size, spec.input_size)), "image", "resized", name="resize")
+            resize_step = KeyedStep(ResizeImage((spec.input_size, spec.input_size)), "image", "resized", name="resize")
             decode = KeyedStep(DecodeBoxes(priors_for(spec), detector["variances"]), "output",
                                ("boxes", "probabilities"), name="decode")
             to_pixels = KeyedStep(DenormalizeBoxes(), ("boxes", "image_size"), "boxes", name="to_pixels")
         else:  # the whole image at the training windows' scale, padded
-            resize = KeyedStep(ScaleAndPad(self.image_scale), "image", ("resized", "canvas_size"), name="resize")
+            resize_step = KeyedStep(ScaleAndPad(self.image_scale), "image", ("resized", "canvas_size"), name="resize")
             decode = KeyedStep(DecodeCanvasBoxes(spec, detector["variances"]), ("output", "canvas_size"),
                                ("boxes", "probabilities"), name="decode")
             to_pixels = KeyedStep(CanvasToPixels(self.image_scale), ("boxes", "canvas_size", "image_size"), "boxes",
                                   name="to_pixels")
         SequentialProcessor.__init__(self, [
             KeyedStep(CheckImage(), "image", ("image", "image_size"), name="check"),
-            resize,
+            resize_step,
             KeyedStep(NormalizeImage(IMAGE_MEAN, IMAGE_STD), "resized", "input", name="normalize"),
             KeyedStep(PredictImage(inference_function(model)), "input", "output", name="predict"),
             decode,

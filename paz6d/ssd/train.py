@@ -56,10 +56,13 @@ def _sample_drawer(images: list[np.ndarray], detector: dict):
     """``sample_callback(model, step, path)``: detections (score >= 0.3) on a few training images, by the
     pipeline a run directory with ``detector`` (``detector.json``'s contents) would give."""
 
+    pipelines = {}  # one per model: its compiled network is traced once, not at every sample step
+
     def draw(model, step, path):
-        detect = DetectSingleShot.from_model(model, detector, score_threshold=0.3)
-        class_names = detect.class_names
-        tiles = [draw_detections(image, detect(image), class_names) for image in images]
+        if id(model) not in pipelines:
+            pipelines[id(model)] = DetectSingleShot.from_model(model, detector, score_threshold=0.3)
+        detect = pipelines[id(model)]
+        tiles = [draw_detections(image, detect(image), detect.class_names) for image in images]
         size = (tiles[0].shape[1], tiles[0].shape[0])  # data sets on disk mix image sizes: tile at the first's
         save_image(path, image_grid([tile if tile.shape[:2] == size[::-1] else resize(tile, size) for tile in tiles],
                                     columns=2))
