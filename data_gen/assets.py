@@ -16,6 +16,7 @@ from paz6d.backend.files import load_json
 from paz6d.backend.mesh import MeshError, diameter, load_mesh
 from paz6d.datasets.bop.models import parse_symmetries
 from paz6d.datasets.bop.units import MM_PER_M
+from paz6d.synthesis.household import household_library
 from paz6d.synthesis.mesh_distractors import textured_distractor_library
 from paz6d.synthesis.occluders import distractor_library
 from paz6d.synthesis.photo_backgrounds import sample_photographs
@@ -157,6 +158,8 @@ def load_assets(config: GenerationConfig) -> Assets:
     distractors, textured = [], []
     if config.distractors or (config.occluder_probability > 0 and config.occluders > 0):
         distractors = distractor_library(float(np.mean(diameters)))
+        if config.distractor_style == "household":
+            distractors += household_library(float(np.mean(diameters)))
         if config.distractor_style == "textured":
             textured = textured_distractor_library(float(np.mean(diameters)), sample_photographs(), seed=config.seed)
     distractor_tinted = np.array([True] * len(distractors) + [False] * len(textured), dtype=bool)

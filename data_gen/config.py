@@ -21,7 +21,7 @@ ROTATION_MODES = ("so3", "view-sphere")
 #: floating: objects at independent distances and orientations (paz6d.synthesis.scene); tabletop:
 #: upright on a textured table seen from above (paz6d.synthesis.tabletop).
 SCENE_STYLES = ("floating", "tabletop")
-DISTRACTOR_STYLES = ("primitive", "textured")
+DISTRACTOR_STYLES = ("primitive", "textured", "household")
 RGB_FORMATS = ("png", "jpg")
 #: Key of the input digests in a run's fingerprint (see :meth:`GenerationConfig.input_contents`).
 CONTENTS_KEY = "input_contents"
@@ -124,7 +124,9 @@ class GenerationConfig:
     distractor_style: str = option(
         "primitive", "primitive: boxes, cylinders, spheres, capsules in one random colour each; textured: as many "
                      "again of photo-textured boxes, cylinders, spheres, capsules, cones, tori "
-                     "(paz6d.synthesis.mesh_distractors)", choices=DISTRACTOR_STYLES)
+                     "(paz6d.synthesis.mesh_distractors); household: as many again of bowls, mugs, cups, "
+                     "bottles, plates and books, tinted like the primitives (paz6d.synthesis.household)",
+        choices=DISTRACTOR_STYLES)
     backgrounds: Path | None = option(None, "folder of background images (default: procedural backgrounds)")
     light_count: tuple[int, int] = option((1, 3), "number of random lights", metavar=("MIN", "MAX"))
     color_jitter: float = option(0.2, "objects' base colour is multiplied by U(1 - j, 1 + j) per channel")
