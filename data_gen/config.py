@@ -121,6 +121,11 @@ class GenerationConfig:
                                                     "detector cannot tell objects by colour alone")
     occluder_probability: float = option(0.3, "chance that a primitive is put between the camera and an object")
     occluders: int = option(1, "occluder draws per image, each with --occluder-probability on a random object")
+    cluster: float = option(0.0, "floating scenes: chance that an object or distractor is placed next to one "
+                                 "already placed (their image centres 0.2-0.9 of their summed projected radii "
+                                 "apart), "
+                                 "so that objects hide each other as in real clutter; 0 leaves data sets "
+                                 "unchanged")
     distractor_style: str = option(
         "primitive", "primitive: boxes, cylinders, spheres, capsules in one random colour each; textured: as many "
                      "again of photo-textured boxes, cylinders, spheres, capsules, cones, tori "
@@ -203,6 +208,8 @@ class GenerationConfig:
         low, high = _range(self.light_count, "light_count", minimum=0, maximum=MAX_PER_IMAGE)
         if int(low) != low or int(high) != high:
             raise ValueError(f"light_count: expected integers, got {self.light_count}")
+        if not 0 <= self.cluster <= 1:
+            raise ValueError(f"cluster: expected a chance in [0, 1], got {self.cluster}")
         if not 0 <= self.neutral_distractors <= 1:
             raise ValueError(f"neutral_distractors: expected a share in [0, 1], got {self.neutral_distractors}")
         if not 0 <= self.object_colored_distractors <= 1:
@@ -242,7 +249,7 @@ class GenerationConfig:
         data["scale"] = data.pop("mesh_scale")  # the key data sets made before the field's rename hold
         if data["scene"] == "floating":
             data.pop("scene")  # data sets made before scene styles existed are floating ones
-        for name in ("neutral_distractors", "object_colored_distractors"):
+        for name in ("neutral_distractors", "object_colored_distractors", "cluster"):
             if data[name] == 0:
                 data.pop(name)  # nor do those made before these fields existed
         if data["occluders"] == 1 and data["distractor_style"] == "primitive":

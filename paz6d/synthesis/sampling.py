@@ -60,9 +60,13 @@ def inside_image(pixels: np.ndarray, width: int, height: int) -> bool:
                 and np.all(pixels[:, 0] <= width - 0.5) and np.all(pixels[:, 1] <= height - 0.5))
 
 
+#: Image distance of a clustered object's centre from its neighbour's, in their summed projected radii.
+CLUSTER_SPACING = (0.2, 0.9)
+
+
 def place_object(generator: np.random.Generator, rotation: np.ndarray, centre: np.ndarray, radius: float,
                  outline: np.ndarray, K: np.ndarray, width: int, height: int, distance: tuple[float, float],
-                 placed: list[tuple[np.ndarray, float]]) -> np.ndarray | None:
+                 placed: list[tuple[np.ndarray, float]], cluster: float = 0.0) -> np.ndarray | None:
     """Translation ``(3,)`` putting an object fully inside the image at a random depth in
     ``distance`` (metres) without intersecting the ``placed`` bounding spheres.
 
@@ -71,15 +75,26 @@ def place_object(generator: np.random.Generator, rotation: np.ndarray, centre: n
         centre / radius: bounding sphere in the model frame (metres).
         outline: ``(M, 3)`` hull vertices (:func:`hull_points`) that must project inside the image.
         placed: ``(centre_cam, radius)`` of the objects already placed; the new one is appended.
+        cluster: chance (per try) that the object's image centre is drawn next to a random placed
+            object's (:data:`CLUSTER_SPACING` of their summed projected radii away), so that the two
+            overlap in the image and the nearer one hides part of the other; 0 draws nothing for it.
 
     Returns:
         The translation, or ``None`` after :data:`PLACEMENT_ATTEMPTS` failed tries.
     """
+    focal = min(K[0, 0], K[1, 1])
     for _ in range(PLACEMENT_ATTEMPTS):
         z = generator.uniform(*distance)
-        margin = min(K[0, 0], K[1, 1]) * radius / (z - radius)
-        u = generator.uniform(min(margin - 0.5, K[0, 2]), max(width - 0.5 - margin, K[0, 2]))
-        v = generator.uniform(min(margin - 0.5, K[1, 2]), max(height - 0.5 - margin, K[1, 2]))
+        margin = focal * radius / (z - radius)
+        if cluster > 0 and placed and generator.random() < cluster:
+            other, other_radius = placed[int(generator.integers(len(placed)))]
+            (u0, v0), = project_points(other[None], K)
+            spacing = generator.uniform(*CLUSTER_SPACING) * (margin + focal * other_radius / other[2])
+            angle = generator.uniform(0.0, 2 * np.pi)
+            u, v = u0 + spacing * np.cos(angle), v0 + spacing * np.sin(angle)
+        else:
+            u = generator.uniform(min(margin - 0.5, K[0, 2]), max(width - 0.5 - margin, K[0, 2]))
+            v = generator.uniform(min(margin - 0.5, K[1, 2]), max(height - 0.5 - margin, K[1, 2]))
         centre_cam = unproject(np.array([[u, v]]), np.array([z]), K)[0]
         translation = centre_cam - rotation @ centre
         if not inside_image(project_points(outline @ rotation.T + translation, K), width, height):

@@ -32,6 +32,7 @@ class SceneSettings(Protocol):
     distractors: int
     occluder_probability: float
     occluders: int
+    cluster: float
 
 
 class SceneAssets(Protocol):
@@ -89,7 +90,8 @@ def add_occluders(generator: np.random.Generator, assets: SceneAssets, settings:
 
 
 def sample_scene(generator: np.random.Generator, assets: SceneAssets, settings: SceneSettings) -> Scene:
-    """Draws the objects (fully inside the image, bounding spheres apart), distractors and occluders
+    """Draws the objects (fully inside the image, bounding spheres apart; with ``settings.cluster``, often
+    next to each other in the image so that they hide each other), distractors and occluders
     (:func:`add_occluders`)."""
     K = np.asarray(settings.K)
     width, height = settings.width, settings.height
@@ -100,7 +102,8 @@ def sample_scene(generator: np.random.Generator, assets: SceneAssets, settings: 
     for index in candidates.tolist():
         rotation = random_rotation(generator, settings.rotation, settings.elevation_degrees, settings.inplane_degrees)
         translation = place_object(generator, rotation, assets.centres[index], assets.radii[index],
-                                   assets.outlines[index], K, width, height, assets.distance, placed)
+                                   assets.outlines[index], K, width, height, assets.distance, placed,
+                                   settings.cluster)
         if translation is None and not object_indices:
             # The first object always fits at the principal point (the distance range ensures it).
             centre_cam = unproject(K[:2, 2][None], np.array([generator.uniform(*assets.distance)]), K)[0]
@@ -115,7 +118,8 @@ def sample_scene(generator: np.random.Generator, assets: SceneAssets, settings: 
             choice = int(generator.integers(len(assets.distractors)))
             rotation = quaternion.to_rotation_matrix(quaternion.random(seed=generator))
             translation = place_object(generator, rotation, np.zeros(3), assets.distractor_radii[choice],
-                                       assets.distractor_outlines[choice], K, width, height, assets.distance, placed)
+                                       assets.distractor_outlines[choice], K, width, height, assets.distance, placed,
+                                       settings.cluster)
             if translation is not None:
                 clutter_indices.append(choice)
                 clutter_poses.append(from_rotation_translation(rotation, translation))
