@@ -122,8 +122,7 @@ class GenerationConfig:
     occluder_probability: float = option(0.3, "chance that a primitive is put between the camera and an object")
     occluders: int = option(1, "occluder draws per image, each with --occluder-probability on a random object")
     cluster: float = option(0.0, "floating scenes: chance that an object or distractor is placed next to one "
-                                 "already placed (their image centres 0.2-0.9 of their summed projected radii "
-                                 "apart), "
+                                 "already placed (image centres 0.2-0.9 of their summed projected radii apart), "
                                  "so that objects hide each other as in real clutter; 0 leaves data sets "
                                  "unchanged")
     distractor_style: str = option(
