@@ -157,11 +157,12 @@ def load_assets(config: GenerationConfig) -> Assets:
     diameters = np.array([diameter(mesh.vertices) for mesh in meshes])
     distractors, textured = [], []
     if config.distractors or (config.occluder_probability > 0 and config.occluders > 0):
-        distractors = distractor_library(float(np.mean(diameters)))
+        size = float(np.mean(diameters))  # the distractors' scale: the meshes' mean diameter (metres)
+        distractors = distractor_library(size)
         if config.distractor_style == "household":
-            distractors += household_library(float(np.mean(diameters)))
+            distractors += household_library(size)
         if config.distractor_style == "textured":
-            textured = textured_distractor_library(float(np.mean(diameters)), sample_photographs(), seed=config.seed)
+            textured = textured_distractor_library(size, sample_photographs(), seed=config.seed)
     distractor_tinted = np.array([True] * len(distractors) + [False] * len(textured), dtype=bool)
     distractors = distractors + textured
     distractor_radii = np.array([np.linalg.norm(mesh.vertices, axis=1).max() for mesh in distractors])
