@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from paz6d.synthesis.occluders import paint_white
+
 #: Shape sizes relative to the ``size`` passed to :func:`household_library`.
 SIZE_FACTORS = (0.5, 0.8, 1.2)
 #: Sections around the axis of every surface of revolution.
@@ -74,7 +76,4 @@ def household_shapes(side: float) -> list[trimesh.Trimesh]:
 def household_library(size: float) -> list[trimesh.Trimesh]:
     """Every shape of :func:`household_shapes` at the :data:`SIZE_FACTORS` of ``size`` (metres), with
     white vertex colours (tinted when rendered): ``6 * 3`` meshes."""
-    library = [shape for factor in SIZE_FACTORS for shape in household_shapes(size * factor)]
-    for mesh in library:
-        mesh.visual.vertex_colors = np.full((len(mesh.vertices), 4), 255, dtype=np.uint8)
-    return library
+    return paint_white([shape for factor in SIZE_FACTORS for shape in household_shapes(size * factor)])

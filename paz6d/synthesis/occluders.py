@@ -24,9 +24,14 @@ def distractor_library(size: float) -> list[trimesh.Trimesh]:
                     trimesh.creation.cylinder(radius=0.25 * side, height=side, sections=24),
                     trimesh.creation.icosphere(subdivisions=2, radius=0.4 * side),
                     trimesh.creation.capsule(height=0.6 * side, radius=0.2 * side, count=(12, 12))]
-    for mesh in library:
+    return paint_white(library)
+
+
+def paint_white(meshes: list[trimesh.Trimesh]) -> list[trimesh.Trimesh]:
+    """``meshes`` with white vertex colours set in place (a random colour tints each when rendered)."""
+    for mesh in meshes:
         mesh.visual.vertex_colors = np.full((len(mesh.vertices), 4), 255, dtype=np.uint8)
-    return library
+    return meshes
 
 
 def random_colors(generator: np.random.Generator, count: int, neutral_share: float = 0.0,
