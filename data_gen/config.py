@@ -209,6 +209,9 @@ class GenerationConfig:
             raise ValueError(f"light_count: expected integers, got {self.light_count}")
         if not 0 <= self.cluster <= 1:
             raise ValueError(f"cluster: expected a chance in [0, 1], got {self.cluster}")
+        if self.cluster > 0 and self.scene != "floating":
+            raise ValueError(f"cluster: only for floating scenes (--scene floating), got --scene {self.scene}; "
+                             "tabletop scenes place their objects on the table on their own")
         if not 0 <= self.neutral_distractors <= 1:
             raise ValueError(f"neutral_distractors: expected a share in [0, 1], got {self.neutral_distractors}")
         if not 0 <= self.object_colored_distractors <= 1:

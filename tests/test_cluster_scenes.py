@@ -80,5 +80,7 @@ def test_cluster_is_checked_and_left_out_of_old_fingerprints(shared_data, tmp_pa
     for chance in (-0.1, 1.5, float("nan")):
         with pytest.raises(ValueError, match=r"cluster: expected a chance in \[0, 1\]"):
             _config(shared_data, tmp_path, cluster=chance)
+    with pytest.raises(ValueError, match=r"cluster: only for floating scenes"):
+        _config(shared_data, tmp_path, cluster=0.5, scene="tabletop")
     assert "cluster" not in _config(shared_data, tmp_path).fingerprint()  # data sets made before it still resume
     assert _config(shared_data, tmp_path, cluster=0.5).fingerprint()["cluster"] == 0.5
