@@ -125,6 +125,29 @@ def test_other_settings_in_the_same_folder_and_bad_input_are_refused(mocked, tmp
         Benchmark(out=tmp_path / "x", lmo=data, method="pvnet")
 
 
+def test_more_aae_steps_extend_the_aaes_and_score_them_again_and_fewer_are_refused(mocked, tmp_path):
+    data, calls = mocked
+    run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
+    calls.clear()
+    longer = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False, aae_steps=9)
+    assert longer.settings.aae_steps == 9
+    run_benchmark(longer)
+    assert calls == ["pose 1", "pose 5", "estimate gt", "evaluate gt", "estimate detections", "evaluate detections"]
+    assert json.loads((tmp_path / "bench" / "benchmark.json").read_text())["settings"]["aae_steps"] == 9
+    calls.clear()
+    run_benchmark(longer)
+    assert calls == []
+    with pytest.raises(ValueError, match=r"aae_steps: .* trained for 9 steps; expected at least that many"):
+        run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False,
+                                aae_steps=5))
+    with pytest.raises(ValueError, match=r"other settings \(settings differ"):  # steps and another size: refused
+        run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=replace(TINY, images=7),
+                                progress=False, aae_steps=12))
+    for bad in (0, -3, 2.5, True):
+        with pytest.raises(ValueError, match="aae_steps: expected a positive number"):
+            Benchmark(out=tmp_path / "x", lmo=data, aae_steps=bad)
+
+
 def test_quick_and_full_sizes_and_the_generator_settings(tmp_path, shared_data):
     job = Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo", quick=True)
     assert job.settings == lmo.QUICK and len(job.objects) == 8
@@ -138,7 +161,8 @@ def test_command_is_registered_and_light(tmp_path):
     from paz6d.cli import build_parser, main
 
     args = build_parser().parse_args(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--quick"])
-    assert args.quick and args.method == "aae"
+    assert args.quick and args.method == "aae" and args.aae_steps is None
+    assert build_parser().parse_args(["benchmark", "lmo", "--out", "b", "--aae-steps", "15000"]).aae_steps == 15000
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(tmp_path / "none")]) == 2
 
 

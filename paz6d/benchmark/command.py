@@ -26,6 +26,8 @@ class LmoOptions:
                          choices=("aae", "keypointnet"))
     lmo: Path = option(DEFAULT_LMO, "LM-O BOP folder: its models/ train everything, its test/ RGB frames are scored")
     seed: int = option(0, "seed of the synthetic data and of every training run")
+    aae_steps: int | None = option(None, "AAE training steps (default: 1,000 quick, 5,000 full); a larger number "
+                                         "on a finished --out resumes its AAEs and scores them again")
     progress: bool = option(True, "progress bars")
 
 
@@ -40,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     with flags_in_errors(LmoOptions):
         check_output_folder(options.out, "out")
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
-                        progress=options.progress, seed=options.seed)
+                        progress=options.progress, seed=options.seed, aae_steps=options.aae_steps)
         report = run_benchmark(job)
     print(f"wrote {Path(options.out) / 'report.json'} and {Path(options.out) / 'report.md'} "
           f"({report['total_minutes']:.1f} min of stages)")

@@ -99,6 +99,7 @@ class Benchmark:
     settings: BenchmarkSettings | None = None  # default: QUICK or FULL
     seed: int = 0
     objects: tuple[int, ...] = field(default=())  # default: every mesh in <lmo>/models
+    aae_steps: int | None = None  # default: the settings'; a larger number on a finished run extends its AAEs
 
     def __post_init__(self):
         self.out, self.lmo = Path(self.out), Path(self.lmo)
@@ -106,6 +107,10 @@ class Benchmark:
             raise ValueError(f"method: expected one of {METHODS}, got {self.method!r}")
         if self.settings is None:
             self.settings = QUICK if self.quick else FULL
+        if self.aae_steps is not None:
+            if isinstance(self.aae_steps, bool) or int(self.aae_steps) != self.aae_steps or self.aae_steps < 1:
+                raise ValueError(f"aae_steps: expected a positive number of training steps, got {self.aae_steps!r}")
+            self.settings = replace(self.settings, aae_steps=int(self.aae_steps))
         models = self.lmo / "models"
         if not models.is_dir():
             raise ValueError(f"lmo: {models} not found (expected the LM-O BOP folder with models/ and test/)")
@@ -273,12 +278,40 @@ def _check_settings(job: Benchmark) -> None:
                "objects": list(job.objects), "lmo": str(job.lmo.resolve())}
     if path.is_file():
         stored = load_json_object(path)
+        if _extends_aae(job, stored, current):
+            write_json_atomically(path, current, indent=2)
+            return
         differing = sorted(key for key in current if stored.get(key) != current[key])
         if differing:
             raise ValueError(f"out: {job.out} holds a benchmark with other settings ({', '.join(differing)} differ; "
                              f"see {path}); use another --out or the same flags")
     else:
         write_json_atomically(path, current, indent=2)
+
+
+def _extends_aae(job: Benchmark, stored: dict, current: dict) -> bool:
+    """Whether ``current`` differs from the ``stored`` settings in a larger ``aae_steps`` only. If so, the
+    AAE stages and the AAE estimates and scores are marked undone, so that the next run resumes each AAE to
+    the new number of steps and scores it again (the data and the detector stay).
+
+    Raises:
+        ValueError: a smaller ``aae_steps`` than the stored one (trained AAEs cannot be shortened).
+    """
+    stored_settings = dict(stored.get("settings") or {})
+    stored_steps = stored_settings.pop("aae_steps", None)
+    current_settings = dict(current["settings"])
+    steps = current_settings.pop("aae_steps")
+    same_otherwise = all(stored.get(key) == current[key] for key in current if key != "settings")
+    if not same_otherwise or stored_settings != current_settings or stored_steps in (None, steps):
+        return False
+    if steps < stored_steps:
+        raise ValueError(f"aae_steps: {job.out} holds AAEs trained for {stored_steps} steps; expected at least "
+                         f"that many (a run resumes its AAEs, it cannot shorten them), got {steps}")
+    undone = [f"pose/obj_{obj_id:06d}" for obj_id in job.objects]
+    undone += [f"{stage}_aae_{condition}" for stage in ("estimate", "evaluate") for condition in ("gt", "detections")]
+    for name in undone:
+        job.marker(name).unlink(missing_ok=True)
+    return True
 
 
 def run_benchmark(job: Benchmark, only: tuple[str, ...] | None = None) -> dict:
