@@ -307,10 +307,10 @@ def _extends_aae(job: Benchmark, stored: dict, current: dict) -> bool:
     if steps < stored_steps:
         raise ValueError(f"aae_steps: {job.out} holds AAEs trained for {stored_steps} steps; expected at least "
                          f"that many (a run resumes its AAEs, it cannot shorten them), got {steps}")
-    undone = [f"pose/obj_{obj_id:06d}" for obj_id in job.objects]
-    undone += [f"{stage}_aae_{condition}" for stage in ("estimate", "evaluate") for condition in ("gt", "detections")]
-    for name in undone:
-        job.marker(name).unlink(missing_ok=True)
+    aae = replace(job, method="aae")
+    for name, _, _ in stages(aae):
+        if name.startswith((f"{aae.pose_root.name}/", "estimate_", "evaluate_")):
+            job.marker(name).unlink(missing_ok=True)
     return True
 
 
