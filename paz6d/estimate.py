@@ -68,6 +68,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--score-threshold", type=float, default=DEFAULT_SCORE_THRESHOLD,
                         help=f"with --detector: detections scoring below it are dropped (default "
                              f"{DEFAULT_SCORE_THRESHOLD}); the BOP score of an estimate is its detection's")
+    parser.add_argument("--verify", action="store_true",
+                        help="with --detector: multiply each detection's score by its pose model's score (the AAE: "
+                             "cosine similarity to its codebook match), in the detections JSON and the results")
     parser.add_argument("--box", choices=sorted(BOXES), default="obj",
                         help="without --detector, the ground-truth box given to the model: of the whole projected "
                              "object (obj) or of its visible part (visib, what a detector would see)")
@@ -351,8 +354,9 @@ def split_images(dataset: Path, split: str):
 
 def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path, dataset: Path, split: str,
                            score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True,
-                           depth: bool = False, keypoint_crops: int = 1) -> dict:
-    """Detect every RGB image of the split, then estimate each detection of an object that has a run.
+                           depth: bool = False, keypoint_crops: int = 1, verify: bool = False) -> dict:
+    """Detect every RGB image of the split, then estimate each detection of an object that has a run
+    (``verify``: scores of the detections with a pose model times their pose's score, ``VerifyBoxes``).
 
     Returns:
         ``{"estimates": _Estimates, "detections": [COCO result dicts], "images": [(scene_id, im_id)],
@@ -369,7 +373,7 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
 
     detector = DetectSingleShot(detector_dir, score_threshold=score_threshold)
     estimators, unusable = _load_estimators(runs, keypoint_crops)
-    pipeline = DetectAndEstimatePose6D(detector, estimators)
+    pipeline = DetectAndEstimatePose6D(detector, estimators, verify=verify)
     estimates, detections, images = _Estimates(), [], []
     skipped_images, failed, without_model, total = 0, {obj_id: 0 for obj_id in runs}, {}, 0.0
     entries = list(split_images(dataset, split))
@@ -392,7 +396,8 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
         seconds = time.perf_counter() - started
         total += seconds
         images.append((scene_id, im_id))
-        for box in values["detections"]:
+        without = [box for box in values["detections"] if box.class_name not in pipeline.estimators]
+        for box in values["boxes"] + without:  # the boxes with a pose model carry the verified scores
             obj_id = bop_object_id(box.class_name)
             if obj_id is None:
                 raise ValueError(f"--detector: class {box.class_name!r} is not a BOP object (obj_XXXXXX)")
@@ -489,6 +494,8 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
         raise ValueError(f"--score-threshold: expected a score in [0, 1], got {args.score_threshold}")
     if args.detections_out is not None and args.detector is None:
         raise ValueError("--detections-out: only with --detector")
+    if args.verify and args.detector is None:
+        raise ValueError("--verify: only with --detector (ground-truth boxes have no detection score)")
     detections = detections_path(args)
     check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
     check_output_file(args.out, "--out")
@@ -524,7 +531,7 @@ def estimate(args: argparse.Namespace) -> dict:
                              f"fraction >= {args.min_visible} in split {args.split!r}")
     else:
         found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
-                                       args.progress, args.depth, args.keypoint_crops)
+                                       args.progress, args.depth, args.keypoint_crops, args.verify)
         targets = detector_targets(args.dataset, found["images"], runs)
         if not found["images"]:
             raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "

@@ -67,6 +67,41 @@ def test_rerun_resumes_and_extends(toy_run):
         train_aae(mesh, run, TOY, mesh_scale=0.002, workers=0, progress=False)
 
 
+def test_learning_rate_drop_trains_resumes_and_moves_to_the_new_end(toy_run):
+    """The last ``lr_drop_steps`` updates run at the dropped rate; a run with the drop checkpoints and resumes."""
+    from paz6d.aae.train import learning_rate
+    from paz6d.backend.tensorflow_guard import import_keras
+
+    keras = import_keras()
+    assert learning_rate(keras, TOY) == TOY.learning_rate
+    schedule = learning_rate(keras, replace(TOY, lr_drop_steps=10, lr_drop_factor=0.25))
+    rates = [float(schedule(iteration)) for iteration in range(40)]
+    np.testing.assert_allclose(rates[:30], 2e-3)
+    np.testing.assert_allclose(rates[30:], 5e-4)
+    assert float(learning_rate(keras, replace(TOY, lr_drop_steps=40))(0)) == pytest.approx(2e-4)
+
+    root, mesh, _ = toy_run
+    run = root / "dropped"
+    run.mkdir()
+    for name in ("object.npz", "views.npz"):  # cached: no rendering
+        shutil.copy(root / "run" / name, run / name)
+    train_aae(mesh, run, replace(TOY, steps=20, lr_drop_steps=10), mesh_scale=0.001, workers=0, progress=False)
+    summary = train_aae(mesh, run, replace(TOY, steps=30), mesh_scale=0.001, workers=0, progress=False)
+    assert summary["resumed_from_step"] == 20 and summary["steps"] == 30
+    stored = json.loads((run / "config.json").read_text())["config"]
+    assert (stored["lr_drop_steps"], stored["steps"]) == (10, 30)  # the stored drop stays, at the new end
+
+
+@pytest.mark.parametrize("changes, match", [({"lr_drop_steps": -1}, "lr_drop_steps"),
+                                            ({"lr_drop_steps": 41}, r"lr_drop_steps.*0 to steps \(40\)"),
+                                            ({"lr_drop_steps": 2.5}, "lr_drop_steps"),
+                                            ({"lr_drop_factor": 0.0}, "lr_drop_factor"),
+                                            ({"lr_drop_factor": 1.5}, "lr_drop_factor")])
+def test_learning_rate_drop_settings_are_checked(changes, match):
+    with pytest.raises(ValueError, match=match):
+        replace(TOY, **changes)
+
+
 def test_rendering_at_a_codebook_rotation_returns_that_rotation(toy_run):
     """Render with the codebook's own camera at in-plane angle 0: the crop equals the codebook crop."""
     from paz6d.aae.codebook import Codebook

@@ -130,6 +130,25 @@ def test_detected_class_without_pose_model_is_skipped_with_a_warning_or_refused_
     assert [box.class_name for box, _ in results] == ["obj_000005"]
 
 
+def test_verify_multiplies_each_box_score_by_its_pose_score(world):
+    from paz6d.detect_and_estimate import DetectAndEstimatePose6D, VerifyBoxes
+    from paz6d.pipelines import ImplicitPose6D
+
+    boxes = [Box2D(0, 0, 10, 10, score, "obj_000005") for score in (0.8, 0.8, 0.8, 0.5, 0.5)]
+    poses = [Pose6D.from_rotation_matrix(np.eye(3), [0, 0, 1], score=score) for score in (0.5, -0.3, 1.7, 1.0)]
+    verified = VerifyBoxes()(boxes, poses + [None])
+    assert [round(box.score, 6) for box in verified] == [0.4, 0.0, 0.8, 0.5, 0.5]  # clipped to [0, 1]; None kept
+    assert [box.to_array().tolist() for box in verified] == [box.to_array().tolist() for box in boxes]
+    sample = _samples(world)[0]
+    estimators = {obj_id: ImplicitPose6D(world / f"aae_{obj_id}") for obj_id in OBJECTS}
+    plain = DetectAndEstimatePose6D(TruthDetector(sample), estimators, sample.camera)
+    checked = DetectAndEstimatePose6D(TruthDetector(sample), estimators, sample.camera, verify=True)
+    assert checked.names == ["check", "detect", "select", "estimate", "verify", "pair"]
+    for (box, pose), (verified_box, verified_pose) in zip(plain(sample.image), checked(sample.image)):
+        assert 0 < pose.score <= 1 and verified_box.score == pytest.approx(box.score * pose.score)
+        np.testing.assert_allclose(verified_pose.translation, pose.translation)
+
+
 def test_image_that_does_not_match_the_camera_is_refused(world):
     from paz6d.detect_and_estimate import DetectAndEstimatePose6D
 
@@ -224,6 +243,18 @@ def test_estimate_with_several_runs_and_with_the_detector_through_evaluate_bop(w
     report = _evaluate(world, detected, tmp_path, "detected")
     assert 0 <= report["AR_MSPD"] <= 1 and 0 <= report["ADD(-S)_recall"] <= 1
     assert "detections ->" in capsys.readouterr().out
+    # --verify: the same detections, each score times its pose's (the AAE's cosine similarity, at most 1)
+    assert main(["estimate", "--detector", str(world / "ssd"), *runs, "--dataset", str(world / "set"),
+                 "--out", str(tmp_path / "verified.csv"), "--score-threshold", "0", "--verify", "--no-progress"]) == 0
+    verified = json.loads((tmp_path / "verified_detections.json").read_text())
+    key = lambda entry: (entry["image_id"], entry["category_id"], tuple(entry["bbox"]))  # noqa: E731
+    assert sorted(map(key, verified)) == sorted(map(key, coco))
+    plain_scores = {key(entry): entry["score"] for entry in coco}
+    assert all(entry["score"] <= plain_scores[key(entry)] + 1e-5 for entry in verified)
+    assert any(entry["score"] < plain_scores[key(entry)] - 1e-3 for entry in verified)
+    assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(tmp_path / "x.csv"),
+                 "--verify"]) == 2
+    assert "--verify: only with --detector" in capsys.readouterr().err
     # a bare run directory with --object-id still works (and its object is checked)
     assert main(["estimate", "--run", str(world / "aae_5"), "--object-id", "5", "--dataset", str(world / "set"),
                  "--out", str(tmp_path / "bare.csv"), "--no-progress"]) == 0

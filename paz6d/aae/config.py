@@ -81,6 +81,9 @@ class AAEConfig:
         steps: optimisation steps.
         batch_size: samples per step.
         learning_rate: Adam learning rate.
+        lr_drop_steps: the last this many steps train at ``learning_rate * lr_drop_factor`` (0: one rate
+            throughout). Extending a finished run (more ``steps``) moves the drop to the new end.
+        lr_drop_factor: the rate's factor for those steps, in (0, 1].
         bootstrap_fraction: fraction of largest pixel errors in the loss (1 = plain L2; paper 0.25).
         augmentation: input augmentation strengths.
         checkpoint_every / sample_every / log_every: Trainer intervals in steps.
@@ -98,11 +101,21 @@ class AAEConfig:
     steps: int = 3000
     batch_size: int = 32
     learning_rate: float = 1e-3
+    lr_drop_steps: int = 0
+    lr_drop_factor: float = 0.1
     bootstrap_fraction: float = 0.25
     augmentation: Augmentation = field(default_factory=Augmentation)
     checkpoint_every: int = 500
     sample_every: int = 500
     log_every: int = 25
+
+    def __post_init__(self):
+        if isinstance(self.lr_drop_steps, bool) or int(self.lr_drop_steps) != self.lr_drop_steps or \
+                not 0 <= self.lr_drop_steps <= self.steps:
+            raise ValueError(f"AAEConfig.lr_drop_steps: expected a whole number from 0 to steps ({self.steps}), "
+                             f"got {self.lr_drop_steps!r}")
+        if not 0.0 < self.lr_drop_factor <= 1.0:
+            raise ValueError(f"AAEConfig.lr_drop_factor: expected a factor in (0, 1], got {self.lr_drop_factor!r}")
 
     def to_dict(self) -> dict:
         data = asdict(self)

@@ -117,6 +117,16 @@ def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Pat
     return pairs
 
 
+def learning_rate(keras, config: AAEConfig):
+    """Adam's learning rate: ``config.learning_rate``, or a schedule of optimizer iterations that multiplies
+    it by ``lr_drop_factor`` for the last ``lr_drop_steps`` updates (iterations ``steps - lr_drop_steps`` on)."""
+    if config.lr_drop_steps == 0:
+        return config.learning_rate
+    last_high = config.steps - config.lr_drop_steps - 1  # PiecewiseConstantDecay: iteration <= boundary -> first
+    return keras.optimizers.schedules.PiecewiseConstantDecay(
+        [last_high], [config.learning_rate, config.learning_rate * config.lr_drop_factor])
+
+
 def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QUICK, mesh_scale: float = 1.0,
               seed: int = 0, workers: int = 2, platform: str | None = None, progress: bool = True,
               dataset: str | Path | None = None, object_id: int = 1, split: str = "train",
@@ -170,7 +180,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     keras.utils.set_random_seed(seed)
     model = build_autoencoder(config.crop_size, config.latent_size, config.filters, config.kernel_size,
                               config.batch_norm)
-    optimizer = keras.optimizers.Adam(config.learning_rate)
+    optimizer = keras.optimizers.Adam(learning_rate(keras, config))
 
     def loss_fn(model, batch):
         inputs, targets = batch
