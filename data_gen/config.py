@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
+from paz6d.backend.checks import is_whole_number
 from paz6d.backend.paths import check_plain_name
 from paz6d.cli_options import option
 from renderers.platform import PLATFORMS
@@ -51,7 +52,7 @@ def _file_digest(path: Path, name: str) -> str:
 
 
 def _positive_int(value, name: str, maximum: int | None = None) -> int:
-    if isinstance(value, bool) or int(value) != value or value <= 0:
+    if not is_whole_number(value) or value <= 0:
         raise ValueError(f"{name}: expected a positive integer, got {value!r}")
     if maximum is not None and value > maximum:
         raise ValueError(f"{name}: expected at most {maximum}, got {value!r}")
@@ -160,7 +161,7 @@ class GenerationConfig:
         _positive_int(self.width, "width", MAX_IMAGE_SIDE)
         _positive_int(self.height, "height", MAX_IMAGE_SIDE)
         _positive_int(self.images_per_scene, "images_per_scene", MAX_IMAGES_PER_SCENE)
-        if isinstance(self.seed, bool) or int(self.seed) != self.seed or self.seed < 0:
+        if not is_whole_number(self.seed) or self.seed < 0:
             raise ValueError(f"seed: expected a non-negative integer, got {self.seed!r}")
         check_plain_name(self.split, "split")
         if not math.isfinite(self.mesh_scale) or self.mesh_scale <= 0:
@@ -170,7 +171,7 @@ class GenerationConfig:
             if not all(math.isfinite(v) for v in self.intrinsics) or fx <= 0 or fy <= 0:
                 raise ValueError(f"intrinsics: expected finite (fx, fy, cx, cy) with fx, fy > 0, got {self.intrinsics}")
         low, high = _range(self.objects_per_image, "objects_per_image", minimum=1, maximum=MAX_PER_IMAGE)
-        if int(low) != low or int(high) != high:
+        if not (is_whole_number(low) and is_whole_number(high)):
             raise ValueError(f"objects_per_image: expected integers, got {self.objects_per_image}")
         if self.distance is not None:
             _range(self.distance, "distance")
@@ -194,18 +195,16 @@ class GenerationConfig:
         if not 0 <= self.inplane_degrees <= 180:
             raise ValueError(f"inplane_degrees: expected 0..180, got {self.inplane_degrees}")
         _range(self.elevation_degrees, "elevation_degrees", -90.0, 90.0)
-        if isinstance(self.distractors, bool) or int(self.distractors) != self.distractors or \
-                not 0 <= self.distractors <= MAX_PER_IMAGE:
+        if not is_whole_number(self.distractors) or not 0 <= self.distractors <= MAX_PER_IMAGE:
             raise ValueError(f"distractors: expected an integer in 0..{MAX_PER_IMAGE}, got {self.distractors!r}")
         _fraction(self.occluder_probability, "occluder_probability")
-        if isinstance(self.occluders, bool) or int(self.occluders) != self.occluders or \
-                not 0 <= self.occluders <= MAX_PER_IMAGE:
+        if not is_whole_number(self.occluders) or not 0 <= self.occluders <= MAX_PER_IMAGE:
             raise ValueError(f"occluders: expected an integer in 0..{MAX_PER_IMAGE}, got {self.occluders!r}")
         if self.distractor_style not in DISTRACTOR_STYLES:
             raise ValueError(f"distractor_style: expected one of {DISTRACTOR_STYLES}, got {self.distractor_style!r}")
         _fraction(self.blur_probability, "blur_probability")
         low, high = _range(self.light_count, "light_count", minimum=0, maximum=MAX_PER_IMAGE)
-        if int(low) != low or int(high) != high:
+        if not (is_whole_number(low) and is_whole_number(high)):
             raise ValueError(f"light_count: expected integers, got {self.light_count}")
         if not 0 <= self.cluster <= 1:
             raise ValueError(f"cluster: expected a chance in [0, 1], got {self.cluster}")
@@ -224,8 +223,7 @@ class GenerationConfig:
             raise ValueError(f"color_jitter: expected 0 <= j < 1, got {self.color_jitter}")
         if not math.isfinite(self.noise_std) or self.noise_std < 0:
             raise ValueError(f"noise_std: expected a non-negative number of grey levels, got {self.noise_std}")
-        if isinstance(self.crop_size, bool) or int(self.crop_size) != self.crop_size or \
-                not 0 <= self.crop_size <= MAX_CROP_SIZE:
+        if not is_whole_number(self.crop_size) or not 0 <= self.crop_size <= MAX_CROP_SIZE:
             raise ValueError(f"crop_size: expected 0 (off) or a pixel size up to {MAX_CROP_SIZE}, "
                              f"got {self.crop_size!r}")
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+from paz6d.backend.checks import is_whole_number
 from paz6d.cli_options import option
 from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
 from paz6d.training.source import checked_mesh_scale
@@ -110,8 +111,7 @@ class AAEConfig:
     log_every: int = 25
 
     def __post_init__(self):
-        if isinstance(self.lr_drop_steps, bool) or int(self.lr_drop_steps) != self.lr_drop_steps or \
-                not 0 <= self.lr_drop_steps <= self.steps:
+        if not is_whole_number(self.lr_drop_steps) or not 0 <= self.lr_drop_steps <= self.steps:
             raise ValueError(f"AAEConfig.lr_drop_steps: expected a whole number from 0 to steps ({self.steps}), "
                              f"got {self.lr_drop_steps!r}")
         if not 0.0 < self.lr_drop_factor <= 1.0:

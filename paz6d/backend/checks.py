@@ -153,6 +153,14 @@ def required_field(entry, name: str, where: str, size: int | None = None):
     return value
 
 
+def is_whole_number(value) -> bool:
+    """Whether ``value`` is a number with an integer value (``3``, ``3.0``, ``np.int64(3)``), not ``True``,
+    ``2.5``, ``"3"``, ``None`` or NaN."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return False
+    return math.isfinite(value) and int(value) == value
+
+
 def integer_field(entry, name: str, where: str, minimum: int = 0) -> int:
     """``entry[name]`` as an ``int`` ``>= minimum`` (a JSON integer, not ``1.5``, ``"1"`` or ``true``).
 

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.abstract import Box2D, Pose6D
+from paz6d.backend.checks import is_whole_number
 from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
 from paz6d.cli import build_parser
 from paz6d.datasets.bop import read_pose_results
@@ -108,7 +109,7 @@ class Benchmark:
         if self.settings is None:
             self.settings = QUICK if self.quick else FULL
         if self.aae_steps is not None:
-            if isinstance(self.aae_steps, bool) or int(self.aae_steps) != self.aae_steps or self.aae_steps < 1:
+            if not is_whole_number(self.aae_steps) or self.aae_steps < 1:
                 raise ValueError(f"aae_steps: expected a positive number of training steps, got {self.aae_steps!r}")
             self.settings = replace(self.settings, aae_steps=int(self.aae_steps))
         models = self.lmo / "models"

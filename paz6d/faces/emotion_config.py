@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from paz6d.backend.checks import is_whole_number
 from paz6d.cli_options import option
 
 #: Largest side of the network's square input (pixels); FER-2013 faces are 48.
@@ -40,7 +41,7 @@ class EmotionTraining:
     def __post_init__(self):
         for name in ("epochs", "batch_size", "input_size", "checkpoint_every"):
             value = getattr(self, name)
-            if isinstance(value, bool) or int(value) != value or value < 1:
+            if not is_whole_number(value) or value < 1:
                 raise ValueError(f"{name}: expected a positive integer, got {value!r}")
         if self.validate_every < 0:
             raise ValueError(f"validate_every: expected 0 (only at the end) or a number of steps, "

@@ -17,6 +17,8 @@ from typing import Any, Callable, Sequence
 
 from tqdm.auto import tqdm
 
+from paz6d.backend.checks import is_whole_number
+
 _STATE: dict[str, Any] = {}
 
 
@@ -71,7 +73,7 @@ def run_in_workers(setup: Callable[..., Any], setup_args: tuple, work: Callable[
     Returns:
         The results in task order (whatever order the workers finish in).
     """
-    if isinstance(processes, bool) or int(processes) != processes or processes < 0:
+    if not is_whole_number(processes) or processes < 0:
         raise ValueError(f"processes: expected 0 (this process) or a positive number of workers, got {processes!r}")
     results = []
     if processes == 0 or not tasks:
