@@ -69,16 +69,14 @@ def test_rerun_resumes_and_extends(toy_run):
 
 def test_learning_rate_drop_trains_resumes_and_moves_to_the_new_end(toy_run):
     """The last ``lr_drop_steps`` updates run at the dropped rate; a run with the drop checkpoints and resumes."""
-    from paz6d.aae.train import learning_rate
-    from paz6d.backend.tensorflow_guard import import_keras
+    from paz6d.aae.train import learning_rate_at
 
-    keras = import_keras()
-    assert learning_rate(keras, TOY) == TOY.learning_rate
-    schedule = learning_rate(keras, replace(TOY, lr_drop_steps=10, lr_drop_factor=0.25))
-    rates = [float(schedule(iteration)) for iteration in range(40)]
+    assert [learning_rate_at(TOY, step) for step in (0, 39)] == [2e-3, 2e-3]
+    dropped = replace(TOY, lr_drop_steps=10, lr_drop_factor=0.25)
+    rates = [learning_rate_at(dropped, step) for step in range(40)]
     np.testing.assert_allclose(rates[:30], 2e-3)
     np.testing.assert_allclose(rates[30:], 5e-4)
-    assert float(learning_rate(keras, replace(TOY, lr_drop_steps=40))(0)) == pytest.approx(2e-4)
+    assert learning_rate_at(replace(TOY, lr_drop_steps=40), 0) == pytest.approx(2e-4)
 
     root, mesh, _ = toy_run
     run = root / "dropped"
@@ -86,6 +84,8 @@ def test_learning_rate_drop_trains_resumes_and_moves_to_the_new_end(toy_run):
     for name in ("object.npz", "views.npz"):  # cached: no rendering
         shutil.copy(root / "run" / name, run / name)
     train_aae(mesh, run, replace(TOY, steps=20, lr_drop_steps=10), mesh_scale=0.001, workers=0, progress=False)
+    rate = np.load(run / "checkpoints" / "step_00000020" / "optimizer.npz")["1"]  # Adam: iterations, rate, ...
+    assert rate == pytest.approx(2e-4)  # the dropped rate was in use at the end
     summary = train_aae(mesh, run, replace(TOY, steps=30), mesh_scale=0.001, workers=0, progress=False)
     assert summary["resumed_from_step"] == 20 and summary["steps"] == 30
     stored = json.loads((run / "config.json").read_text())["config"]

@@ -182,6 +182,33 @@ def test_extending_a_finished_run_continues(tmp_path):
     assert finished.loader_samples_per_second is None and finished.model_samples_per_second is None
 
 
+def test_learning_rate_function_sets_each_steps_rate_and_resumes_like_an_uninterrupted_run(tmp_path):
+    seen = []
+
+    def rate(step):
+        seen.append(step)
+        return 0.05 if step < 12 else 0.005
+
+    reference = _trainer(tmp_path / "reference", 20, learning_rate=rate)
+    reference.fit()
+    assert seen == list(range(20)) and float(reference.optimizer.learning_rate) == pytest.approx(0.005)
+    constant = _trainer(tmp_path / "constant", 20)
+    constant.fit()
+    assert not np.allclose(constant.model.get_weights()[0], reference.model.get_weights()[0])
+    _trainer(tmp_path / "resumed", 10, learning_rate=rate).fit()  # stops before the drop; its checkpoint says 0.05
+    resumed = _trainer(tmp_path / "resumed", 20, learning_rate=rate)
+    assert resumed.fit().start_step == 10
+    for got, want in zip(resumed.model.get_weights(), reference.model.get_weights()):
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    keras = import_keras()
+    from paz6d.training.trainer import Trainer
+
+    model, _, loss_fn, data = _problem()
+    schedule = keras.optimizers.schedules.ExponentialDecay(0.05, 10, 0.5)
+    with pytest.raises(ValueError, match="learning_rate: the optimizer must have a constant rate"):
+        Trainer(model, keras.optimizers.Adam(schedule), loss_fn, data, tmp_path / "bad", 5, learning_rate=rate)
+
+
 def test_iterable_data_and_custom_train_step(tmp_path):
     from paz6d.training.trainer import Trainer
 

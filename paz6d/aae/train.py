@@ -117,14 +117,11 @@ def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Pat
     return pairs
 
 
-def learning_rate(keras, config: AAEConfig):
-    """Adam's learning rate: ``config.learning_rate``, or a schedule of optimizer iterations that multiplies
-    it by ``lr_drop_factor`` for the last ``lr_drop_steps`` updates (iterations ``steps - lr_drop_steps`` on)."""
-    if config.lr_drop_steps == 0:
-        return config.learning_rate
-    last_high = config.steps - config.lr_drop_steps - 1  # PiecewiseConstantDecay: iteration <= boundary -> first
-    return keras.optimizers.schedules.PiecewiseConstantDecay(
-        [last_high], [config.learning_rate, config.learning_rate * config.lr_drop_factor])
+def learning_rate_at(config: AAEConfig, step: int) -> float:
+    """Adam's rate for 0-based ``step``: ``learning_rate``, times ``lr_drop_factor`` for the last
+    ``lr_drop_steps`` steps (``steps - lr_drop_steps`` on)."""
+    dropped = config.lr_drop_steps and step >= config.steps - config.lr_drop_steps
+    return config.learning_rate * (config.lr_drop_factor if dropped else 1.0)
 
 
 def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QUICK, mesh_scale: float = 1.0,
@@ -180,7 +177,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     keras.utils.set_random_seed(seed)
     model = build_autoencoder(config.crop_size, config.latent_size, config.filters, config.kernel_size,
                               config.batch_norm)
-    optimizer = keras.optimizers.Adam(learning_rate(keras, config))
+    optimizer = keras.optimizers.Adam(config.learning_rate)
 
     def loss_fn(model, batch):
         inputs, targets = batch
@@ -189,7 +186,8 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     trainer = Trainer(model, optimizer, loss_fn, lambda step: sampler.batch(step, config.batch_size), run_dir,
                       config.steps, checkpoint_every=config.checkpoint_every, log_every=config.log_every,
                       sample_every=config.sample_every, sample_callback=_sample_callback(sampler), progress=progress,
-                      prefetch=4, prefetch_workers=1)
+                      prefetch=4, prefetch_workers=1,
+                      learning_rate=(lambda step: learning_rate_at(config, step)) if config.lr_drop_steps else None)
     tick = time.perf_counter()
     training = trainer.fit()
     timings["training_seconds"] = time.perf_counter() - tick

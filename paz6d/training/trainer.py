@@ -121,6 +121,10 @@ class Trainer:
         compile_step: wrap the built-in step in ``tf.function``.
         prefetch: with a callable ``data``, batches computed ahead in background threads (0 = none).
         prefetch_workers: threads computing batches (numpy/OpenCV release the GIL).
+        learning_rate: optional ``learning_rate(step) -> rate`` of the step about to run (0-based), set on the
+            optimizer's learning-rate variable before each step (the optimizer must be built with a
+            constant rate, not a schedule): checkpoints keep the same variables as a constant rate's, and a
+            resumed run follows the function from its step on.
         strategy: a ``tf.distribute`` strategy (:func:`~paz6d.training.distribution.make_strategy`)
             whose scope created ``model`` and ``optimizer``; None trains on one device. The global
             batch size must be divisible by its number of replicas; ``loss_fn`` sees one replica's
@@ -133,7 +137,8 @@ class Trainer:
                  sample_every: int = 0, sample_callback: Callable | None = None,
                  train_step: Callable[[Any], Mapping[str, Any]] | None = None, keep_checkpoints: int = 2,
                  tensorboard: bool = True, progress: bool = True, compile_step: bool = True, prefetch: int = 0,
-                 prefetch_workers: int = 1, strategy: Any = None):
+                 prefetch_workers: int = 1, strategy: Any = None,
+                 learning_rate: Callable[[int], float] | None = None):
         if int(steps) <= 0:
             raise ValueError(f"steps: expected a positive number of training steps, got {steps}")
         for name, value in (("checkpoint_every", checkpoint_every), ("log_every", log_every),
@@ -157,8 +162,11 @@ class Trainer:
             if outside:
                 raise ValueError(f"model: {len(outside)} variables (e.g. {outside[0]}) were not created in "
                                  f"strategy.scope(); build the model and optimizer inside it")
+        if learning_rate is not None and not hasattr(optimizer.learning_rate, "assign"):
+            raise ValueError("learning_rate: the optimizer must have a constant rate (a variable), not a schedule")
         self.model = model
         self.optimizer = optimizer
+        self.learning_rate = learning_rate
         self.loss_fn = loss_fn
         self.data = data
         self.run_dir = Path(run_dir)
@@ -348,6 +356,10 @@ class Trainer:
                 except StopIteration:
                     break
                 tock = time.perf_counter()
+                if self.learning_rate is not None:
+                    rate = float(self.learning_rate(step))
+                    if rate != float(self.optimizer.learning_rate):
+                        self.optimizer.learning_rate.assign(rate)
                 metrics = self._step_function(self._distribute(batch))
                 values = {key: float(np.asarray(value)) for key, value in metrics.items()}
                 done = time.perf_counter()
