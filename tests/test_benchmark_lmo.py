@@ -148,6 +148,39 @@ def test_more_aae_steps_extend_the_aaes_and_score_them_again_and_fewer_are_refus
             Benchmark(out=tmp_path / "x", lmo=data, aae_steps=bad)
 
 
+def test_aae_learning_rate_drop_reaches_the_aae_and_folders_from_before_it_resume(mocked, tmp_path, monkeypatch):
+    data, calls = mocked
+    job = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False, aae_lr_drop_steps=3)
+    assert job.settings.aae_lr_drop_steps == 3
+    monkeypatch.undo()  # the real pose stage, with train_aae replaced: the AAE config it builds
+    import paz6d.aae.train
+
+    seen = {}
+    monkeypatch.setattr(paz6d.aae.train, "train_aae", lambda mesh, run_dir, config, **kwargs: seen.update(
+        steps=config.steps, lr_drop_steps=config.lr_drop_steps))
+    lmo._stage_pose(job, 5)
+    assert seen == {"steps": 4, "lr_drop_steps": 3}
+    for bad, match in ((-1, "expected 0 or a number of steps"), (2.5, "expected 0 or a number of steps"),
+                       (5, r"expected at most aae_steps \(4\)")):
+        with pytest.raises(ValueError, match=f"aae_lr_drop_steps: {match}"):
+            Benchmark(out=tmp_path / "x", lmo=data, settings=TINY, aae_lr_drop_steps=bad)
+
+
+def test_a_folder_written_before_the_learning_rate_drop_resumes_with_none(mocked, tmp_path):
+    data, calls = mocked
+    run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
+    path = tmp_path / "bench" / "benchmark.json"
+    stored = json.loads(path.read_text())
+    del stored["settings"]["aae_lr_drop_steps"]  # as written by the versions before the setting
+    path.write_text(json.dumps(stored))
+    calls.clear()
+    run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
+    assert calls == []
+    with pytest.raises(ValueError, match=r"other settings \(settings differ"):
+        run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False,
+                                aae_lr_drop_steps=2))
+
+
 def test_quick_and_full_sizes_and_the_generator_settings(tmp_path, shared_data):
     job = Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo", quick=True)
     assert job.settings == lmo.QUICK and len(job.objects) == 8
@@ -164,6 +197,18 @@ def test_command_is_registered_and_light(tmp_path):
     assert args.quick and args.method == "aae" and args.aae_steps is None
     assert build_parser().parse_args(["benchmark", "lmo", "--out", "b", "--aae-steps", "15000"]).aae_steps == 15000
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(tmp_path / "none")]) == 2
+
+
+def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
+    from paz6d.benchmark import command
+    from paz6d.cli import main
+
+    data, _ = mocked
+    jobs = []
+    monkeypatch.setattr(command, "run_benchmark", lambda job: jobs.append(job) or {"total_minutes": 0.0})
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-steps", "12000",
+                 "--aae-lr-drop-steps", "2000", "--no-progress"]) == 0
+    assert (jobs[0].settings.aae_steps, jobs[0].settings.aae_lr_drop_steps) == (12000, 2000)
 
 
 @pytest.mark.slow

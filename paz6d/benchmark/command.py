@@ -28,6 +28,9 @@ class LmoOptions:
     seed: int = option(0, "seed of the synthetic data and of every training run")
     aae_steps: int | None = option(None, "AAE training steps (default: 1,000 quick, 5,000 full); a larger number "
                                          "on a finished --out resumes its AAEs and scores them again")
+    aae_lr_drop_steps: int | None = option(None, "the last this many AAE steps at a tenth of the learning rate "
+                                                 "(default: the sizes' own, docs/real_photos.md); with a larger "
+                                                 "--aae-steps on a finished --out the drop moves to the new end")
     progress: bool = option(True, "progress bars")
 
 
@@ -42,7 +45,8 @@ def run(args: argparse.Namespace) -> int:
     with flags_in_errors(LmoOptions):
         check_output_folder(options.out, "out")
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
-                        progress=options.progress, seed=options.seed, aae_steps=options.aae_steps)
+                        progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
+                        aae_lr_drop_steps=options.aae_lr_drop_steps)
         report = run_benchmark(job)
     print(f"wrote {Path(options.out) / 'report.json'} and {Path(options.out) / 'report.md'} "
           f"({report['total_minutes']:.1f} min of stages)")

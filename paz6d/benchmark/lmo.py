@@ -62,6 +62,7 @@ class BenchmarkSettings:
         detector_steps / detector_input_size: SSD steps and input side in pixels (quick network).
         aae_steps / aae_views / aae_in_plane: AAE steps, view-sphere directions and codebook in-plane
             rotations per view.
+        aae_lr_drop_steps: the last this many AAE steps train at a tenth of the learning rate.
         keypointnet_steps / keypointnet_views: KeypointNet steps and rendered training views.
         scene_crops: share of AAE training samples cut from the synthetic scenes (0: rendered views only).
         workers: rendering processes.
@@ -78,6 +79,7 @@ class BenchmarkSettings:
     scene_crops: float = 0.5
     workers: int = 2
     aae_views: int = 1000
+    aae_lr_drop_steps: int = 0
 
 
 # The quick benchmark keeps the detector at 320 px to stay within 45 minutes; 448 px (the SSD quick config's
@@ -101,6 +103,7 @@ class Benchmark:
     seed: int = 0
     objects: tuple[int, ...] = field(default=())  # default: every mesh in <lmo>/models
     aae_steps: int | None = None  # default: the settings'; a larger number on a finished run extends its AAEs
+    aae_lr_drop_steps: int | None = None  # default: the settings'
 
     def __post_init__(self):
         self.out, self.lmo = Path(self.out), Path(self.lmo)
@@ -112,6 +115,13 @@ class Benchmark:
             if not is_whole_number(self.aae_steps) or self.aae_steps < 1:
                 raise ValueError(f"aae_steps: expected a positive number of training steps, got {self.aae_steps!r}")
             self.settings = replace(self.settings, aae_steps=int(self.aae_steps))
+        if self.aae_lr_drop_steps is not None:
+            if not is_whole_number(self.aae_lr_drop_steps) or self.aae_lr_drop_steps < 0:
+                raise ValueError(f"aae_lr_drop_steps: expected 0 or a number of steps, got {self.aae_lr_drop_steps!r}")
+            self.settings = replace(self.settings, aae_lr_drop_steps=int(self.aae_lr_drop_steps))
+        if self.settings.aae_lr_drop_steps > self.settings.aae_steps:
+            raise ValueError(f"aae_lr_drop_steps: expected at most aae_steps ({self.settings.aae_steps}), got "
+                             f"{self.settings.aae_lr_drop_steps}")
         models = self.lmo / "models"
         if not models.is_dir():
             raise ValueError(f"lmo: {models} not found (expected the LM-O BOP folder with models/ and test/)")
@@ -185,7 +195,8 @@ def _stage_pose(job: Benchmark, obj_id: int) -> dict:
 
         # paper-sized crop shifts/scales: the boxes come from a detector or from visible parts
         config = replace(AAE_QUICK, steps=job.settings.aae_steps, in_plane=job.settings.aae_in_plane,
-                         views=job.settings.aae_views, augmentation=Augmentation())
+                         views=job.settings.aae_views, lr_drop_steps=job.settings.aae_lr_drop_steps,
+                         augmentation=Augmentation())
         crops = job.settings.scene_crops > 0
         return train_aae(job.mesh(obj_id), job.pose_dir(obj_id), config, mesh_scale=0.001, seed=job.seed,
                          workers=job.settings.workers, progress=job.progress,
@@ -272,6 +283,10 @@ def stage_done(job: Benchmark, name: str, outputs: list[Path]) -> bool:
     return job.marker(name).is_file() and all(path.exists() for path in outputs)
 
 
+#: settings newer than some benchmark folders, with the value the versions before them used
+_EARLIER_SETTINGS = {"aae_lr_drop_steps": 0}
+
+
 def _check_settings(job: Benchmark) -> None:
     """Records the benchmark's settings in ``DIR/benchmark.json``; a re-run with other sizes is refused."""
     path = job.out / "benchmark.json"
@@ -279,6 +294,8 @@ def _check_settings(job: Benchmark) -> None:
                "objects": list(job.objects), "lmo": str(job.lmo.resolve())}
     if path.is_file():
         stored = load_json_object(path)
+        if isinstance(stored.get("settings"), dict):
+            stored["settings"] = {**_EARLIER_SETTINGS, **stored["settings"]}
         if _extends_aae(job, stored, current):
             write_json_atomically(path, current, indent=2)
             return
