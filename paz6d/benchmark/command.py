@@ -29,7 +29,7 @@ class LmoOptions:
     aae_steps: int | None = option(None, "AAE training steps (default: 1,000 quick, 5,000 full); a larger number "
                                          "on a finished --out resumes its AAEs and scores them again")
     aae_lr_drop_steps: int | None = option(None, "the last this many AAE steps at a tenth of the learning rate "
-                                                 "(default: the sizes' own, docs/real_photos.md); with a larger "
+                                                 "(default: 0 quick, 500 full); with a larger "
                                                  "--aae-steps on a finished --out the drop moves to the new end")
     progress: bool = option(True, "progress bars")
 
