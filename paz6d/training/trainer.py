@@ -346,6 +346,7 @@ class Trainer:
         last_metrics: dict[str, float] = {}
         started = time.perf_counter()
         step = start_step
+        rate_set = None  # the rate last given to the optimizer by ``learning_rate`` in this fit
         bar = tqdm(total=self.steps, initial=start_step, desc=f"train {self.run_dir.name}",
                    disable=not self.progress, dynamic_ncols=True)
         try:
@@ -358,8 +359,9 @@ class Trainer:
                 tock = time.perf_counter()
                 if self.learning_rate is not None:
                     rate = float(self.learning_rate(step))
-                    if rate != float(self.optimizer.learning_rate):
+                    if rate != rate_set:  # first step of this fit (the checkpoint's rate) or a change
                         self.optimizer.learning_rate.assign(rate)
+                        rate_set = rate
                 metrics = self._step_function(self._distribute(batch))
                 values = {key: float(np.asarray(value)) for key, value in metrics.items()}
                 done = time.perf_counter()
