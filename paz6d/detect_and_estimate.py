@@ -22,6 +22,7 @@ from __future__ import annotations
 import re
 import warnings
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -191,9 +192,7 @@ class VerifyBoxes(Processor):
     (``None``) leaves the box's score as it is."""
 
     def call(self, boxes, poses) -> list[Box2D]:
-        return [box if pose is None else
-                Box2D(box.x_min, box.y_min, box.x_max, box.y_max, box.score * min(max(pose.score, 0.0), 1.0),
-                      box.class_name)
+        return [box if pose is None else replace(box, score=box.score * min(max(pose.score, 0.0), 1.0))
                 for box, pose in zip(boxes, poses)]
 
 
