@@ -123,12 +123,18 @@ def test_demo_keypoints_option_runs_the_keypoint_demo_on_the_demo_mesh(tmp_path,
     assert args._run(args) == 0
     out_dir, mesh_path, options = calls["keypoints"]
     assert out_dir == tmp_path / "keypoints" and mesh_path == mesh
-    assert options["mesh_scale"] == 0.001 and options["test_images"] == 7
+    assert options["mesh_scale"] == 0.001 and options["test_images"] == 7 and options["config"] == "quick"
     assert calls["aae"][1:] == (7, 2000, 0.0)  # rendered views only by default
     models, count = calls["ood"]
     assert count == 5 and [(m.name, m.kind) for m in models] == [("AAE", "aae"), ("KeypointNet", "keypointnet")]
     assert models[1].run_dir == tmp_path / "keypoints" / "keypointnet_supervised"
     assert "ood_check" in json.loads((tmp_path / "report.json").read_text())
+    calls.clear()
+    args = build_parser().parse_args(["demo", "--out", str(tmp_path), "--keypoints", "--keypoint-config", "robust"])
+    args._run(args)
+    assert calls["keypoints"][2]["config"] == "robust"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["demo", "--keypoints", "--keypoint-config", "full"])
     (tmp_path / "plain").mkdir()
     args = build_parser().parse_args(["demo", "--out", str(tmp_path / "plain"), "--scene-crops", "0.25",
                                       "--train-images", "300"])

@@ -97,6 +97,26 @@ def test_relighting_and_background_noise_change_only_their_part_of_a_crop(views)
     assert 0 < noisy_views < len(views)  # on about half of the crops
 
 
+def test_photo_backgrounds_are_collages_of_the_bundled_photographs(views):
+    from paz6d.synthesis.photo_backgrounds import photo_collage, sample_photographs
+
+    size = views.rgb.shape[1]
+    photographs = sample_photographs()
+    chosen = 0
+    for seed in range(12):
+        index = seed % len(views)
+        picture, _, _ = kv.augmented_view(views, index, np.random.default_rng([6, seed]),
+                                          kv.Augmentation(crop_scale=0.0, crop_shift=0.0, colour=False, photos=0.5))
+        replay = np.random.default_rng([6, seed])
+        replay.uniform(), replay.uniform(size=2)  # the crop jitter's draws
+        clear, opaque = views.alpha[index] == 0, views.alpha[index] == 255
+        np.testing.assert_array_equal(picture[opaque], views.rgb[index][opaque])  # the object is untouched
+        if replay.random() < 0.5:
+            chosen += 1
+            np.testing.assert_array_equal(picture[clear], photo_collage(replay, photographs, size, size)[clear])
+    assert 0 < chosen < 12  # a photo collage on about half of the crops, the shapes style on the others
+
+
 def test_relight_gains_and_ramp_stay_in_their_bounds():
     from paz6d.synthesis.augment import relight
 
@@ -124,6 +144,14 @@ def test_view_lighting_styles_are_drawn_per_view_and_recorded(mesh_path, views):
     assert np.array_equal(relit.masks, views.masks)
     with pytest.raises(ValueError, match="lighting: expected one or more of"):
         kv.ViewSampling(lighting=("studio",))
+
+
+def test_a_lighting_style_listed_twice_is_drawn_twice_as_often():
+    rng = np.random.default_rng(0)
+    styles = [kv._light_style(rng, ("key-fill", "key-fill", "surround")) for _ in range(3000)]
+    assert styles.count("key-fill") / 3000 == pytest.approx(2 / 3, abs=0.03)
+    state = rng.bit_generator.state
+    assert kv._light_style(rng, ("scene",)) == "scene" and rng.bit_generator.state == state  # one style: no draw
 
 
 def test_empty_masks_are_a_clear_error(views):
@@ -186,6 +214,26 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
         resumed = train_keypointnet(KeypointTraining(job.out, mesh_path, mesh_scale=1e-3, mode=mode, workers=0, steps=50,
                                                      progress=False, overrides=TINY))
         assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
+
+
+def test_the_robust_preset_trains_on_photos_and_mixed_lights(mesh_path, tmp_path, monkeypatch):
+    from paz6d.keypointnet.config import CONFIGS, KeypointTraining
+    from paz6d.keypointnet.train import train_keypointnet
+
+    collages = []
+    real_collage = kv.photo_collage
+    monkeypatch.setattr(kv, "photo_collage", lambda *args, **kwargs: collages.append(1) or real_collage(*args, **kwargs))
+    job = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, config="robust", seed=0, workers=0, steps=4,
+                           progress=False, overrides=TINY)
+    assert job.settings()["augmentation"] == CONFIGS["robust"]["augmentation"]
+    train_keypointnet(job)
+    config = json.loads((tmp_path / "config.json").read_text())
+    assert config["config"] == "robust" and config["sampling"]["lighting"] == ["key-fill", "key-fill", "surround"]
+    assert config["settings"]["augmentation"] == {"photos": 0.5, "background_noise": 40.0}
+    crops = 4 * 2 * TINY["pairs"]  # steps x the two views of each pair
+    assert 0.25 * crops < len(collages) < 0.75 * crops  # about half of the training crops over photo collages
+    assert {key: value for key, value in CONFIGS["robust"].items() if key not in ("steps", "lighting", "augmentation")} \
+        == {key: value for key, value in CONFIGS["quick"].items() if key != "steps"}  # the quick network
 
 
 def test_lifting_crops_are_cut_as_at_inference_with_matching_intrinsics():

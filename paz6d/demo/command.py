@@ -32,8 +32,11 @@ class DemoOptions:
     steps: int | None = option(None, "AAE training steps (default: the quick config's)")
     workers: int = option(2, "rendering processes")
     platform: str | None = option(None, "OpenGL platform of the renderers (default: auto)", choices=PLATFORMS)
-    keypoints: bool = option(False, "also train and score KeypointNet (supervised, quick config; ~15 more minutes "
-                                    "on 2 CPU cores) on the same object into OUT/keypoints")
+    keypoints: bool = option(False, "also train and score KeypointNet (supervised, --keypoint-config) on the same "
+                                    "object into OUT/keypoints")
+    keypoint_config: str = option("quick", "KeypointNet config of --keypoints: quick (~13 more minutes on 2 CPU "
+                                           "cores; fails the out-of-distribution check) or robust (~25 minutes; "
+                                           "passes it)", choices=("quick", "robust"))
     ood_images: int = option(200, "held-out views of the out-of-distribution check (each scored under every condition)")
 
     def __post_init__(self):
@@ -70,7 +73,8 @@ def run_demos(options: DemoOptions, config=QUICK, keypoint_overrides: dict | Non
     if options.keypoints:
         keypoint_out = out / "keypoints"
         keypoint_demo.run_keypoint_demo(keypoint_out, mesh, mesh_scale=1.0 / MM_PER_M, test_images=options.test_images,
-                                        workers=options.workers, overrides=keypoint_overrides)
+                                        workers=options.workers, overrides=keypoint_overrides,
+                                        config=options.keypoint_config)
         models.append(ood_check.PoseModel("KeypointNet", "keypointnet",
                                           keypoint_demo.mode_run_dir(keypoint_out, "supervised")))
     print(f"\n== out-of-distribution check ({options.ood_images} views, {len(models)} models)", flush=True)

@@ -22,6 +22,7 @@ This module imports neither TensorFlow nor pyrender at import time.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -37,6 +38,7 @@ from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_bo
 from paz6d.synthesis.augment import (BlendBackground, RandomBrightness, RandomContrast, RandomGaussianBlur, RandomHue,
                                      RandomImageNoise, RandomSaturation, relight, sensor_noise, share_generator)
 from paz6d.synthesis.lighting import LIGHTING_STYLES, random_lighting
+from paz6d.synthesis.photo_backgrounds import photo_collage, sample_photographs
 from paz6d.synthesis.sampling import hull_points, random_pose_in_view
 from paz6d.synthesis.workers import chunks, progress_bar, run_in_workers
 
@@ -55,7 +57,8 @@ class ViewSampling:
         border: fraction of the image width/height kept free at each side for the object centre.
         margin: crop side = ``margin`` × the longer side of the silhouette box.
         lighting: light styles of :func:`~paz6d.synthesis.lighting.random_lighting` for the training crops,
-            one drawn per view (test images always use ``"key-fill"``).
+            one drawn uniformly per view, so a style listed twice is drawn twice as often (test images
+            always use ``"key-fill"``).
     """
 
     input_size: int = 128
@@ -305,6 +308,8 @@ class Augmentation:
             ramp); 0: none.
         background_noise: on half of the crops, Gaussian pixel noise of a standard deviation uniform in
             ``[0, background_noise]`` grey levels on the background only; 0: none.
+        photos: probability that a crop's background is a collage of scikit-image's sample photographs
+            (:func:`~paz6d.synthesis.photo_backgrounds.photo_collage`) instead of :data:`BACKGROUND`'s style.
     """
 
     crop_scale: float = 0.08
@@ -313,6 +318,13 @@ class Augmentation:
     background: bool = True
     relight: float = 0.0
     background_noise: float = 0.0
+    photos: float = 0.0
+
+
+@functools.cache
+def _photographs() -> tuple[np.ndarray, ...]:
+    """scikit-image's sample photographs, loaded once per process."""
+    return tuple(sample_photographs())
 
 
 def _jitter_crop(views: ViewSet, index: int, rng: np.random.Generator, augmentation: Augmentation):
@@ -345,8 +357,12 @@ def augmented_view(views: ViewSet, index: int, rng: np.random.Generator,
     if augmentation.relight > 0:
         rgb = np.clip(relight(rgb, rng, augmentation.relight), 0, 255).astype(np.uint8)
     if augmentation.background:
-        share_generator(BACKGROUND, rng)
-        picture = BACKGROUND(rgb, alpha)
+        if augmentation.photos > 0 and rng.random() < augmentation.photos:
+            collage = photo_collage(rng, _photographs(), rgb.shape[1], rgb.shape[0])
+            picture = image_backend.alpha_blend(rgb, alpha, collage)
+        else:
+            share_generator(BACKGROUND, rng)
+            picture = BACKGROUND(rgb, alpha)
         if augmentation.background_noise > 0 and rng.random() < 0.5:
             noisy = sensor_noise(rng, picture, float(rng.uniform(0.0, augmentation.background_noise)))
             picture = image_backend.alpha_blend(picture, alpha, noisy)
