@@ -1,5 +1,6 @@
-"""Keypoint demo: train KeypointNet (quick config) on a mesh, estimate 6D poses on held-out synthetic
-images with ground-truth boxes, score them with ``evaluation.pose_errors`` and write a report.
+"""Keypoint demo: train KeypointNet (the quick config by default, or robust) on a mesh, estimate 6D poses
+on held-out synthetic images with ground-truth boxes, score them with ``evaluation.pose_errors`` and write
+a report.
 
 Meant to be called by ``paz6d demo --keypoints``::
 
