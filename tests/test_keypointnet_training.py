@@ -146,6 +146,13 @@ def test_view_lighting_styles_are_drawn_per_view_and_recorded(mesh_path, views):
         kv.ViewSampling(lighting=("studio",))
 
 
+@pytest.mark.parametrize("field, value", [("photos", 1.5), ("photos", -0.1), ("photos", float("nan")),
+                                          ("background_noise", -1.0), ("relight", float("nan"))])
+def test_augmentation_refuses_bad_strengths(field, value):
+    with pytest.raises(ValueError, match=f"augmentation.{field}"):
+        kv.Augmentation(**{field: value})
+
+
 def test_a_lighting_style_listed_twice_is_drawn_twice_as_often():
     rng = np.random.default_rng(0)
     styles = [kv._light_style(rng, ("key-fill", "key-fill", "surround")) for _ in range(3000)]

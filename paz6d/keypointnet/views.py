@@ -320,6 +320,13 @@ class Augmentation:
     background_noise: float = 0.0
     photos: float = 0.0
 
+    def __post_init__(self):
+        if not 0.0 <= self.photos <= 1.0:
+            raise ValueError(f"augmentation.photos: expected a probability in [0, 1], got {self.photos!r}")
+        for name in ("crop_scale", "crop_shift", "relight", "background_noise"):
+            if not getattr(self, name) >= 0.0:
+                raise ValueError(f"augmentation.{name}: expected a value >= 0, got {getattr(self, name)!r}")
+
 
 @functools.cache
 def _photographs() -> tuple[np.ndarray, ...]:
