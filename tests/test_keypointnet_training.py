@@ -153,6 +153,18 @@ def test_augmentation_refuses_bad_strengths(field, value):
         kv.Augmentation(**{field: value})
 
 
+def test_an_unknown_augmentation_setting_is_named_before_anything_is_rendered(mesh_path, tmp_path):
+    from paz6d.keypointnet.config import KeypointTraining
+
+    assert kv.Augmentation.from_settings({"photos": 0.5}) == kv.Augmentation(photos=0.5)
+    assert kv.Augmentation.from_settings(None) == kv.Augmentation()
+    with pytest.raises(ValueError, match=r"augmentation.photo: unknown setting; expected some of \('crop_scale'"):
+        kv.Augmentation.from_settings({"photo": 0.5})
+    with pytest.raises(ValueError, match="augmentation.photos: expected a probability"):
+        KeypointTraining(tmp_path / "run", mesh_path, overrides={"augmentation": {"photos": 2.0}})
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_lighting_style_listed_twice_is_drawn_twice_as_often():
     rng = np.random.default_rng(0)
     styles = [kv._light_style(rng, ("key-fill", "key-fill", "surround")) for _ in range(3000)]
@@ -277,6 +289,14 @@ def test_a_run_directory_refuses_a_different_run(mesh_path, tmp_path):
     other = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="discovery", overrides=TINY)
     with pytest.raises(ValueError, match="different run"):
         _prepare_run_dir(other, other.settings(), 0.1, kv.ViewSampling(input_size=32))
+    longer = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="supervised", steps=7, overrides=TINY)
+    assert _prepare_run_dir(longer, longer.settings(), 0.1, kv.ViewSampling(input_size=32))["settings"]["steps"] == 7
+    edited = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="supervised",
+                              overrides={**TINY, "augmentation": {"photos": 0.5}})
+    with pytest.raises(ValueError, match="settings changed since this run started .augmentation=None"):
+        _prepare_run_dir(edited, edited.settings(), 0.1, kv.ViewSampling(input_size=32))
+    with pytest.raises(ValueError, match="view sampling changed"):
+        _prepare_run_dir(job, job.settings(), 0.1, kv.ViewSampling(input_size=32, lighting=("surround",)))
     with pytest.raises(ValueError, match="mode"):
         KeypointTraining(tmp_path, mesh_path, mode="other")
     with pytest.raises(ValueError, match="steps"):

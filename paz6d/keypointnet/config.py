@@ -142,6 +142,9 @@ class KeypointTraining:
         if settings.get("mode", self.mode) != self.mode:
             raise ValueError(f"config: {self.config!r} is a {settings['mode']} preset; pass --mode {settings['mode']} "
                              f"(got --mode {self.mode})")
+        from paz6d.keypointnet.views import Augmentation  # no TensorFlow
+
+        Augmentation.from_settings(settings.get("augmentation"))  # a bad key or strength fails before rendering
         return apply_steps(settings, self.steps)
 
 

@@ -27,6 +27,7 @@ TensorFlow and the renderer are loaded inside :func:`train_keypointnet`.
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -46,6 +47,10 @@ from paz6d.processors.predict import predict_in_batches
 
 # ------------------------------------------------------------------------------- run directory
 
+#: Settings a resumed run may change: its length, and the compute dtype ("auto" resolves per machine).
+RESUMABLE_CHANGES = ("steps", "precision")
+
+
 def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling, symmetry=None) -> dict:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"mode": job.mode, "config": job.config, "seed": job.seed, "mesh_path": str(Path(job.mesh).resolve()),
@@ -62,6 +67,15 @@ def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: flo
             if previous.get(key) != config[key]:
                 raise ValueError(f"{path}: this run directory holds a different run ({key}={previous.get(key)!r}, "
                                  f"now {config[key]!r}); choose another --out")
+        now = json.loads(json.dumps(config))  # tuples as lists, as config.json holds them
+        for key in sorted(set(previous["settings"]) | set(now["settings"])):
+            if key not in RESUMABLE_CHANGES and previous["settings"].get(key) != now["settings"].get(key):
+                raise ValueError(f"{path}: the {job.config!r} settings changed since this run started ({key}="
+                                 f"{previous['settings'].get(key)!r}, now {now['settings'].get(key)!r}); resuming "
+                                 f"would mix two trainings, choose another --out")
+        if previous.get("sampling") != now["sampling"]:
+            raise ValueError(f"{path}: the view sampling changed since this run started ({previous.get('sampling')!r}, "
+                             f"now {now['sampling']!r}); resuming would mix two trainings, choose another --out")
         if previous["settings"].get("steps") != config["settings"]["steps"]:
             previous["settings"]["steps"] = config["settings"]["steps"]  # extending a run is allowed
             run_files.write_config(job.out, previous)
@@ -454,7 +468,7 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     anchors = (AnchorSource(model, train_views, settings, job.seed + 3, object_diameter, symmetry)
                if job.mode == "discovery" else None)
 
-    augmentation = Augmentation(**settings.get("augmentation", {}))
+    augmentation = Augmentation.from_settings(settings.get("augmentation"))
 
     def make_batch(step: int):
         rng = np.random.default_rng([job.seed, 1, step])

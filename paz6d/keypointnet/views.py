@@ -23,7 +23,7 @@ This module imports neither TensorFlow nor pyrender at import time.
 from __future__ import annotations
 
 import functools
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import cv2
@@ -326,6 +326,20 @@ class Augmentation:
         for name in ("crop_scale", "crop_shift", "relight", "background_noise"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"augmentation.{name}: expected a value >= 0, got {getattr(self, name)!r}")
+
+    @classmethod
+    def from_settings(cls, values: dict | None) -> "Augmentation":
+        """The ``augmentation`` setting of a preset (``None``: the defaults).
+
+        Raises:
+            ValueError: for a key that is not a field, naming it and the known ones.
+        """
+        values = dict(values or {})
+        known = tuple(item.name for item in fields(cls))
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ValueError(f"augmentation.{unknown[0]}: unknown setting; expected some of {known}")
+        return cls(**values)
 
 
 @functools.cache
