@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-from paz6d.backend.checks import is_whole_number
+from paz6d.backend.checks import is_whole_number, unknown_fields
 from paz6d.cli_options import option
 from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
 from paz6d.training.source import checked_mesh_scale
@@ -125,9 +125,9 @@ class AAEConfig:
     @classmethod
     def from_dict(cls, data: dict) -> "AAEConfig":
         data = dict(data)
-        unknown = set(data) - {f for f in cls.__dataclass_fields__}
+        unknown = unknown_fields(cls, data)
         if unknown:
-            raise ValueError(f"AAE config: unknown field(s) {sorted(unknown)}")
+            raise ValueError(f"AAE config: unknown field(s) {unknown}")
         augmentation = data.pop("augmentation", {})
         for key in ("occluder_size", "scale", "contrast", "saturation"):
             if key in augmentation:

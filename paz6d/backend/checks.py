@@ -6,6 +6,7 @@ message naming the argument and the expected shape when the input is bad.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -151,6 +152,11 @@ def required_field(entry, name: str, where: str, size: int | None = None):
             raise ValueError(f"{where}: field {name!r} must hold {size} finite numbers, got {found}")
         return array
     return value
+
+
+def unknown_fields(dataclass_type, data: dict) -> list[str]:
+    """The keys of ``data``, sorted, that are not fields of ``dataclass_type`` (a dataclass)."""
+    return sorted(set(data) - {item.name for item in dataclasses.fields(dataclass_type)})
 
 
 def is_whole_number(value) -> bool:

@@ -32,6 +32,7 @@ import numpy as np
 from paz6d.abstract.processor import SequentialProcessor
 from paz6d.backend import image as image_backend
 from paz6d.backend.camera import Camera
+from paz6d.backend.checks import unknown_fields
 from paz6d.backend.files import load_npz, save_npz_atomically
 from paz6d.backend.mesh import diameter, load_mesh
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_box, square_window
@@ -335,9 +336,9 @@ class Augmentation:
             ValueError: for a key that is not a field, naming it and the known ones.
         """
         values = dict(values or {})
-        known = tuple(item.name for item in fields(cls))
-        unknown = sorted(set(values) - set(known))
+        unknown = unknown_fields(cls, values)
         if unknown:
+            known = tuple(item.name for item in fields(cls))
             raise ValueError(f"augmentation.{unknown[0]}: unknown setting; expected some of {known}")
         return cls(**values)
 
