@@ -116,7 +116,7 @@ def _argument_options(config_class: type, field: dataclasses.Field, annotation: 
 
 def _display(value: Any) -> str:
     if isinstance(value, (tuple, list)):
-        return " ".join(str(item) for item in value)
+        return " ".join(str(item) for item in value) if value else "none"
     return str(value)
 
 
@@ -135,6 +135,9 @@ def add_config_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGro
                 options["action"] = "extend"  # --x a b and --x a --x b both work
         else:
             options["default"] = default
+            if options.get("nargs") == "+" and default == ():
+                options.update(action="extend", default=[])  # a repeatable flag, none by default (a tuple again
+                #                                              in config_from_args)
             if options.get("action") is argparse.BooleanOptionalAction:
                 shown = flag_name(field.name) if default else "--no-" + flag_name(field.name)[2:]
                 help_text = f"{help_text} (default: {shown})".strip()

@@ -13,7 +13,8 @@ from paz6d.benchmark import lmo
 from paz6d.benchmark.lmo import Benchmark, BenchmarkSettings, run_benchmark, score_table, stages
 
 TINY = BenchmarkSettings(images=6, backgrounds=3, detector_steps=4, aae_steps=4, aae_in_plane=4,
-                         keypointnet_steps=4, keypointnet_views=8, workers=1, aae_views=12, detector_input_size=128)
+                         keypointnet_steps=4, keypointnet_views=8, workers=1, aae_views=12, detector_input_size=128,
+                         keypointnet_robust_steps=5, keypointnet_robust_views=9)
 
 
 def _fake_lmo(root: Path, objects=(1, 5)) -> Path:
@@ -125,6 +126,33 @@ def test_other_settings_in_the_same_folder_and_bad_input_are_refused(mocked, tmp
         Benchmark(out=tmp_path / "x", lmo=data, method="pvnet")
 
 
+def test_a_pose_method_per_object_reuses_the_other_models_and_reports_under_its_own_label(mocked, tmp_path):
+    data, calls = mocked
+    run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
+    calls.clear()
+    mixed = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False,
+                      object_methods={5: "keypointnet_robust", 1: "aae"})
+    assert mixed.object_methods == {5: "keypointnet_robust"} and mixed.label == "aae+keypointnet_robust@5"
+    assert mixed.pose_dir(1) == tmp_path / "bench" / "pose" / "obj_000001"
+    assert mixed.pose_dir(5) == tmp_path / "bench" / "pose_keypointnet_robust" / "obj_000005"
+    assert [name for name, _, _ in stages(mixed)][3:6] == [
+        "pose/obj_000001", "pose_keypointnet_robust/obj_000005", "estimate_aae+keypointnet_robust@5_gt"]
+    assert {f"--run=1={mixed.pose_dir(1)}", f"--run=5={mixed.pose_dir(5)}"} <= set(lmo._estimate_args(mixed, "gt"))
+    report = run_benchmark(mixed)
+    assert calls == ["pose 5", "estimate gt", "evaluate gt", "estimate detections", "evaluate detections",
+                     "detector ap"]
+    assert sorted(report["methods"]) == ["aae", "aae+keypointnet_robust@5"]
+    assert mixed.result("gt", ".csv") == tmp_path / "bench" / "results" / "aae+keypointnet_robust@5_gt.csv"
+    assert "| aae+keypointnet_robust@5 | gt_visible_boxes | **all** |" in score_table(report)
+    calls.clear()  # longer AAEs: the mix is scored again, its KeypointNet is not retrained
+    run_benchmark(replace(mixed, aae_steps=9))
+    assert calls == ["pose 1", "estimate gt", "evaluate gt", "estimate detections", "evaluate detections"]
+    with pytest.raises(ValueError, match=r"object_methods: objects \[9\] are not benchmarked"):
+        Benchmark(out=tmp_path / "x", lmo=data, object_methods={9: "aae"})
+    with pytest.raises(ValueError, match="object_methods: object 5: expected one of"):
+        Benchmark(out=tmp_path / "x", lmo=data, object_methods={5: "pvnet"})
+
+
 def test_more_aae_steps_extend_the_aaes_and_score_them_again_and_fewer_are_refused(mocked, tmp_path):
     data, calls = mocked
     run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
@@ -171,13 +199,15 @@ def test_a_folder_written_before_the_learning_rate_drop_resumes_with_none(mocked
     run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
     path = tmp_path / "bench" / "benchmark.json"
     stored = json.loads(path.read_text())
-    del stored["settings"]["aae_lr_drop_steps"]  # as written by the versions before the setting
+    for key in ("aae_lr_drop_steps", "keypointnet_robust_steps", "keypointnet_robust_views"):
+        del stored["settings"][key]  # as written by the versions before these settings
     path.write_text(json.dumps(stored))
     calls.clear()
-    run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
+    settings = replace(TINY, keypointnet_robust_steps=None, keypointnet_robust_views=None)
+    run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=settings, progress=False))
     assert calls == []
     with pytest.raises(ValueError, match=r"other settings \(settings differ"):
-        run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False,
+        run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=settings, progress=False,
                                 aae_lr_drop_steps=2))
 
 
@@ -209,20 +239,27 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-steps", "12000",
                  "--aae-lr-drop-steps", "2000", "--no-progress"]) == 0
     assert (jobs[0].settings.aae_steps, jobs[0].settings.aae_lr_drop_steps) == (12000, 2000)
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
+                 "5=keypointnet_robust", "--object-method", "1=keypointnet", "--no-progress"]) == 0
+    assert jobs[1].object_methods == {1: "keypointnet", 5: "keypointnet_robust"}
+    for bad in ("5", "x=aae", "5=aae 5=keypointnet"):
+        assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
+                     *bad.split()]) == 2
 
 
 @pytest.mark.slow
 def test_every_real_stage_runs_on_the_shared_lmo_data_at_toy_size(tmp_path, shared_data):
     job = Benchmark(out=tmp_path / "bench", lmo=shared_data / "bop_lmo", quick=True, settings=TINY, objects=(5, 8),
-                    progress=False)
+                    progress=False, object_methods={8: "keypointnet_robust"})
     report = run_benchmark(job)
     for condition in ("gt_visible_boxes", "detections"):
-        scores = report["methods"]["aae"][condition]
+        scores = report["methods"]["aae+keypointnet_robust@8"][condition]
         assert scores is not None and sorted(scores["per_object"]) == ["5", "8"]
         assert 0 <= scores["mean_AR_MSSD_AR_MSPD"] <= 1
     assert (job.out / "detector" / "model.keras").is_file() and (job.pose_dir(5) / "codebook.npz").is_file()
-    assert len(list((job.out / "overlays" / "aae_detections").glob("*.png"))) == 20
-    assert (job.out / "overlays" / "aae_gt.png").is_file() and (job.out / "report.md").is_file()
+    assert json.loads((job.pose_dir(8) / "config.json").read_text())["config"] == "robust"
+    assert len(list((job.out / "overlays" / "aae+keypointnet_robust@8_detections").glob("*.png"))) == 20
+    assert (job.out / "overlays" / "aae+keypointnet_robust@8_gt.png").is_file() and (job.out / "report.md").is_file()
 
 
 def test_keypointnet_stage_uses_the_orientation_network_for_half_turn_symmetric_objects(shared_data, tmp_path,
@@ -231,8 +268,16 @@ def test_keypointnet_stage_uses_the_orientation_network_for_half_turn_symmetric_
     monkeypatch.setattr(lmo, "train_keypointnet", lambda job: jobs.setdefault(job.mesh.stem, job) and {})
     bench = Benchmark(out=tmp_path / "bench", lmo=shared_data / "bop_lmo", quick=True, settings=TINY,
                       method="keypointnet")
-    for obj_id in (5, 10, 11):
-        lmo._stage_pose(bench, obj_id)
+    robust = replace(bench, method="aae", object_methods={1: "keypointnet_robust"})
+    for job, obj_id in ((bench, 5), (bench, 10), (bench, 11), (robust, 1)):
+        lmo._stage_pose(job, obj_id)
     assert {stem: job.orientation_network for stem, job in jobs.items()} == {
-        "obj_000005": False, "obj_000010": True, "obj_000011": True}
+        "obj_000005": False, "obj_000010": True, "obj_000011": True, "obj_000001": False}
+    assert {stem: (job.config, job.steps, job.overrides) for stem, job in jobs.items() if stem in (
+        "obj_000005", "obj_000001")} == {"obj_000005": ("quick", 4, {"views": 8}),
+                                         "obj_000001": ("robust", 5, {"views": 9})}
+    assert jobs["obj_000001"].out == tmp_path / "bench" / "pose_keypointnet_robust" / "obj_000001"
+    full = Benchmark(out=tmp_path / "full", lmo=shared_data / "bop_lmo", object_methods={8: "keypointnet_robust"})
+    lmo._stage_pose(full, 8)  # the robust preset at its own length
+    assert jobs["obj_000008"].settings()["steps"] == 10000 and jobs["obj_000008"].settings()["views"] == 4000
     assert abs(jobs["obj_000010"].symmetry().symmetry[0, 0] + 1.0) < 1e-3  # the eggbox's half turn about z

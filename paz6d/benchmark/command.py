@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from paz6d.backend.paths import check_output_folder
-from paz6d.benchmark.lmo import DEFAULT_LMO, Benchmark, run_benchmark
+from paz6d.benchmark.lmo import DEFAULT_LMO, METHODS, Benchmark, run_benchmark
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 
 
@@ -22,8 +22,10 @@ class LmoOptions:
     out: Path = option(help="output folder (detector/, pose/obj_XXXXXX/, results/, overlays/, report.json); "
                             "re-run the same command to resume")
     quick: bool = option(False, "the quick sizes (~45 min on an idle 2-core CPU) instead of the full ones (~3 h)")
-    method: str = option("aae", "pose model per object (keypointnet runs go to OUT/pose_keypointnet/)",
-                         choices=("aae", "keypointnet"))
+    method: str = option("aae", "pose model per object (keypointnet runs go to OUT/pose_<method>/)",
+                         choices=METHODS)
+    object_method: tuple[str, ...] = option((), "OBJ_ID=METHOD: this object's pose model instead of --method's "
+                                                "(repeatable), e.g. 8=keypointnet_robust", metavar="OBJ_ID=METHOD")
     lmo: Path = option(DEFAULT_LMO, "LM-O BOP folder: its models/ train everything, its test/ RGB frames are scored")
     seed: int = option(0, "seed of the synthetic data and of every training run")
     aae_steps: int | None = option(None, "AAE training steps (default: 1,000 quick, 5,000 full); a larger number "
@@ -39,6 +41,19 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_config_arguments(parser, LmoOptions)
 
 
+def parse_object_methods(values: tuple[str, ...]) -> dict[int, str]:
+    """``{obj_id: method}`` of ``--object-method OBJ_ID=METHOD`` values."""
+    found = {}
+    for value in values:
+        obj_id, _, method = value.partition("=")
+        if not obj_id.strip().isdigit() or not method:
+            raise ValueError(f"object_method: expected OBJ_ID=METHOD (e.g. 8=keypointnet_robust), got {value!r}")
+        if int(obj_id) in found:
+            raise ValueError(f"object_method: object {int(obj_id)} given twice")
+        found[int(obj_id)] = method
+    return found
+
+
 def run(args: argparse.Namespace) -> int:
     """Runs (or resumes) the benchmark."""
     options = config_from_args(LmoOptions, args)
@@ -46,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
         check_output_folder(options.out, "out")
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
                         progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
-                        aae_lr_drop_steps=options.aae_lr_drop_steps)
+                        aae_lr_drop_steps=options.aae_lr_drop_steps,
+                        object_methods=parse_object_methods(options.object_method))
         report = run_benchmark(job)
     print(f"wrote {Path(options.out) / 'report.json'} and {Path(options.out) / 'report.md'} "
           f"({report['total_minutes']:.1f} min of stages)")

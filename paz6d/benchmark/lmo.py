@@ -7,9 +7,10 @@ From the 8 LM-O meshes (``<lmo>/models``) only:
 2. ``synthetic``: ``paz6d generate`` of floating multi-object scenes over those collages at LM-O's camera,
    distances and viewpoints (the settings that transferred best to the real frames, ``docs/ssd.md`` q1);
 3. ``detector``: ``paz6d train ssd`` (quick network) -> ``DIR/detector/``;
-4. ``pose/obj_XXXXXX``: one pose model per object (AAE by default, KeypointNet with ``method="keypointnet"``)
-   -> ``DIR/pose/obj_XXXXXX/`` (KeypointNet: ``DIR/pose_keypointnet/obj_XXXXXX/``); the AAE also trains on
-   crops of the synthetic scenes (real inter-object occlusion) besides its own rendered views;
+4. ``pose/obj_XXXXXX``: one pose model per object (AAE by default, KeypointNet with ``method="keypointnet"``
+   or ``"keypointnet_robust"``, and per object with ``object_methods``) -> ``DIR/pose/obj_XXXXXX/``
+   (KeypointNet: ``DIR/pose_<method>/obj_XXXXXX/``); the AAE also trains on crops of the synthetic scenes
+   (real inter-object occlusion) besides its own rendered views;
 5. ``estimate_gt`` / ``estimate_detections``: ``paz6d estimate`` on the real RGB frames with the ground-truth
    visible boxes and with the detector's boxes (which reads no ground truth);
 6. ``evaluate_*``: ``paz6d evaluate bop`` (AR_MSSD, AR_MSPD, ADD(-S), per object) of both, and
@@ -27,6 +28,7 @@ and the trainers, as in ``paz6d demo``.
 from __future__ import annotations
 
 import json
+import re
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
@@ -50,7 +52,9 @@ from paz6d.ssd.config import SSDTraining
 DEFAULT_LMO = Path(__file__).resolve().parents[3] / "shared" / "data" / "bop_lmo"
 #: LM-O's camera (``camera.json`` of the BOP data set): fx, fy, cx, cy.
 LMO_INTRINSICS = (572.4114, 573.57043, 325.2611, 242.04899)
-METHODS = ("aae", "keypointnet")
+#: Pose methods: the AAE, KeypointNet's quick preset at the benchmark's length, and its ``robust`` preset
+#: (photo backgrounds, its own length): the one that does more than fail on the driller (docs/real_photos.md).
+METHODS = ("aae", "keypointnet", "keypointnet_robust")
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,8 @@ class BenchmarkSettings:
             rotations per view.
         aae_lr_drop_steps: the last this many AAE steps train at a tenth of the learning rate.
         keypointnet_steps / keypointnet_views: KeypointNet steps and rendered training views.
+        keypointnet_robust_steps / keypointnet_robust_views: the same for ``keypointnet_robust`` (None: the
+            ``robust`` preset's own, 10,000 and 4,000).
         scene_crops: share of AAE training samples cut from the synthetic scenes (0: rendered views only).
         workers: rendering processes.
     """
@@ -80,6 +86,8 @@ class BenchmarkSettings:
     workers: int = 2
     aae_views: int = 1000
     aae_lr_drop_steps: int = 0
+    keypointnet_robust_steps: int | None = None
+    keypointnet_robust_views: int | None = None
 
 
 # The quick benchmark keeps the detector at 320 px to stay within 45 minutes; 448 px (the SSD quick config's
@@ -95,7 +103,8 @@ FULL = BenchmarkSettings(images=2500, backgrounds=300, detector_steps=3000, aae_
 
 @dataclass
 class Benchmark:
-    """One ``paz6d benchmark lmo`` run: where, which sizes and which pose method."""
+    """One ``paz6d benchmark lmo`` run: where, which sizes and which pose method (``method`` for every object
+    but those of ``object_methods``, ``{obj_id: method}``)."""
 
     out: Path
     lmo: Path = DEFAULT_LMO
@@ -107,11 +116,15 @@ class Benchmark:
     objects: tuple[int, ...] = field(default=())  # default: every mesh in <lmo>/models
     aae_steps: int | None = None  # default: the settings'; a larger number on a finished run extends its AAEs
     aae_lr_drop_steps: int | None = None  # default: the settings'
+    object_methods: dict[int, str] = field(default_factory=dict)
 
     def __post_init__(self):
         self.out, self.lmo = Path(self.out), Path(self.lmo)
         if self.method not in METHODS:
             raise ValueError(f"method: expected one of {METHODS}, got {self.method!r}")
+        for obj_id, method in self.object_methods.items():
+            if method not in METHODS:
+                raise ValueError(f"object_methods: object {obj_id}: expected one of {METHODS}, got {method!r}")
         if self.settings is None:
             self.settings = QUICK if self.quick else FULL
         if self.aae_steps is not None:
@@ -137,21 +150,34 @@ class Benchmark:
                 raise ValueError(f"objects: {missing} have no mesh in {models}")
         else:
             self.objects = tuple(found)
+        unknown = sorted(set(self.object_methods) - set(self.objects))
+        if unknown:
+            raise ValueError(f"object_methods: objects {unknown} are not benchmarked (objects: {list(self.objects)})")
+        self.object_methods = {int(obj_id): method for obj_id, method in sorted(self.object_methods.items())
+                               if method != self.method}
 
     # -- paths ----------------------------------------------------------------------------------
     def mesh(self, obj_id: int) -> Path:
         return self.lmo / "models" / f"obj_{obj_id:06d}.ply"
 
+    def method_of(self, obj_id: int) -> str:
+        return self.object_methods.get(obj_id, self.method)
+
     @property
-    def pose_root(self) -> Path:
-        return self.out / ("pose" if self.method == "aae" else f"pose_{self.method}")
+    def label(self) -> str:
+        """Name of this combination of pose models in results, reports and overlays: the method, then
+        ``+<method>@<obj_id>`` per object that differs (e.g. ``aae+keypointnet_robust@8``)."""
+        return self.method + "".join(f"+{method}@{obj_id}" for obj_id, method in self.object_methods.items())
+
+    def pose_root(self, method: str) -> Path:
+        return self.out / ("pose" if method == "aae" else f"pose_{method}")
 
     def pose_dir(self, obj_id: int) -> Path:
-        return self.pose_root / f"obj_{obj_id:06d}"
+        return self.pose_root(self.method_of(obj_id)) / f"obj_{obj_id:06d}"
 
     def result(self, condition: str, suffix: str) -> Path:
-        """``DIR/results/<method>_<condition><suffix>`` (condition ``gt`` or ``detections``)."""
-        return self.out / "results" / f"{self.method}_{condition}{suffix}"
+        """``DIR/results/<label>_<condition><suffix>`` (condition ``gt`` or ``detections``)."""
+        return self.out / "results" / f"{self.label}_{condition}{suffix}"
 
     def marker(self, stage: str) -> Path:
         return self.out / "stages" / f"{stage.replace('/', '_')}.json"
@@ -192,7 +218,8 @@ def _stage_detector(job: Benchmark) -> dict:
 
 
 def _stage_pose(job: Benchmark, obj_id: int) -> dict:
-    if job.method == "aae":
+    method = job.method_of(obj_id)
+    if method == "aae":
         from paz6d.aae.config import QUICK as AAE_QUICK, Augmentation
         from paz6d.aae.train import train_aae
 
@@ -208,11 +235,15 @@ def _stage_pose(job: Benchmark, obj_id: int) -> dict:
 
     # objects with one half-turn symmetry (LM-O's eggbox and glue) get the orientation network
     symmetries = load_models_info(job.mesh(obj_id).parent / MODELS_INFO)[obj_id].symmetries_discrete
-    return train_keypointnet(KeypointTraining(job.pose_dir(obj_id), job.mesh(obj_id), mesh_scale=0.001,
-                                              seed=job.seed, workers=job.settings.workers,
-                                              steps=job.settings.keypointnet_steps, progress=job.progress,
-                                              overrides={"views": job.settings.keypointnet_views},
-                                              orientation_network=is_single_half_turn(symmetries)))
+    settings = job.settings
+    if method == "keypointnet_robust":
+        preset, steps, views = "robust", settings.keypointnet_robust_steps, settings.keypointnet_robust_views
+    else:
+        preset, steps, views = "quick", settings.keypointnet_steps, settings.keypointnet_views
+    return train_keypointnet(KeypointTraining(
+        job.pose_dir(obj_id), job.mesh(obj_id), mesh_scale=0.001, config=preset, seed=job.seed,
+        workers=settings.workers, steps=steps, progress=job.progress,
+        overrides={} if views is None else {"views": views}, orientation_network=is_single_half_turn(symmetries)))
 
 
 def _estimate_args(job: Benchmark, condition: str) -> list[str]:
@@ -246,7 +277,7 @@ def _stage_evaluate(job: Benchmark, condition: str) -> dict:
     _run_command(["evaluate", "bop", "--dataset", str(job.lmo), "--split", "test",
                   "--results", str(job.result(condition, ".csv")),
                   "--targets", str(job.result(condition, "_targets.json")), "--metrics", "mssd,mspd,add",
-                  "--out", str(scores), "--plots", str(job.out / "results" / f"{job.method}_{condition}_plots")]
+                  "--out", str(scores), "--plots", str(job.out / "results" / f"{job.label}_{condition}_plots")]
                  + ([] if job.progress else ["--no-progress"]))
     return {"scores": str(scores)}
 
@@ -269,14 +300,14 @@ def stages(job: Benchmark) -> list[tuple[str, Callable[[], dict], list[Path]]]:
              ("synthetic", lambda: _stage_synthetic(job), [job.out / "synthetic" / "camera.json"]),
              ("detector", lambda: _stage_detector(job), [job.out / "detector" / "model.keras"])]
     for obj_id in job.objects:
-        found.append((f"{job.pose_root.name}/obj_{obj_id:06d}", lambda obj_id=obj_id: _stage_pose(job, obj_id),
-                      [job.pose_dir(obj_id)]))
+        found.append((f"{job.pose_dir(obj_id).parent.name}/obj_{obj_id:06d}",
+                      lambda obj_id=obj_id: _stage_pose(job, obj_id), [job.pose_dir(obj_id)]))
     for condition in ("gt", "detections"):
-        found.append((f"estimate_{job.method}_{condition}", lambda c=condition: _stage_estimate(job, c),
+        found.append((f"estimate_{job.label}_{condition}", lambda c=condition: _stage_estimate(job, c),
                       [job.result(condition, ".csv")]))
-        found.append((f"evaluate_{job.method}_{condition}", lambda c=condition: _stage_evaluate(job, c),
+        found.append((f"evaluate_{job.label}_{condition}", lambda c=condition: _stage_evaluate(job, c),
                       [job.result(condition, "_scores.json")]))
-    found.append((f"detector_ap_{job.method}", lambda: _stage_detection_ap(job),
+    found.append((f"detector_ap_{job.label}", lambda: _stage_detection_ap(job),
                   [job.out / "results" / "detector_coco.json"]))
     return found
 
@@ -287,7 +318,7 @@ def stage_done(job: Benchmark, name: str, outputs: list[Path]) -> bool:
 
 
 #: settings newer than some benchmark folders, with the value the versions before them used
-_EARLIER_SETTINGS = {"aae_lr_drop_steps": 0}
+_EARLIER_SETTINGS = {"aae_lr_drop_steps": 0, "keypointnet_robust_steps": None, "keypointnet_robust_views": None}
 
 
 def _check_settings(job: Benchmark) -> None:
@@ -328,10 +359,12 @@ def _extends_aae(job: Benchmark, stored: dict, current: dict) -> bool:
     if steps < stored_steps:
         raise ValueError(f"aae_steps: {job.out} holds AAEs trained for {stored_steps} steps; expected at least "
                          f"that many (a run resumes its AAEs, it cannot shorten them), got {steps}")
-    aae = replace(job, method="aae")
-    for name, _, _ in stages(aae):
-        if name.startswith((f"{aae.pose_root.name}/", "estimate_", "evaluate_")):
+    for name, _, _ in stages(replace(job, method="aae", object_methods={})):
+        if name.startswith("pose/"):
             job.marker(name).unlink(missing_ok=True)
+    for marker in (job.out / "stages").glob("*.json"):  # the scores of every combination with an AAE in it
+        if marker.stem.startswith(("estimate_", "evaluate_")) and "aae" in re.split(r"[_+@]", marker.stem):
+            marker.unlink()
     return True
 
 
@@ -412,7 +445,7 @@ def _not_estimated(job: Benchmark) -> dict[str, str]:
     """``{obj_id: reason}`` of the objects whose pose model could not estimate (from the estimate stages)."""
     found = {}
     for condition in ("gt", "detections"):
-        marker = job.marker(f"estimate_{job.method}_{condition}")
+        marker = job.marker(f"estimate_{job.label}_{condition}")
         if marker.is_file():
             found.update((load_json_object(marker).get("summary") or {}).get("unusable", {}))
     return found
@@ -453,7 +486,7 @@ def _overlays(job: Benchmark, condition: str) -> list[Path]:
                 x, y, w, h = entry["bbox"]
                 boxes.setdefault(entry["image_id"], []).append(Box2D(x, y, x + w, y + h, entry["score"],
                                                                      f"obj_{entry['category_id']:06d}"))
-    folder = job.out / "overlays" / f"{job.method}_{condition}"
+    folder = job.out / "overlays" / f"{job.label}_{condition}"
     written, tiles = [], []
     for scene in sorted((job.lmo / "test").iterdir()):
         if not scene.name.isdigit():
@@ -474,7 +507,7 @@ def _overlays(job: Benchmark, condition: str) -> list[Path]:
             written.append(save_image(out, canvas))
             tiles.append(cv2.resize(canvas, (320, 240), interpolation=cv2.INTER_AREA))
     if tiles:
-        written.append(save_image(job.out / "overlays" / f"{job.method}_{condition}.png", image_grid(tiles, 4)))
+        written.append(save_image(job.out / "overlays" / f"{job.label}_{condition}.png", image_grid(tiles, 4)))
     return written
 
 
@@ -484,20 +517,20 @@ def write_report(job: Benchmark, timings: dict[str, float]) -> dict:
     path = job.out / "report.json"
     report = load_json_object(path) if path.is_file() else {}
     methods = dict(report.get("methods", {}))
-    methods[job.method] = {"gt_visible_boxes": _scores(job.result("gt", "_scores.json")),
-                           "detections": _scores(job.result("detections", "_scores.json"))}
-    for summary in methods[job.method].values():
+    methods[job.label] = {"gt_visible_boxes": _scores(job.result("gt", "_scores.json")),
+                          "detections": _scores(job.result("detections", "_scores.json"))}
+    for summary in methods[job.label].values():
         if summary is not None:
             summary["mean_AR_MSSD_AR_MSPD"] = _mean_ar(summary)
     not_estimated = dict(report.get("not_estimated", {}))
-    not_estimated[job.method] = _not_estimated(job)
+    not_estimated[job.label] = _not_estimated(job)
     all_timings = {**report.get("timings_seconds", {}), **timings}
     detector = _scores(job.out / "results" / "detector_coco.json")
     overlays = {condition: [str(p) for p in _overlays(job, condition)] for condition in ("gt", "detections")}
     report = {"benchmark": "lmo", "quick": job.quick, "settings": asdict(job.settings), "objects": list(job.objects),
               "lmo": str(job.lmo), "methods": methods, "not_estimated": not_estimated, "detector_coco": detector,
               "timings_seconds": all_timings, "total_minutes": sum(all_timings.values()) / 60,
-              "overlays": {**report.get("overlays", {}), job.method: overlays}}
+              "overlays": {**report.get("overlays", {}), job.label: overlays}}
     write_json_atomically(path, report, indent=2)
     table = score_table(report) + not_estimated_notes(report)
     header = (f"# paz6d benchmark lmo ({'quick' if job.quick else 'full'})\n\n"
