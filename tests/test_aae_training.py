@@ -349,3 +349,16 @@ def test_boxes_far_larger_than_the_image_are_rejected_at_once(toy_run):
         with pytest.raises(ValueError, match="larger than 4 times the 160x120 image"):
             estimator(image, box)
         assert time.perf_counter() - started < 1.0  # was > 10 minutes (blur and resampling grew with the box)
+
+
+def test_config_json_round_trip_and_unknown_fields_at_either_level_are_named():
+    from dataclasses import asdict
+
+    from paz6d.aae.config import AAEConfig
+
+    stored = json.loads(json.dumps(asdict(QUICK)))  # as config.json holds it: lists, not tuples
+    assert AAEConfig.from_dict(stored) == QUICK
+    with pytest.raises(ValueError, match=r"AAE config: unknown field\(s\) \['colour'\]"):
+        AAEConfig.from_dict({**stored, "colour": 1})
+    with pytest.raises(ValueError, match=r"AAE config: augmentation: unknown field\(s\) \['blurr'\]"):
+        AAEConfig.from_dict({**stored, "augmentation": {**stored["augmentation"], "blurr": 1.0}})

@@ -128,7 +128,10 @@ class AAEConfig:
         unknown = unknown_fields(cls, data)
         if unknown:
             raise ValueError(f"AAE config: unknown field(s) {unknown}")
-        augmentation = data.pop("augmentation", {})
+        augmentation = dict(data.pop("augmentation", {}))
+        unknown = unknown_fields(Augmentation, augmentation)
+        if unknown:
+            raise ValueError(f"AAE config: augmentation: unknown field(s) {unknown}")
         for key in ("occluder_size", "scale", "contrast", "saturation"):
             if key in augmentation:
                 augmentation[key] = tuple(augmentation[key])
