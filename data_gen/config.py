@@ -135,6 +135,13 @@ class GenerationConfig:
     backgrounds: Path | None = option(None, "folder of background images (default: procedural backgrounds)")
     light_count: tuple[int, int] = option((1, 3), "number of random lights", metavar=("MIN", "MAX"))
     color_jitter: float = option(0.2, "objects' base colour is multiplied by U(1 - j, 1 + j) per channel")
+    roughness: tuple[float, float] | None = option(
+        None, "random material roughness of every object and distractor per image, uniform in MIN..MAX (0: "
+              "mirror-like highlights, 1: matte; default: none drawn, pyrender's 0.8 for vertex colours)",
+        metavar=("MIN", "MAX"))
+    metallic: tuple[float, float] | None = option(
+        None, "random metallic factor likewise (0: plastic-like, 1: metal; default: none drawn, pyrender's 0.2)",
+        metavar=("MIN", "MAX"))
     blur_probability: float = option(0.3, "chance of a Gaussian blur of the final image")
     noise_std: float = option(4.0, "maximum standard deviation (grey levels) of the Gaussian image noise, "
                                    "added to half of the images")
@@ -219,6 +226,9 @@ class GenerationConfig:
         if self.neutral_distractors + self.object_colored_distractors > 1:
             raise ValueError(f"neutral_distractors + object_colored_distractors: expected shares summing to at most "
                              f"1, got {self.neutral_distractors} + {self.object_colored_distractors}")
+        for name in ("roughness", "metallic"):
+            if getattr(self, name) is not None:
+                _range(getattr(self, name), name, minimum=0.0, maximum=1.0)
         if not 0 <= self.color_jitter < 1:
             raise ValueError(f"color_jitter: expected 0 <= j < 1, got {self.color_jitter}")
         if not math.isfinite(self.noise_std) or self.noise_std < 0:
@@ -249,8 +259,8 @@ class GenerationConfig:
         data["scale"] = data.pop("mesh_scale")  # the key data sets made before the field's rename hold
         if data["scene"] == "floating":
             data.pop("scene")  # data sets made before scene styles existed are floating ones
-        for name in ("neutral_distractors", "object_colored_distractors", "cluster"):
-            if data[name] == 0:
+        for name in ("neutral_distractors", "object_colored_distractors", "cluster", "roughness", "metallic"):
+            if not data[name]:
                 data.pop(name)  # nor do those made before these fields existed
         if data["occluders"] == 1 and data["distractor_style"] == "primitive":
             data.pop("occluders")  # nor do those made before these two fields existed

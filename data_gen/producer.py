@@ -18,7 +18,7 @@ from paz6d.backend.square_crop import crop_intrinsics, crop_square, square_windo
 from paz6d.datasets.bop.writer import depth_png_from_lengths, gt_info_entry, pose_entry
 from paz6d.synthesis.augment import RandomGaussianBlur, RandomImageNoise, share_generator
 from paz6d.synthesis.backgrounds import background_image
-from paz6d.synthesis.lighting import random_lighting, random_tints
+from paz6d.synthesis.lighting import random_lighting, random_materials, random_tints
 from paz6d.synthesis.occluders import mesh_palettes, random_colors
 from paz6d.synthesis.photo_backgrounds import sample_photographs
 from paz6d.synthesis.scene import ZNEAR, sample_scene
@@ -91,11 +91,14 @@ class ImageProducer:
         tints = np.concatenate([object_tints, clutter_tints])
         objects = [(assets.meshes[i], pose) for i, pose in zip(scene.object_indices, scene.T_model2cam)]
         objects += [(assets.distractors[i], pose) for i, pose in zip(scene.clutter_indices, scene.clutter_T_model2cam)]
+        materials = random_materials(generator, len(objects), config.roughness, config.metallic)
         if scene.support is not None:
             objects.append(scene.support)
             tints = np.concatenate([tints, np.ones((1, 3))])
+            if materials is not None:
+                materials = [*materials, None]  # the table keeps its own material
         out = self.renderer.render(self.K, objects, lighting=lighting, tints=tints,
-                                   masked_objects=len(scene.object_indices))
+                                   masked_objects=len(scene.object_indices), materials=materials)
         background = background_image(generator, assets.backgrounds, config.width, config.height)
         share_generator(self.degrade, generator)
         rgb = self.degrade(alpha_blend(out.rgb, out.alpha, background))

@@ -228,11 +228,11 @@ class Renderer:
         self._meshes.move_to_end(key)
         return entry
 
-    def _place_objects(self, objects, tints) -> list:
+    def _place_objects(self, objects, tints, materials) -> list:
         """Poses one scene node per object; hides cached meshes not in this frame."""
         used: dict[int, int] = {}
         nodes = []
-        for (mesh, T_model2cam), tint in zip(objects, tints):
+        for (mesh, T_model2cam), tint, material in zip(objects, tints, materials):
             mesh_key = id(mesh)
             _, gpu_mesh, pool = self._gpu_mesh(mesh)
             slot = used.get(mesh_key, 0)
@@ -252,6 +252,12 @@ class Renderer:
                 factor = base.copy()
                 factor[:3] *= tint
                 primitive.material.baseColorFactor = factor
+                own = getattr(primitive, "_paz6d_base_material", None)
+                if own is None:
+                    own = (primitive.material.roughnessFactor, primitive.material.metallicFactor)
+                    primitive._paz6d_base_material = own
+                roughness, metallic = own if material is None else (float(material[0]), float(material[1]))
+                primitive.material.roughnessFactor, primitive.material.metallicFactor = roughness, metallic
         for key, (_, gpu_mesh, pool) in self._meshes.items():
             count = used.get(key, 0)
             # Keep one node per cached mesh in the scene so pyrender keeps its GPU buffers.
@@ -326,7 +332,8 @@ class Renderer:
         return masks
 
     def render(self, K, objects: Sequence[tuple[trimesh.Trimesh, np.ndarray]], lighting: Lighting | None = None,
-               tints=None, rgb: bool = True, masks: bool = True, masked_objects: int | None = None) -> RenderOutput:
+               tints=None, rgb: bool = True, masks: bool = True, masked_objects: int | None = None,
+               materials=None) -> RenderOutput:
         """Renders ``objects`` seen by a pinhole camera ``K``.
 
         Args:
@@ -339,6 +346,9 @@ class Renderer:
             masks: compute ``masks`` and ``visible_masks``.
             masked_objects: masks only for ``objects[:masked_objects]`` (default: all); the
                 other objects (distractors, occluders) still occlude them.
+            materials: per object ``(roughness, metallic)`` in [0, 1] of its metallic-roughness material
+                (0: mirror-like / dielectric), or None for the mesh's own (pyrender's 0.8 / 0.2 for vertex
+                colours); default: every mesh's own.
 
         Returns:
             :class:`RenderOutput`.
@@ -355,8 +365,16 @@ class Renderer:
         tints = np.ones((count, 3)) if tints is None else np.asarray(tints, dtype=np.float64)
         if tints.shape != (count, 3) or not np.all(np.isfinite(tints)) or np.any(tints < 0):
             raise ValueError(f"tints: expected ({count}, 3) non-negative finite factors, got shape {tints.shape}")
+        materials = [None] * count if materials is None else list(materials)
+        if len(materials) != count:
+            raise ValueError(f"materials: expected {count} entries (one per object), got {len(materials)}")
+        for index, material in enumerate(materials):
+            if material is not None and (np.shape(material) != (2,) or not np.all(
+                    (np.asarray(material, dtype=np.float64) >= 0) & (np.asarray(material, dtype=np.float64) <= 1))):
+                raise ValueError(f"materials[{index}]: expected None or (roughness, metallic) in [0, 1], got "
+                                 f"{material!r}")
         self._camera.set_intrinsics(K)
-        nodes = self._place_objects(objects, tints)
+        nodes = self._place_objects(objects, tints, materials)
         self._set_lighting(lighting if lighting is not None else Lighting())
 
         color_image = alpha = depth = instances = None

@@ -1,4 +1,4 @@
-"""Random lights and object colour jitter (light descriptions only: no GL is loaded here)."""
+"""Random lights, object colour jitter and materials (descriptions only: no GL is loaded here)."""
 
 from __future__ import annotations
 
@@ -64,3 +64,13 @@ def random_lighting(generator: np.random.Generator, style: str = "scene", light_
 def random_tints(generator: np.random.Generator, count: int, jitter: float) -> np.ndarray:
     """``(count, 3)`` per-channel colour factors in ``[1 - jitter, 1 + jitter]`` for ``count`` objects."""
     return generator.uniform(1.0 - jitter, 1.0 + jitter, size=(count, 3))
+
+
+def random_materials(generator: np.random.Generator, count: int, roughness: tuple[float, float] | None,
+                     metallic: tuple[float, float] | None) -> np.ndarray | None:
+    """``(count, 2)`` ``(roughness, metallic)`` of :meth:`renderers.Renderer.render`, each uniform in its range
+    (a range of None: pyrender's vertex-colour default, 0.8 and 0.2); None (and nothing drawn) when both are None."""
+    if roughness is None and metallic is None:
+        return None
+    low_high = [roughness or (0.8, 0.8), metallic or (0.2, 0.2)]
+    return np.stack([generator.uniform(low, high, size=count) for low, high in low_high], axis=1)
