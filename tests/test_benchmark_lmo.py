@@ -14,7 +14,12 @@ from paz6d.benchmark.lmo import Benchmark, BenchmarkSettings, run_benchmark, sco
 
 TINY = BenchmarkSettings(images=6, backgrounds=3, detector_steps=4, aae_steps=4, aae_in_plane=4,
                          keypointnet_steps=4, keypointnet_views=8, workers=1, aae_views=12, detector_input_size=128,
-                         keypointnet_robust_steps=5, keypointnet_robust_views=9)
+                         keypointnet_robust_steps=5, keypointnet_robust_views=9, validation_images=3)
+
+
+#: the mocked estimate and evaluate stages of one run, in order
+SCORING = ["estimate gt", "evaluate gt", "estimate detections", "evaluate detections", "estimate synthetic",
+           "evaluate synthetic"]
 
 
 def _fake_lmo(root: Path, objects=(1, 5)) -> Path:
@@ -38,6 +43,8 @@ def mocked(tmp_path, monkeypatch):
                                                                  touch(job.out / "backgrounds"))[0] or {})
     monkeypatch.setattr(lmo, "_stage_synthetic", lambda job: (calls.append("synthetic"),
                                                                touch(job.out / "synthetic" / "camera.json"))[0] or {})
+    monkeypatch.setattr(lmo, "_stage_validation", lambda job: (calls.append("validation"),
+                                                                 touch(job.out / "validation" / "camera.json"))[0] or {})
     monkeypatch.setattr(lmo, "_stage_detector", lambda job: (calls.append("detector"),
                                                               touch(job.out / "detector" / "model.keras"))[0] or {})
     monkeypatch.setattr(lmo, "_stage_pose", lambda job, obj_id: (calls.append(f"pose {obj_id}"),
@@ -72,11 +79,13 @@ def test_stages_run_in_order_once_and_a_rerun_skips_every_finished_one(mocked, t
     data, calls = mocked
     job = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False)
     assert [name for name, _, _ in stages(job)] == [
-        "backgrounds", "synthetic", "detector", "pose/obj_000001", "pose/obj_000005", "estimate_aae_gt",
-        "evaluate_aae_gt", "estimate_aae_detections", "evaluate_aae_detections", "detector_ap_aae"]
+        "backgrounds", "synthetic", "validation", "detector", "pose/obj_000001", "pose/obj_000005", "estimate_aae_gt",
+        "evaluate_aae_gt", "estimate_aae_detections", "evaluate_aae_detections", "estimate_aae_synthetic",
+        "evaluate_aae_synthetic", "detector_ap_aae"]
     report = run_benchmark(job)
-    assert calls == ["backgrounds", "synthetic", "detector", "pose 1", "pose 5", "estimate gt", "evaluate gt",
-                     "estimate detections", "evaluate detections", "detector ap"]
+    assert calls == ["backgrounds", "synthetic", "validation", "detector", "pose 1", "pose 5", *SCORING,
+                     "detector ap"]
+    assert sorted(report["methods"]["aae"]) == ["detections", "gt_visible_boxes", "synthetic_gt_visible_boxes"]
     stored = json.loads((job.out / "report.json").read_text())
     assert stored == json.loads(json.dumps(report))
     assert stored["methods"]["aae"]["detections"]["mean_AR_MSSD_AR_MSPD"] == pytest.approx(0.3)
@@ -135,18 +144,17 @@ def test_a_pose_method_per_object_reuses_the_other_models_and_reports_under_its_
     assert mixed.object_methods == {5: "keypointnet_robust"} and mixed.label == "aae+keypointnet_robust@5"
     assert mixed.pose_dir(1) == tmp_path / "bench" / "pose" / "obj_000001"
     assert mixed.pose_dir(5) == tmp_path / "bench" / "pose_keypointnet_robust" / "obj_000005"
-    assert [name for name, _, _ in stages(mixed)][3:6] == [
+    assert [name for name, _, _ in stages(mixed)][4:7] == [
         "pose/obj_000001", "pose_keypointnet_robust/obj_000005", "estimate_aae+keypointnet_robust@5_gt"]
     assert {f"--run=1={mixed.pose_dir(1)}", f"--run=5={mixed.pose_dir(5)}"} <= set(lmo._estimate_args(mixed, "gt"))
     report = run_benchmark(mixed)
-    assert calls == ["pose 5", "estimate gt", "evaluate gt", "estimate detections", "evaluate detections",
-                     "detector ap"]
+    assert calls == ["pose 5", *SCORING, "detector ap"]
     assert sorted(report["methods"]) == ["aae", "aae+keypointnet_robust@5"]
     assert mixed.result("gt", ".csv") == tmp_path / "bench" / "results" / "aae+keypointnet_robust@5_gt.csv"
     assert "| aae+keypointnet_robust@5 | gt_visible_boxes | **all** |" in score_table(report)
     calls.clear()  # longer AAEs: the mix is scored again, its KeypointNet is not retrained
     run_benchmark(replace(mixed, aae_steps=9))
-    assert calls == ["pose 1", "estimate gt", "evaluate gt", "estimate detections", "evaluate detections"]
+    assert calls == ["pose 1", *SCORING]
     with pytest.raises(ValueError, match=r"object_methods: objects \[9\] are not benchmarked"):
         Benchmark(out=tmp_path / "x", lmo=data, object_methods={9: "aae"})
     with pytest.raises(ValueError, match="object_methods: object 5: expected one of"):
@@ -160,7 +168,7 @@ def test_more_aae_steps_extend_the_aaes_and_score_them_again_and_fewer_are_refus
     longer = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False, aae_steps=9)
     assert longer.settings.aae_steps == 9
     run_benchmark(longer)
-    assert calls == ["pose 1", "pose 5", "estimate gt", "evaluate gt", "estimate detections", "evaluate detections"]
+    assert calls == ["pose 1", "pose 5", *SCORING]
     assert json.loads((tmp_path / "bench" / "benchmark.json").read_text())["settings"]["aae_steps"] == 9
     calls.clear()
     run_benchmark(longer)
@@ -199,11 +207,11 @@ def test_a_folder_written_before_the_learning_rate_drop_resumes_with_none(mocked
     run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
     path = tmp_path / "bench" / "benchmark.json"
     stored = json.loads(path.read_text())
-    for key in ("aae_lr_drop_steps", "keypointnet_robust_steps", "keypointnet_robust_views"):
+    for key in ("aae_lr_drop_steps", "keypointnet_robust_steps", "keypointnet_robust_views", "validation_images"):
         del stored["settings"][key]  # as written by the versions before these settings
     path.write_text(json.dumps(stored))
     calls.clear()
-    settings = replace(TINY, keypointnet_robust_steps=None, keypointnet_robust_views=None)
+    settings = replace(TINY, keypointnet_robust_steps=None, keypointnet_robust_views=None, validation_images=60)
     run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=settings, progress=False))
     assert calls == []
     with pytest.raises(ValueError, match=r"other settings \(settings differ"):
@@ -252,7 +260,7 @@ def test_every_real_stage_runs_on_the_shared_lmo_data_at_toy_size(tmp_path, shar
     job = Benchmark(out=tmp_path / "bench", lmo=shared_data / "bop_lmo", quick=True, settings=TINY, objects=(5, 8),
                     progress=False, object_methods={8: "keypointnet_robust"})
     report = run_benchmark(job)
-    for condition in ("gt_visible_boxes", "detections"):
+    for condition in ("gt_visible_boxes", "detections", "synthetic_gt_visible_boxes"):
         scores = report["methods"]["aae+keypointnet_robust@8"][condition]
         assert scores is not None and sorted(scores["per_object"]) == ["5", "8"]
         assert 0 <= scores["mean_AR_MSSD_AR_MSPD"] <= 1
