@@ -185,7 +185,7 @@ class Benchmark:
         return self.pose_root(self.method_of(obj_id)) / f"obj_{obj_id:06d}"
 
     def result(self, condition: str, suffix: str) -> Path:
-        """``DIR/results/<label>_<condition><suffix>`` (condition ``gt`` or ``detections``)."""
+        """``DIR/results/<label>_<condition><suffix>`` (condition: a key of :data:`CONDITIONS`)."""
         return self.out / "results" / f"{self.label}_{condition}{suffix}"
 
     def marker(self, stage: str) -> Path:
