@@ -95,6 +95,16 @@ def _to_pyrender_mesh(pyrender, mesh: trimesh.Trimesh):
     return gpu_mesh
 
 
+def _checked_material(material, index: int) -> tuple[float, float] | None:
+    """``materials[index]`` of :meth:`Renderer.render` as ``(roughness, metallic)`` floats, or None."""
+    if material is None:
+        return None
+    values = np.asarray(material, dtype=np.float64) if np.shape(material) == (2,) else None
+    if values is None or not np.all((values >= 0) & (values <= 1)):
+        raise ValueError(f"materials[{index}]: expected None or (roughness, metallic) in [0, 1], got {material!r}")
+    return float(values[0]), float(values[1])
+
+
 def _destroy_only_own_egl_context(platform) -> None:
     """Makes closing one renderer leave the others working.
 
@@ -245,18 +255,17 @@ class Renderer:
             nodes.append(pool[slot])
             gpu_mesh.is_visible = True
             for primitive in gpu_mesh.primitives:
-                base = getattr(primitive, "_paz6d_base_color", None)
-                if base is None:
-                    base = np.array(primitive.material.baseColorFactor, dtype=np.float64)
-                    primitive._paz6d_base_color = base
+                own = getattr(primitive, "_paz6d_own_material", None)
+                if own is None:  # the mesh's own factors, before any tint or material of a frame
+                    own = (np.array(primitive.material.baseColorFactor, dtype=np.float64),
+                           primitive.material.roughnessFactor, primitive.material.metallicFactor)
+                    primitive._paz6d_own_material = own
+                base, roughness, metallic = own
                 factor = base.copy()
                 factor[:3] *= tint
                 primitive.material.baseColorFactor = factor
-                own = getattr(primitive, "_paz6d_base_material", None)
-                if own is None:
-                    own = (primitive.material.roughnessFactor, primitive.material.metallicFactor)
-                    primitive._paz6d_base_material = own
-                roughness, metallic = own if material is None else (float(material[0]), float(material[1]))
+                if material is not None:
+                    roughness, metallic = material
                 primitive.material.roughnessFactor, primitive.material.metallicFactor = roughness, metallic
         for key, (_, gpu_mesh, pool) in self._meshes.items():
             count = used.get(key, 0)
@@ -365,14 +374,10 @@ class Renderer:
         tints = np.ones((count, 3)) if tints is None else np.asarray(tints, dtype=np.float64)
         if tints.shape != (count, 3) or not np.all(np.isfinite(tints)) or np.any(tints < 0):
             raise ValueError(f"tints: expected ({count}, 3) non-negative finite factors, got shape {tints.shape}")
-        materials = [None] * count if materials is None else list(materials)
+        materials = [None] * count if materials is None else [_checked_material(material, index)
+                                                              for index, material in enumerate(materials)]
         if len(materials) != count:
             raise ValueError(f"materials: expected {count} entries (one per object), got {len(materials)}")
-        for index, material in enumerate(materials):
-            if material is not None and (np.shape(material) != (2,) or not np.all(
-                    (np.asarray(material, dtype=np.float64) >= 0) & (np.asarray(material, dtype=np.float64) <= 1))):
-                raise ValueError(f"materials[{index}]: expected None or (roughness, metallic) in [0, 1], got "
-                                 f"{material!r}")
         self._camera.set_intrinsics(K)
         nodes = self._place_objects(objects, tints, materials)
         self._set_lighting(lighting if lighting is not None else Lighting())
