@@ -289,3 +289,64 @@ def test_keypointnet_stage_uses_the_orientation_network_for_half_turn_symmetric_
     lmo._stage_pose(full, 8)  # the robust preset at its own length
     assert jobs["obj_000008"].settings()["steps"] == 10000 and jobs["obj_000008"].settings()["views"] == 4000
     assert abs(jobs["obj_000010"].symmetry().symmetry[0, 0] + 1.0) < 1e-3  # the eggbox's half turn about z
+
+
+def _scores(per_object: dict[str, tuple[int, float, float]]) -> dict:
+    return {"per_object": {obj_id: {"instances": n, "AR_MSSD": mssd, "AR_MSPD": mspd}
+                           for obj_id, (n, mssd, mspd) in per_object.items()}}
+
+
+def test_the_method_pick_uses_only_the_synthetic_scores_and_pools_the_real_ones_by_instances():
+    report = {"object_methods": {"aae": {"1": "aae", "5": "aae"},
+                                 "aae+keypointnet_robust@5": {"1": "aae", "5": "keypointnet_robust"}},
+              "methods": {"aae": {"gt_visible_boxes": _scores({"1": (2, 0.4, 0.6), "5": (6, 0.0, 0.2)}),
+                                  "detections": None,
+                                  "synthetic_gt_visible_boxes": _scores({"1": (9, 0.8, 0.9), "5": (9, 0.1, 0.3)})},
+                          "aae+keypointnet_robust@5": {
+                              "gt_visible_boxes": _scores({"1": (2, 0.4, 0.6), "5": (6, 0.3, 0.5)}),
+                              "detections": _scores({"1": (2, 0.1, 0.2), "5": (6, 0.0, 0.1)}),
+                              "synthetic_gt_visible_boxes": _scores({"1": (9, 0.8, 0.9), "5": (9, 0.6, 0.7)})}}}
+    pick = lmo.method_pick(report)
+    assert pick["methods"] == {"1": "aae", "5": "keypointnet_robust"}
+    assert pick["validation"]["5"] == {"aae": pytest.approx(0.2), "keypointnet_robust": pytest.approx(0.65)}
+    gt = pick["real"]["gt_visible_boxes"]
+    # pooled over the 8 instances as `paz6d evaluate bop` pools them: (2 * 0.4 + 6 * 0.3) / 8, (2 * 0.6 + 6 * 0.5) / 8
+    assert (gt["AR_MSSD"], gt["AR_MSPD"]) == (pytest.approx(0.325), pytest.approx(0.525))
+    assert gt["mean"] == pytest.approx(0.425) and gt["per_object"] == {"1": 0.5, "5": 0.4}
+    assert pick["real"]["detections"]["mean"] == pytest.approx((2 * 0.15 + 6 * 0.05) / 8)
+    # a tie goes to the first method name; a real condition an object lacks is None; the most common pick is the base
+    report["methods"]["aae+keypointnet_robust@5"]["synthetic_gt_visible_boxes"] = _scores({"1": (9, 0.8, 0.9),
+                                                                                          "5": (9, 0.1, 0.3)})
+    report["methods"]["aae"]["detections"] = report["methods"]["aae+keypointnet_robust@5"]["detections"]
+    pick = lmo.method_pick(report)
+    assert pick["methods"]["5"] == "aae" and pick["method"] == "aae" and pick["object_methods"] == {}
+    report["methods"]["aae"]["detections"] = None
+    assert lmo.method_pick(report)["real"]["detections"] is None
+    # one method per object: nothing to pick; reports from before the per-object methods were stored: skipped
+    assert lmo.method_pick({"object_methods": {"aae": {"1": "aae"}}, "methods": {"aae": report["methods"]["aae"]}}) is None
+    assert lmo.method_pick({"methods": report["methods"]}) is None
+
+
+def test_the_report_picks_a_method_per_object_once_two_were_scored(mocked, tmp_path, monkeypatch):
+    data, _ = mocked
+    evaluate = lmo._stage_evaluate
+
+    def by_method(job, condition):  # the robust KeypointNet is better on object 5's synthetic images only
+        evaluate(job, condition)
+        path = job.result(condition, "_scores.json")
+        scores = json.loads(path.read_text())
+        if condition == "synthetic" and job.method_of(5) == "keypointnet_robust":
+            scores["per_object"]["5"].update(AR_MSSD=0.9, AR_MSPD=0.9)
+        path.write_text(json.dumps(scores))
+        return {}
+
+    monkeypatch.setattr(lmo, "_stage_evaluate", by_method)
+    report = run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
+    assert report["method_pick"] is None and "picked on the held-out" not in (tmp_path / "bench" / "report.md").read_text()
+    report = run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False,
+                                     method="keypointnet_robust"))
+    assert report["object_methods"]["keypointnet_robust"] == {"1": "keypointnet_robust", "5": "keypointnet_robust"}
+    assert report["method_pick"]["methods"] == {"1": "aae", "5": "keypointnet_robust"}
+    text = (tmp_path / "bench" / "report.md").read_text()
+    assert "| 5 | aae 0.400, keypointnet_robust 0.900 | keypointnet_robust | 0.400 | 0.400 |" in text
+    assert "`paz6d benchmark lmo --method aae --object-method 5=keypointnet_robust`" in text

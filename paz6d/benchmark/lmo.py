@@ -17,7 +17,8 @@ From the 8 LM-O meshes (``<lmo>/models``) only:
    boxes: what a user without real labels sees, to pick a method per object;
 6. ``evaluate_*``: ``paz6d evaluate bop`` (AR_MSSD, AR_MSPD, ADD(-S), per object) of each, and
    ``paz6d evaluate coco`` of the detections;
-7. ``report``: ``DIR/report.json``, ``DIR/report.md`` (the table) and PNG overlays of the estimates on the
+7. ``report``: ``DIR/report.json``, ``DIR/report.md`` (the table; once two methods were scored on an object,
+   the method per object that the held-out synthetic images pick, :func:`method_pick`) and PNG overlays of the estimates on the
    real frames (``DIR/overlays/``).
 
 The real frames' ground truth is read only to score and for the ground-truth-box condition. Every stage
@@ -468,6 +469,75 @@ def score_table(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def method_pick(report: dict) -> dict | None:
+    """Per object, the pose method whose model scores best on the held-out synthetic images (mean of AR_MSSD
+    and AR_MSPD, ties to the first method name): a choice made without real labels. Also what that mix
+    scores on the real frames, pooled over the objects' instances as ``paz6d evaluate bop`` pools them
+    (exactly what ``--object-method`` runs of the mix report, since each object's estimates come from its
+    own model).
+
+    Returns:
+        ``None`` when no object has two methods scored on the synthetic images; else ``{"methods": {obj_id:
+        method}, "validation": {obj_id: {method: mean}}, "method": the most common pick, "object_methods":
+        {obj_id: method} (the other picks), "real": {condition: {"AR_MSSD", "AR_MSPD", "mean",
+        "per_object": {obj_id: mean}} or None when an object lacks it}}``.
+    """
+    found = {}  # (condition, obj_id, method) -> that object's scores (the same model in every label using it)
+    for label, methods_of in report.get("object_methods", {}).items():
+        scores = report.get("methods", {}).get(label) or {}
+        for condition in CONDITIONS.values():
+            per_object = (scores.get(condition) or {}).get("per_object", {})
+            for obj_id, method in methods_of.items():
+                if _mean_ar(per_object.get(obj_id)) is not None:
+                    found.setdefault((condition, obj_id, method), per_object[obj_id])
+    validation = {}
+    for (condition, obj_id, method), entry in found.items():
+        if condition == CONDITIONS["synthetic"]:
+            validation.setdefault(obj_id, {})[method] = _mean_ar(entry)
+    if not any(len(methods) > 1 for methods in validation.values()):
+        return None
+    picks = {obj_id: max(sorted(validation[obj_id]), key=lambda method: validation[obj_id][method])
+             for obj_id in sorted(validation, key=int)}
+    names = sorted(picks.values())
+    base = max(names, key=names.count)
+    real = {}
+    for condition in ("gt", "detections"):
+        entries = {obj_id: found.get((CONDITIONS[condition], obj_id, method)) for obj_id, method in picks.items()}
+        if any(entry is None for entry in entries.values()):
+            real[CONDITIONS[condition]] = None
+            continue
+        instances = sum(entry["instances"] for entry in entries.values())
+        pooled = {key: sum(entry["instances"] * entry[key] for entry in entries.values()) / instances
+                  for key in ("AR_MSSD", "AR_MSPD")}
+        real[CONDITIONS[condition]] = {**pooled, "mean": _mean_ar(pooled),
+                                       "per_object": {obj_id: _mean_ar(entry) for obj_id, entry in entries.items()}}
+    return {"methods": picks, "validation": validation, "method": base,
+            "object_methods": {obj_id: method for obj_id, method in picks.items() if method != base}, "real": real}
+
+
+def method_pick_notes(pick: dict | None) -> str:
+    """Markdown section of :func:`method_pick` (empty without a choice to make)."""
+    if pick is None:
+        return ""
+
+    def cell(summary, obj_id=None):
+        if summary is None:
+            return "-"
+        return f"{(summary['mean'] if obj_id is None else summary['per_object'][obj_id]):.3f}"
+
+    gt, detections = pick["real"][CONDITIONS["gt"]], pick["real"][CONDITIONS["detections"]]
+    lines = ["", "## Method per object, picked on the held-out synthetic images", "",
+             "| object | held-out synthetic: mean of AR_MSSD and AR_MSPD per method | pick | real, visible boxes | "
+             "real, detections |", "|---|---|---|---:|---:|"]
+    for obj_id, method in pick["methods"].items():
+        scores = ", ".join(f"{name} {value:.3f}" for name, value in sorted(pick["validation"][obj_id].items()))
+        lines.append(f"| {int(obj_id)} | {scores} | {method} | {cell(gt, obj_id)} | {cell(detections, obj_id)} |")
+    lines.append(f"| **all** | | | **{cell(gt)}** | **{cell(detections)}** |")
+    options = "".join(f" --object-method {int(obj_id)}={method}" for obj_id, method in pick["object_methods"].items())
+    lines += ["", f"The pick runs as `paz6d benchmark lmo --method {pick['method']}{options}` (same folder)."]
+    return "\n".join(lines) + "\n"
+
+
 def _not_estimated(job: Benchmark) -> dict[str, str]:
     """``{obj_id: reason}`` of the objects whose pose model could not estimate (from the estimate stages)."""
     found = {}
@@ -548,17 +618,21 @@ def write_report(job: Benchmark, timings: dict[str, float]) -> dict:
     for summary in methods[job.label].values():
         if summary is not None:
             summary["mean_AR_MSSD_AR_MSPD"] = _mean_ar(summary)
+    object_methods = {**report.get("object_methods", {}),
+                      job.label: {str(obj_id): job.method_of(obj_id) for obj_id in job.objects}}
     not_estimated = dict(report.get("not_estimated", {}))
     not_estimated[job.label] = _not_estimated(job)
     all_timings = {**report.get("timings_seconds", {}), **timings}
     detector = _scores(job.out / "results" / "detector_coco.json")
     overlays = {condition: [str(p) for p in _overlays(job, condition)] for condition in ("gt", "detections")}
     report = {"benchmark": "lmo", "quick": job.quick, "settings": asdict(job.settings), "objects": list(job.objects),
-              "lmo": str(job.lmo), "methods": methods, "not_estimated": not_estimated, "detector_coco": detector,
+              "lmo": str(job.lmo), "methods": methods, "object_methods": object_methods,
+              "not_estimated": not_estimated, "detector_coco": detector,
               "timings_seconds": all_timings, "total_minutes": sum(all_timings.values()) / 60,
               "overlays": {**report.get("overlays", {}), job.label: overlays}}
+    report["method_pick"] = method_pick(report)
     write_json_atomically(path, report, indent=2)
-    table = score_table(report) + not_estimated_notes(report)
+    table = score_table(report) + not_estimated_notes(report) + method_pick_notes(report["method_pick"])
     header = (f"# paz6d benchmark lmo ({'quick' if job.quick else 'full'})\n\n"
               f"Synthetic training only; {len(job.objects)} LM-O objects; scored on the real RGB frames of "
               f"{job.lmo} with `paz6d evaluate bop`; `synthetic_gt_visible_boxes`: the same models on "
