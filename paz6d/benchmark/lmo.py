@@ -18,8 +18,8 @@ From the 8 LM-O meshes (``<lmo>/models``) only:
 6. ``evaluate_*``: ``paz6d evaluate bop`` (AR_MSSD, AR_MSPD, ADD(-S), per object) of each, and
    ``paz6d evaluate coco`` of the detections;
 7. ``report``: ``DIR/report.json``, ``DIR/report.md`` (the table; once two methods were scored on an object,
-   the method per object that the held-out synthetic images pick, :func:`method_pick`) and PNG overlays of the estimates on the
-   real frames (``DIR/overlays/``).
+   the method per object that the held-out synthetic images pick, :func:`method_pick`) and PNG overlays of the
+   estimates on the real frames (``DIR/overlays/``).
 
 The real frames' ground truth is read only to score and for the ground-truth-box condition. Every stage
 is skipped when its output is complete (a ``DIR/stages/<stage>.json`` marker written after it, and the
