@@ -447,25 +447,26 @@ def _mean_ar(summary: dict | None) -> float | None:
     return 0.5 * (summary["AR_MSSD"] + summary["AR_MSPD"])
 
 
+def _cell(value: float | None) -> str:
+    """A score in a Markdown table: three decimals, ``-`` when missing."""
+    return "-" if value is None else f"{value:.3f}"
+
+
 def score_table(report: dict) -> str:
     """The Markdown table of ``report.json``: per object and over all, per method and condition."""
     lines = ["| method | boxes | object | instances | AR_MSSD | AR_MSPD | mean | ADD(-S) |",
              "|---|---|---|---:|---:|---:|---:|---:|"]
-
-    def cell(value):
-        return "-" if value is None else f"{value:.3f}"
-
     for method, conditions in sorted(report["methods"].items()):
         for condition, summary in conditions.items():
             if summary is None:
                 continue
             for obj_id, entry in sorted(summary.get("per_object", {}).items(), key=lambda item: int(item[0])):
                 lines.append(f"| {method} | {condition} | {int(obj_id)} | {entry.get('instances', '-')} | "
-                             f"{cell(entry.get('AR_MSSD'))} | {cell(entry.get('AR_MSPD'))} | {cell(_mean_ar(entry))} | "
-                             f"{cell(entry.get('ADD(-S)_recall'))} |")
+                             f"{_cell(entry.get('AR_MSSD'))} | {_cell(entry.get('AR_MSPD'))} | "
+                             f"{_cell(_mean_ar(entry))} | {_cell(entry.get('ADD(-S)_recall'))} |")
             lines.append(f"| {method} | {condition} | **all** | {summary.get('counts', {}).get('gt_instances', '-')} | "
-                         f"{cell(summary.get('AR_MSSD'))} | {cell(summary.get('AR_MSPD'))} | "
-                         f"**{cell(_mean_ar(summary))}** | {cell(summary.get('ADD(-S)_recall'))} |")
+                         f"{_cell(summary.get('AR_MSSD'))} | {_cell(summary.get('AR_MSPD'))} | "
+                         f"**{_cell(_mean_ar(summary))}** | {_cell(summary.get('ADD(-S)_recall'))} |")
     return "\n".join(lines) + "\n"
 
 
@@ -521,9 +522,7 @@ def method_pick_notes(pick: dict | None) -> str:
         return ""
 
     def cell(summary, obj_id=None):
-        if summary is None:
-            return "-"
-        return f"{(summary['mean'] if obj_id is None else summary['per_object'][obj_id]):.3f}"
+        return _cell(None if summary is None else summary["mean"] if obj_id is None else summary["per_object"][obj_id])
 
     gt, detections = pick["real"][CONDITIONS["gt"]], pick["real"][CONDITIONS["detections"]]
     lines = ["", "## Method per object, picked on the held-out synthetic images", "",
