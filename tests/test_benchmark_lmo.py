@@ -352,3 +352,34 @@ def test_the_report_picks_a_method_per_object_once_two_were_scored(mocked, tmp_p
     text = (tmp_path / "bench" / "report.md").read_text()
     assert "| 5 | aae 0.400, keypointnet_robust 0.900 | keypointnet_robust | 0.400 | 0.400 |" in text
     assert "`paz6d benchmark lmo --method aae --object-method 5=keypointnet_robust`" in text
+
+
+def test_a_model_scored_under_two_labels_counts_with_the_label_scored_last():
+    older, newer = _scores({"1": (2, 0.1, 0.1)}), _scores({"1": (2, 0.7, 0.9)})
+    rows = {"aae": {"gt_visible_boxes": older, "synthetic_gt_visible_boxes": _scores({"1": (9, 0.5, 0.5)})},
+            "keypointnet_robust@1": {"gt_visible_boxes": _scores({"1": (2, 0.0, 0.0)}),
+                                     "synthetic_gt_visible_boxes": _scores({"1": (9, 0.1, 0.1)})},
+            "aae+x": {"gt_visible_boxes": newer, "synthetic_gt_visible_boxes": _scores({"1": (9, 0.5, 0.5)})}}
+    methods_of = {"aae": {"1": "aae"}, "keypointnet_robust@1": {"1": "keypointnet_robust"}, "aae+x": {"1": "aae"}}
+    pick = lmo.method_pick({"object_methods": methods_of, "methods": rows})
+    assert pick["real"]["gt_visible_boxes"]["per_object"] == {"1": pytest.approx(0.8)}
+    reordered = {label: methods_of[label] for label in ("aae+x", "keypointnet_robust@1", "aae")}
+    pick = lmo.method_pick({"object_methods": reordered, "methods": rows})
+    assert pick["real"]["gt_visible_boxes"]["per_object"] == {"1": pytest.approx(0.1)}
+
+
+def test_longer_aaes_drop_the_stale_rows_of_every_label_with_an_aae(mocked, tmp_path):
+    data, _ = mocked
+    folder = dict(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False)
+    run_benchmark(Benchmark(**folder))
+    run_benchmark(Benchmark(**folder, method="keypointnet_robust"))
+    report = run_benchmark(Benchmark(**folder, object_methods={5: "keypointnet_robust"}))
+    assert list(report["methods"]) == ["aae", "keypointnet_robust", "aae+keypointnet_robust@5"]
+    report = run_benchmark(Benchmark(**folder))  # scored again (nothing to run): its row moves last
+    assert list(report["methods"]) == ["keypointnet_robust", "aae+keypointnet_robust@5", "aae"]
+    report = run_benchmark(Benchmark(**folder, object_methods={5: "keypointnet_robust"}, aae_steps=9))
+    assert list(report["methods"]) == ["keypointnet_robust", "aae+keypointnet_robust@5"]  # "aae": not re-scored
+    assert list(report["object_methods"]) == list(report["not_estimated"]) == list(report["methods"])
+    assert "\n| aae | " not in (tmp_path / "bench" / "report.md").read_text()  # no score-table row of it
+    # the AAE of object 5 is known from no scored label now; object 1's AAE and KeypointNet tie: the first name
+    assert report["method_pick"]["methods"] == {"1": "aae", "5": "keypointnet_robust"}

@@ -391,9 +391,31 @@ def _extends_aae(job: Benchmark, stored: dict, current: dict) -> bool:
         if name.startswith("pose/"):
             job.marker(name).unlink(missing_ok=True)
     for marker in (job.out / "stages").glob("*.json"):  # the scores of every combination with an AAE in it
-        if marker.stem.startswith(("estimate_", "evaluate_")) and "aae" in re.split(r"[_+@]", marker.stem):
+        if marker.stem.startswith(("estimate_", "evaluate_")) and _has_aae(marker.stem):
             marker.unlink()
+    _forget_report_rows(job, [label for label in _report(job).get("methods", {}) if _has_aae(label)])
     return True
+
+
+def _has_aae(name: str) -> bool:
+    """Whether a label (``aae+keypointnet_robust@8``) or a stage marker's name uses an AAE."""
+    return "aae" in re.split(r"[_+@]", name)
+
+
+def _report(job: Benchmark) -> dict:
+    path = job.out / "report.json"
+    return load_json_object(path) if path.is_file() else {}
+
+
+def _forget_report_rows(job: Benchmark, labels: list[str]) -> None:
+    """Removes these labels' scores from ``report.json``: their models changed, so the rows (and the method pick
+    made from them) would be stale until the labels are scored again."""
+    report = _report(job)
+    if not any(label in report.get("methods", {}) for label in labels):
+        return
+    for key in ("methods", "object_methods", "not_estimated", "overlays"):
+        report[key] = {label: value for label, value in report.get(key, {}).items() if label not in labels}
+    write_json_atomically(job.out / "report.json", report, indent=2)
 
 
 def run_benchmark(job: Benchmark, only: tuple[str, ...] | None = None) -> dict:
@@ -475,7 +497,8 @@ def method_pick(report: dict) -> dict | None:
     and AR_MSPD, ties to the first method name): a choice made without real labels. Also what that mix
     scores on the real frames, pooled over the objects' instances as ``paz6d evaluate bop`` pools them
     (exactly what ``--object-method`` runs of the mix report, since each object's estimates come from its
-    own model).
+    own model). A model scored under several labels counts with the label scored last (``report.json`` keeps the
+    labels in scoring order).
 
     Returns:
         ``None`` when no object has two methods scored on the synthetic images; else ``{"methods": {obj_id:
@@ -483,8 +506,8 @@ def method_pick(report: dict) -> dict | None:
         {obj_id: method} (the other picks), "real": {condition: {"AR_MSSD", "AR_MSPD", "mean",
         "per_object": {obj_id: mean}} or None when an object lacks it}}``.
     """
-    found = {}  # (condition, obj_id, method) -> that object's scores (the same model in every label using it)
-    for label, methods_of in report.get("object_methods", {}).items():
+    found = {}  # (condition, obj_id, method) -> that object's scores, from the label scored last
+    for label, methods_of in reversed(list(report.get("object_methods", {}).items())):
         scores = report.get("methods", {}).get(label) or {}
         for condition in CONDITIONS.values():
             per_object = (scores.get(condition) or {}).get("per_object", {})
@@ -607,28 +630,31 @@ def _overlays(job: Benchmark, condition: str) -> list[Path]:
     return written
 
 
+def _scored_last(rows: dict, label: str, value) -> dict:
+    """``rows`` with ``label``'s entry replaced by ``value`` and moved last (the report keeps scoring order)."""
+    return {**{other: row for other, row in rows.items() if other != label}, label: value}
+
+
 def write_report(job: Benchmark, timings: dict[str, float]) -> dict:
-    """``DIR/report.json`` (settings, timings, scores of every method run so far), ``DIR/report.md`` and the
-    overlays of this method."""
+    """``DIR/report.json`` (settings, timings, scores of every method run so far, in scoring order),
+    ``DIR/report.md`` and the overlays of this method."""
     path = job.out / "report.json"
-    report = load_json_object(path) if path.is_file() else {}
-    methods = dict(report.get("methods", {}))
-    methods[job.label] = {name: _scores(job.result(condition, "_scores.json")) for condition, name in CONDITIONS.items()}
-    for summary in methods[job.label].values():
+    report = _report(job)
+    scores = {name: _scores(job.result(condition, "_scores.json")) for condition, name in CONDITIONS.items()}
+    for summary in scores.values():
         if summary is not None:
             summary["mean_AR_MSSD_AR_MSPD"] = _mean_ar(summary)
-    object_methods = {**report.get("object_methods", {}),
-                      job.label: {str(obj_id): job.method_of(obj_id) for obj_id in job.objects}}
-    not_estimated = dict(report.get("not_estimated", {}))
-    not_estimated[job.label] = _not_estimated(job)
+    methods_of = {str(obj_id): job.method_of(obj_id) for obj_id in job.objects}
     all_timings = {**report.get("timings_seconds", {}), **timings}
     detector = _scores(job.out / "results" / "detector_coco.json")
     overlays = {condition: [str(p) for p in _overlays(job, condition)] for condition in ("gt", "detections")}
     report = {"benchmark": "lmo", "quick": job.quick, "settings": asdict(job.settings), "objects": list(job.objects),
-              "lmo": str(job.lmo), "methods": methods, "object_methods": object_methods,
-              "not_estimated": not_estimated, "detector_coco": detector,
-              "timings_seconds": all_timings, "total_minutes": sum(all_timings.values()) / 60,
-              "overlays": {**report.get("overlays", {}), job.label: overlays}}
+              "lmo": str(job.lmo), "methods": _scored_last(report.get("methods", {}), job.label, scores),
+              "object_methods": _scored_last(report.get("object_methods", {}), job.label, methods_of),
+              "not_estimated": _scored_last(report.get("not_estimated", {}), job.label, _not_estimated(job)),
+              "detector_coco": detector, "timings_seconds": all_timings,
+              "total_minutes": sum(all_timings.values()) / 60,
+              "overlays": _scored_last(report.get("overlays", {}), job.label, overlays)}
     report["method_pick"] = method_pick(report)
     write_json_atomically(path, report, indent=2)
     table = score_table(report) + not_estimated_notes(report) + method_pick_notes(report["method_pick"])
