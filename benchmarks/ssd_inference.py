@@ -6,7 +6,10 @@ Without ``--run-dir`` a randomly initialised network of the config is used (spee
 the weights; NMS does a little, through the number of candidates above the score threshold, so a
 trained run's figure is the one to report).
 
-Run: ``.venv/bin/python benchmarks/ssd_inference.py [--run-dir runs/ssd] [--config quick] [--repeats 20]``.
+``--flip`` times the pipeline that also runs the network on the mirror image (``DetectSingleShot(flip=True)``);
+the raw ``predict`` stays one image, so the ratio shows what the second pass costs.
+
+Run: ``.venv/bin/python benchmarks/ssd_inference.py [--run-dir runs/ssd] [--config quick] [--repeats 20] [--flip]``.
 """
 
 from __future__ import annotations
@@ -33,20 +36,22 @@ def _random_run(folder: Path, config: str) -> Path:
     return folder
 
 
-def measure(run_dir: Path | None, config: str, repeats: int, score_threshold: float, image: np.ndarray) -> dict:
+def measure(run_dir: Path | None, config: str, repeats: int, score_threshold: float, image: np.ndarray,
+            flip: bool = False) -> dict:
     from paz6d.backend.tensorflow_guard import import_keras
     from paz6d.ssd.pipeline import DetectSingleShot
 
     import_keras().utils.set_random_seed(0)
     with tempfile.TemporaryDirectory() as folder:
-        detector = DetectSingleShot(run_dir or _random_run(Path(folder), config), score_threshold=score_threshold)
+        detector = DetectSingleShot(run_dir or _random_run(Path(folder), config), score_threshold=score_threshold,
+                                    flip=flip)
     size = detector.input_size
     network_input = detector.run_steps({"image": image}, stop="predict")["input"][None]
     infer = detector["predict"].processor.predict.function
     pipeline_ms = 1000 * median_seconds(lambda: detector(image), repeats)
     predict_ms = 1000 * median_seconds(lambda: detector.model.predict(network_input, verbose=0), repeats)
     return {"run_dir": None if run_dir is None else str(run_dir), "config": config, "input_size": size,
-            "image": list(image.shape), "score_threshold": score_threshold, "detections": len(detector(image)),
+            "image": list(image.shape), "score_threshold": score_threshold, "flip": flip, "detections": len(detector(image)),
             "pipeline_ms": round(pipeline_ms, 2),
             "network_compiled_ms": round(1000 * median_seconds(lambda: infer(network_input), repeats), 2),
             "keras_predict_ms": round(predict_ms, 2), "pipeline_over_predict": round(pipeline_ms / predict_ms, 3)}
@@ -59,12 +64,14 @@ def main() -> None:
     parser.add_argument("--image", type=Path, help="a 640x480 RGB image (default: random pixels)")
     parser.add_argument("--score-threshold", type=float, default=0.3)
     parser.add_argument("--repeats", type=int, default=20)
+    parser.add_argument("--flip", action="store_true", help="the pipeline also detects on the mirror image")
     args = parser.parse_args()
     from paz6d.backend.image import load_image
 
     image = (load_image(args.image) if args.image is not None
              else np.random.default_rng(1).integers(0, 256, (480, 640, 3), dtype=np.uint8))
-    print(json.dumps(measure(args.run_dir, args.config, args.repeats, args.score_threshold, image), indent=2))
+    print(json.dumps(measure(args.run_dir, args.config, args.repeats, args.score_threshold, image, args.flip),
+                     indent=2))
 
 
 if __name__ == "__main__":

@@ -273,13 +273,14 @@ class DetectAndEstimatePose6D(SequentialProcessor):
     @classmethod
     def from_run_dirs(cls, detector_dir: str | Path, pose_dirs: Mapping[str | int, str | Path], camera=None,
                       score_threshold: float = 0.3, strict: bool = False, load_meshes: bool = True,
-                      verify: bool = False) -> "DetectAndEstimatePose6D":
+                      verify: bool = False, flip: bool = False) -> "DetectAndEstimatePose6D":
         """Loads a ``DetectSingleShot`` run and one pose run directory per class (method found by itself).
 
         Args:
             detector_dir: SSD run directory (``paz6d train ssd``).
             pose_dirs: class name or BOP object id -> AAE or KeypointNet run directory.
             load_meshes: load each pose run's mesh (when its file still exists) for :meth:`draw`.
+            flip: the detector also sees the mirror image (``DetectSingleShot``'s ``flip``).
         """
         from paz6d.ssd.pipeline import DetectSingleShot
 
@@ -293,7 +294,7 @@ class DetectAndEstimatePose6D(SequentialProcessor):
 
                 mesh = load_mesh(found[0], found[1])
                 meshes[name] = (np.asarray(mesh.vertices), np.asarray(mesh.faces))
-        detector = DetectSingleShot(detector_dir, score_threshold=score_threshold)
+        detector = DetectSingleShot(detector_dir, score_threshold=score_threshold, flip=flip)
         return cls(detector, estimators, camera, strict, meshes, verify)
 
     def run(self, image, camera=None, depth=None) -> dict:

@@ -71,6 +71,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--verify", action="store_true",
                         help="with --detector: multiply each detection's score by its pose model's score (the AAE: "
                              "cosine similarity to its codebook match), in the detections JSON and the results")
+    parser.add_argument("--flip", action="store_true",
+                        help="with --detector: also detect on each image's mirror image and average (a second "
+                             "network pass; see DetectSingleShot's flip)")
     parser.add_argument("--box", choices=sorted(BOXES), default="obj",
                         help="without --detector, the ground-truth box given to the model: of the whole projected "
                              "object (obj) or of its visible part (visib, what a detector would see)")
@@ -354,9 +357,11 @@ def split_images(dataset: Path, split: str):
 
 def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path, dataset: Path, split: str,
                            score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True,
-                           depth: bool = False, keypoint_crops: int = 1, verify: bool = False) -> dict:
+                           depth: bool = False, keypoint_crops: int = 1, verify: bool = False,
+                           flip: bool = False) -> dict:
     """Detect every RGB image of the split, then estimate each detection of an object that has a run
-    (``verify``: scores of the detections with a pose model times their pose's score, ``VerifyBoxes``).
+    (``verify``: scores of the detections with a pose model times their pose's score, ``VerifyBoxes``;
+    ``flip``: the detector also sees the mirror image, ``DetectSingleShot``).
 
     Returns:
         ``{"estimates": _Estimates, "detections": [COCO result dicts], "images": [(scene_id, im_id)],
@@ -371,7 +376,7 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
     from paz6d.detect_and_estimate import DetectAndEstimatePose6D, MissingPoseModelWarning, bop_object_id
     from paz6d.ssd.pipeline import DetectSingleShot
 
-    detector = DetectSingleShot(detector_dir, score_threshold=score_threshold)
+    detector = DetectSingleShot(detector_dir, score_threshold=score_threshold, flip=flip)
     estimators, unusable = _load_estimators(runs, keypoint_crops)
     pipeline = DetectAndEstimatePose6D(detector, estimators, verify=verify)
     estimates, detections, images = _Estimates(), [], []
@@ -496,6 +501,8 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
         raise ValueError("--detections-out: only with --detector")
     if args.verify and args.detector is None:
         raise ValueError("--verify: only with --detector (ground-truth boxes have no detection score)")
+    if args.flip and args.detector is None:
+        raise ValueError("--flip: only with --detector (it is how the detector sees the image)")
     detections = detections_path(args)
     check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
     check_output_file(args.out, "--out")
@@ -531,7 +538,8 @@ def estimate(args: argparse.Namespace) -> dict:
                              f"fraction >= {args.min_visible} in split {args.split!r}")
     else:
         found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
-                                       args.progress, args.depth, args.keypoint_crops, args.verify)
+                                       args.progress, args.depth, args.keypoint_crops, args.verify,
+                                       args.flip)
         targets = detector_targets(args.dataset, found["images"], runs)
         if not found["images"]:
             raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "

@@ -147,6 +147,8 @@ def test_a_pose_method_per_object_reuses_the_other_models_and_reports_under_its_
     assert [name for name, _, _ in stages(mixed)][4:7] == [
         "pose/obj_000001", "pose_keypointnet_robust/obj_000005", "estimate_aae+keypointnet_robust@5_gt"]
     assert {f"--run=1={mixed.pose_dir(1)}", f"--run=5={mixed.pose_dir(5)}"} <= set(lmo._estimate_args(mixed, "gt"))
+    # the detections condition lets the detector see each frame's mirror image too (docs/ssd.md)
+    assert "--flip" in lmo._estimate_args(mixed, "detections") and "--flip" not in lmo._estimate_args(mixed, "gt")
     report = run_benchmark(mixed)
     assert calls == ["pose 5", *SCORING, "detector ap"]
     assert sorted(report["methods"]) == ["aae", "aae+keypointnet_robust@5"]

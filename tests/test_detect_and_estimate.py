@@ -255,6 +255,15 @@ def test_estimate_with_several_runs_and_with_the_detector_through_evaluate_bop(w
     assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(tmp_path / "x.csv"),
                  "--verify"]) == 2
     assert "--verify: only with --detector" in capsys.readouterr().err
+    # --flip: the detector also sees each mirror image; other boxes, the same classes
+    assert main(["estimate", "--detector", str(world / "ssd"), *runs, "--dataset", str(world / "set"),
+                 "--out", str(tmp_path / "flipped.csv"), "--score-threshold", "0", "--flip", "--no-progress"]) == 0
+    flipped = json.loads((tmp_path / "flipped_detections.json").read_text())
+    assert len(flipped) >= 4 and {entry["category_id"] for entry in flipped} <= set(OBJECTS)
+    assert sorted(map(key, flipped)) != sorted(map(key, coco))
+    assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(tmp_path / "x.csv"),
+                 "--flip"]) == 2
+    assert "--flip: only with --detector" in capsys.readouterr().err
     # a bare run directory with --object-id still works (and its object is checked)
     assert main(["estimate", "--run", str(world / "aae_5"), "--object-id", "5", "--dataset", str(world / "set"),
                  "--out", str(tmp_path / "bare.csv"), "--no-progress"]) == 0

@@ -148,6 +148,13 @@ def test_detect_command_writes_detections_that_evaluate_scores(trained, generate
                  "--no-progress"]) == 0
     entries = json.loads((tmp_path / "f.json").read_text())
     assert {entry["image_id"] for entry in entries} <= {0, 1} and "file_name" in entries[0]
+    capsys.readouterr()
+    assert main(["detect", "--run-dir", str(trained), "--images", str(folder), "--out", str(tmp_path / "m.json"),
+                 "--flip", "--no-progress"]) == 0
+    assert json.loads(capsys.readouterr().out)["flip"] is True
+    mirrored = json.loads((tmp_path / "m.json").read_text())
+    assert {entry["image_id"] for entry in mirrored} <= {0, 1}
+    assert sorted(entry["bbox"] for entry in mirrored) != sorted(entry["bbox"] for entry in entries)
 
 
 def test_corrupt_run_directory_is_refused(trained, tmp_path):

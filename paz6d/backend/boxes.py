@@ -126,6 +126,26 @@ def flip_left_right(boxes, image_width: float) -> np.ndarray:
     return flipped
 
 
+def mirrored_prior_index(priors, decimals: int = 6) -> np.ndarray:
+    """``(P,)`` indices ``m``: prior ``m[i]`` is the left-right mirror image of prior ``i`` (normalized ``cxcywh``
+    ``(P, 4)``, ``cx -> 1 - cx``). Identical priors keep their order, so ``m`` pairs them in turn.
+
+    Raises:
+        ValueError: some prior has no mirror image among ``priors`` (compared to ``decimals`` places).
+    """
+    priors = as_array(priors, "priors", (4,))
+    keys = np.round(priors, decimals)
+    mirrored = keys.copy()
+    mirrored[:, 0] = np.round(1.0 - priors[:, 0], decimals)
+    order, mirrored_order = np.lexsort(keys.T[::-1]), np.lexsort(mirrored.T[::-1])
+    if not np.array_equal(keys[order], mirrored[mirrored_order]):
+        raise ValueError("priors: expected priors that are left-right symmetric (each with a mirror image), "
+                         "as a test-time mirror image needs")
+    index = np.empty(len(priors), dtype=np.int64)
+    index[mirrored_order] = order
+    return index
+
+
 def _iou(boxes_a: np.ndarray, boxes_b: np.ndarray) -> np.ndarray:
     """IoU of already validated, broadcast-compatible ``xyxy`` arrays."""
     low = np.maximum(boxes_a[..., :2], boxes_b[..., :2])

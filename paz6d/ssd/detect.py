@@ -49,6 +49,8 @@ class Detection:
                                              "(visible boxes; visible fraction < 0.1 ignored)")
     score_threshold: float = option(0.01, "detections scoring below it are dropped (low for mAP)")
     max_detections: int = option(100, "most detections per image")
+    flip: bool = option(False, "also detect on each image's mirror image and average (test-time augmentation: "
+                               "a second network pass, real LM-O AP 0.252 -> 0.270)")
     progress: bool = option(True, "progress bar")
 
     def __post_init__(self):
@@ -128,7 +130,8 @@ def detect(job: Detection) -> dict:
     """Runs the detector and writes ``job.out`` (and ``job.ground_truth``); returns a summary."""
     from paz6d.ssd.pipeline import DetectSingleShot
 
-    detector = DetectSingleShot(job.run_dir, score_threshold=job.score_threshold, max_detections=job.max_detections)
+    detector = DetectSingleShot(job.run_dir, score_threshold=job.score_threshold, max_detections=job.max_detections,
+                                flip=job.flip)
     if job.dataset is not None:
         coco = bop_split_to_coco(job.dataset, job.split)
         category_ids = {name: bop_category_id(name) for name in detector.class_names}
@@ -143,4 +146,4 @@ def detect(job: Detection) -> dict:
     return {"images": len(files), "detections": len(results), "out": str(job.out),
             "ground_truth": None if job.ground_truth is None else str(job.ground_truth),
             "milliseconds_per_image": round(1000 * seconds, 2),
-            "score_threshold": job.score_threshold, "classes": list(detector.class_names)}
+            "score_threshold": job.score_threshold, "flip": job.flip, "classes": list(detector.class_names)}
