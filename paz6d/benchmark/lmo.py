@@ -663,7 +663,8 @@ def write_report(job: Benchmark, timings: dict[str, float]) -> dict:
     table = score_table(report) + not_estimated_notes(report) + method_pick_notes(report["method_pick"])
     header = (f"# paz6d benchmark lmo ({'quick' if job.quick else 'full'})\n\n"
               f"Synthetic training only; {len(job.objects)} LM-O objects; scored on the real RGB frames of "
-              f"{job.lmo} with `paz6d evaluate bop`; `synthetic_gt_visible_boxes`: the same models on "
+              f"{job.lmo} with `paz6d evaluate bop`; `detections`: the benchmark's detector, which also sees each "
+              f"frame's mirror image (`paz6d estimate --flip`); `synthetic_gt_visible_boxes`: the same models on "
               f"{job.settings.validation_images} held-out synthetic images (what a user without real labels can "
               f"measure, to pick a method per object). Total stage time {report['total_minutes']:.1f} min.\n\n")
     write_text_atomically(job.out / "report.md", header + table)
