@@ -102,6 +102,25 @@ def test_pipeline_returns_one_pose_per_detected_object_in_metres_in_the_camera_f
         assert box.x_min - 2 <= u <= box.x_max + 2 and box.y_min - 2 <= v <= box.y_max + 2
 
 
+def test_from_run_dirs_loads_the_detector_and_a_pose_model_per_object(world):
+    from paz6d.pipelines import DetectAndEstimatePose6D, ImplicitPose6D
+
+    sample = _samples(world)[0]
+    runs = {obj_id: world / f"aae_{obj_id}" for obj_id in OBJECTS}
+    for flip in (False, True):
+        pipeline = DetectAndEstimatePose6D.from_run_dirs(world / "ssd", runs, sample.camera, score_threshold=0.0,
+                                                         flip=flip)
+        assert pipeline.names == ["check", "detect", "select", "estimate", "pair"]
+        detector = pipeline.detector
+        assert detector.flip is flip and detector.run_dir == world / "ssd"
+        assert type(detector["predict"].processor).__name__ == ("PredictImageAndMirror" if flip else "PredictImage")
+        estimators = pipeline.estimators
+        assert sorted(estimators) == sorted(pipeline.meshes) == ["obj_000005", "obj_000008"]  # meshes: for draw()
+        assert all(isinstance(estimator, ImplicitPose6D) for estimator in estimators.values())
+        results = pipeline(sample.image)
+        assert results and all(pose.class_name == box.class_name for box, pose in results)
+
+
 def test_detected_class_without_pose_model_is_skipped_with_a_warning_or_refused_when_strict(world):
     from paz6d.detect_and_estimate import DetectAndEstimatePose6D, MissingPoseModelWarning
     from paz6d.pipelines import ImplicitPose6D
