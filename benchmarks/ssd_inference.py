@@ -51,7 +51,8 @@ def measure(run_dir: Path | None, config: str, repeats: int, score_threshold: fl
     pipeline_ms = 1000 * median_seconds(lambda: detector(image), repeats)
     predict_ms = 1000 * median_seconds(lambda: detector.model.predict(network_input, verbose=0), repeats)
     return {"run_dir": None if run_dir is None else str(run_dir), "config": config, "input_size": size,
-            "image": list(image.shape), "score_threshold": score_threshold, "flip": flip, "detections": len(detector(image)),
+            "image": list(image.shape), "score_threshold": score_threshold, "flip": flip,
+            "detections": len(detector(image)),
             "pipeline_ms": round(pipeline_ms, 2),
             "network_compiled_ms": round(1000 * median_seconds(lambda: infer(network_input), repeats), 2),
             "keras_predict_ms": round(predict_ms, 2), "pipeline_over_predict": round(pipeline_ms / predict_ms, 3)}
