@@ -18,14 +18,35 @@ from types import ModuleType
 _FLAGS_MODULE = "tensorflow.python.pywrap_dlopen_global_flags"
 
 
-def import_tensorflow() -> ModuleType:
-    """Imports TensorFlow with RTLD_LOCAL semantics and returns the module (idempotent)."""
+def import_tensorflow(threads: int | None = None) -> ModuleType:
+    """Imports TensorFlow with RTLD_LOCAL semantics and returns the module (idempotent).
+
+    Args:
+        threads: CPU threads TensorFlow's operations may use (intra- and inter-op pools); None leaves
+            TensorFlow's default (every core). Only the first call in a process that runs no operation before
+            it can set them.
+
+    Raises:
+        RuntimeError: ``threads`` given after TensorFlow started running operations with other settings.
+    """
     if "tensorflow" not in sys.modules:
         sys.modules.setdefault(_FLAGS_MODULE, None)
         os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
         os.environ.setdefault("KERAS_BACKEND", "tensorflow")
+        if threads is not None:
+            os.environ["OMP_NUM_THREADS"] = str(int(threads))
     import tensorflow
 
+    if threads is not None:
+        threading = tensorflow.config.threading
+        if (threading.get_intra_op_parallelism_threads(), threading.get_inter_op_parallelism_threads()) != (threads,
+                                                                                                           threads):
+            try:
+                threading.set_intra_op_parallelism_threads(int(threads))
+                threading.set_inter_op_parallelism_threads(int(threads))
+            except RuntimeError as error:
+                raise RuntimeError(f"threads: TensorFlow already runs with its thread pools set up; limit it to "
+                                   f"{threads} before it runs anything ({error})") from error
     return tensorflow
 
 

@@ -33,6 +33,9 @@ class LmoOptions:
     aae_lr_drop_steps: int | None = option(None, "the last this many AAE steps at a tenth of the learning rate "
                                                  "(default: 0 quick, 500 full); with a larger "
                                                  "--aae-steps on a finished --out the drop moves to the new end")
+    jobs: int = option(1, "trainings (the detector, the pose models) run side by side, each in its own process "
+                          "with its share of the CPU cores: 2 on 2 cores saves about a seventh of the wall time "
+                          "(docs/real_photos.md)")
     progress: bool = option(True, "progress bars")
 
 
@@ -62,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
                         progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
                         aae_lr_drop_steps=options.aae_lr_drop_steps,
-                        object_methods=parse_object_methods(options.object_method))
+                        object_methods=parse_object_methods(options.object_method), jobs=options.jobs)
         report = run_benchmark(job)
     print(f"wrote {Path(options.out) / 'report.json'} and {Path(options.out) / 'report.md'} "
           f"({report['total_minutes']:.1f} min of stages)")

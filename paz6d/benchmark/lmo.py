@@ -130,9 +130,12 @@ class Benchmark:
     aae_steps: int | None = None  # default: the settings'; a larger number on a finished run extends its AAEs
     aae_lr_drop_steps: int | None = None  # default: the settings'
     object_methods: dict[int, str] = field(default_factory=dict)
+    jobs: int = 1  # trainings run side by side (the detector and the pose models), each in its own process
 
     def __post_init__(self):
         self.out, self.lmo = Path(self.out), Path(self.lmo)
+        if not is_whole_number(self.jobs) or self.jobs < 1:
+            raise ValueError(f"jobs: expected a positive number of processes, got {self.jobs!r}")
         if self.method not in METHODS:
             raise ValueError(f"method: expected one of {METHODS}, got {self.method!r}")
         for obj_id, method in self.object_methods.items():
@@ -421,8 +424,46 @@ def _forget_report_rows(job: Benchmark, labels: list[str]) -> None:
     write_json_atomically(job.out / "report.json", report, indent=2)
 
 
+def trains_a_model(name: str) -> bool:
+    """Whether a stage trains a network (the detector, a pose model): those can run side by side."""
+    return name == "detector" or name.startswith("pose")
+
+
+def _run_stage(job: Benchmark, name: str, function: Callable[[], dict]) -> float:
+    """Runs one stage and writes its marker (seconds and summary); returns the seconds."""
+    print(f"[benchmark lmo] {name} ...", flush=True)
+    started = time.perf_counter()
+    summary = function()
+    seconds = time.perf_counter() - started
+    write_json_atomically(job.marker(name), {"stage": name, "seconds": seconds, "summary": _json_safe(summary)},
+                          indent=2)
+    print(f"[benchmark lmo] {name}: {seconds / 60:.1f} min", flush=True)
+    return seconds
+
+
+def _stage_in_own_process(job: Benchmark, name: str, threads: int) -> None:
+    """Runs stage ``name`` in this (spawned) process, TensorFlow limited to ``threads`` CPU threads."""
+    from paz6d.backend.tensorflow_guard import import_tensorflow
+
+    import_tensorflow(threads=threads)
+    function = next(function for stage, function, _ in stages(job) if stage == name)
+    _run_stage(job, name, function)
+
+
+def _run_side_by_side(job: Benchmark, names: list[str]) -> None:
+    """Runs these stages in ``job.jobs`` processes at once, the CPU cores shared out between them."""
+    from paz6d.benchmark.parallel import run_in_processes, threads_per_job
+
+    threads = threads_per_job(job.jobs)
+    print(f"[benchmark lmo] {len(names)} trainings, {job.jobs} at a time ({threads} threads each)", flush=True)
+    run_in_processes([(name, _stage_in_own_process, (job, name, threads)) for name in names], job.jobs)
+
+
 def run_benchmark(job: Benchmark, only: tuple[str, ...] | None = None) -> dict:
     """Runs (or resumes) every stage, then writes the report; returns ``report.json``'s content.
+
+    With ``job.jobs`` > 1 the unfinished trainings (detector and pose models) run side by side in their own
+    processes once the data exist, ``job.jobs`` at a time.
 
     Args:
         only: run just the stages whose name starts with one of these (tests, partial runs).
@@ -432,25 +473,25 @@ def run_benchmark(job: Benchmark, only: tuple[str, ...] | None = None) -> dict:
     import_tensorflow()  # first: anything rendered in this process is then safe next to TensorFlow
     job.out.mkdir(parents=True, exist_ok=True)
     _check_settings(job)
+    started = time.perf_counter()
+    selected = [stage for stage in stages(job) if only is None or stage[0].startswith(only)]
+    side_by_side = [name for name, _, outputs in selected
+                    if trains_a_model(name) and not stage_done(job, name, outputs)]
+    if job.jobs == 1 or len(side_by_side) < 2:
+        side_by_side = []
     timings: dict[str, float] = {}
-    for name, function, outputs in stages(job):
-        if only is not None and not name.startswith(only):
-            continue
+    for name, function, outputs in selected:
+        if side_by_side and name == side_by_side[0]:
+            _run_side_by_side(job, side_by_side)
         if stage_done(job, name, outputs):
-            print(f"[benchmark lmo] {name}: done (skipped)", flush=True)
+            if name not in side_by_side:
+                print(f"[benchmark lmo] {name}: done (skipped)", flush=True)
             timings[name] = float(load_json_object(job.marker(name)).get("seconds", 0.0))
             continue
-        print(f"[benchmark lmo] {name} ...", flush=True)
-        started = time.perf_counter()
-        summary = function()
-        seconds = time.perf_counter() - started
-        timings[name] = seconds
-        write_json_atomically(job.marker(name), {"stage": name, "seconds": seconds,
-                                                 "summary": _json_safe(summary)}, indent=2)
-        print(f"[benchmark lmo] {name}: {seconds / 60:.1f} min", flush=True)
+        timings[name] = _run_stage(job, name, function)
     if only is not None:
         return {"timings": timings}
-    return write_report(job, timings)
+    return write_report(job, timings, wall_seconds=time.perf_counter() - started)
 
 
 def _json_safe(value):
@@ -633,14 +674,27 @@ def _overlays(job: Benchmark, condition: str) -> list[Path]:
     return written
 
 
+def _wall_note(report: dict) -> str:
+    """`` (this run: N min of wall time, trainings J at a time)`` when trainings ran side by side."""
+    if report["jobs"] == 1 or report["run_wall_minutes"] is None:
+        return ""
+    return (f" (this run: {report['run_wall_minutes']:.1f} min of wall time, trainings {report['jobs']} at a "
+            f"time; stages run side by side overlap)")
+
+
 def _scored_last(rows: dict, label: str, value) -> dict:
     """``rows`` with ``label``'s entry replaced by ``value`` and moved last (the report keeps scoring order)."""
     return {**{other: row for other, row in rows.items() if other != label}, label: value}
 
 
-def write_report(job: Benchmark, timings: dict[str, float]) -> dict:
+def write_report(job: Benchmark, timings: dict[str, float], wall_seconds: float | None = None) -> dict:
     """``DIR/report.json`` (settings, timings, scores of every method run so far, in scoring order),
-    ``DIR/report.md`` and the overlays of this method."""
+    ``DIR/report.md`` and the overlays of this method.
+
+    Args:
+        timings: seconds of each stage (trainings run side by side overlap).
+        wall_seconds: this run's wall time (stages skipped as done count 0).
+    """
     path = job.out / "report.json"
     report = _report(job)
     scores = {name: _scores(job.result(condition, "_scores.json")) for condition, name in CONDITIONS.items()}
@@ -657,6 +711,7 @@ def write_report(job: Benchmark, timings: dict[str, float]) -> dict:
               "not_estimated": _scored_last(report.get("not_estimated", {}), job.label, _not_estimated(job)),
               "detector_coco": detector, "timings_seconds": all_timings,
               "total_minutes": sum(all_timings.values()) / 60,
+              "run_wall_minutes": None if wall_seconds is None else wall_seconds / 60, "jobs": job.jobs,
               "overlays": _scored_last(report.get("overlays", {}), job.label, overlays)}
     report["method_pick"] = method_pick(report)
     write_json_atomically(path, report, indent=2)
@@ -666,7 +721,8 @@ def write_report(job: Benchmark, timings: dict[str, float]) -> dict:
               f"{job.lmo} with `paz6d evaluate bop`; `detections`: the benchmark's detector, which also sees each "
               f"frame's mirror image (`paz6d estimate --flip`); `synthetic_gt_visible_boxes`: the same models on "
               f"{job.settings.validation_images} held-out synthetic images (what a user without real labels can "
-              f"measure, to pick a method per object). Total stage time {report['total_minutes']:.1f} min.\n\n")
+              f"measure, to pick a method per object). Total stage time {report['total_minutes']:.1f} min"
+              f"{_wall_note(report)}.\n\n")
     write_text_atomically(job.out / "report.md", header + table)
     print(table)
     return report
