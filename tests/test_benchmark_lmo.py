@@ -104,6 +104,46 @@ def test_stages_run_in_order_once_and_a_rerun_skips_every_finished_one(mocked, t
     assert calls == ["detector"]
 
 
+def test_jobs_hand_the_unfinished_pose_trainings_to_side_by_side_processes_after_the_detector(mocked, tmp_path,
+                                                                                       monkeypatch):
+    data, calls = mocked
+    handed = []
+
+    def side_by_side(job, names):  # in place of the spawned processes: the (mocked) stages run here
+        handed.append(list(names))
+        calls.append("side by side")
+        for name, function, _ in stages(job):
+            if name in names:
+                lmo._run_stage(job, name, function)
+
+    monkeypatch.setattr(lmo, "_run_side_by_side", side_by_side)
+    folder = dict(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False)
+    report = run_benchmark(Benchmark(**folder, jobs=2))
+    assert handed == [["pose/obj_000001", "pose/obj_000005"]]
+    assert calls[:4] == ["backgrounds", "synthetic", "validation", "detector"]
+    assert calls[4:7] == ["side by side", "pose 1", "pose 5"] and calls[7:13] == SCORING
+    assert report["jobs"] == 2 and report["run_wall_minutes"] >= 0
+    assert "pose models 2 at a time" in (tmp_path / "bench" / "report.md").read_text()
+    assert report["timings_seconds"].keys() >= {"detector", "pose/obj_000001", "pose/obj_000005"}
+
+    # a resumed run hands over only what is unfinished; one training alone runs in this process
+    lmo_marker = Benchmark(**folder).marker("pose/obj_000005")
+    lmo_marker.unlink()
+    calls.clear()
+    run_benchmark(Benchmark(**folder, jobs=2))
+    assert handed[1:] == [] and calls[0] == "pose 5"
+    for name in ("pose/obj_000001", "pose/obj_000005"):
+        Benchmark(**folder).marker(name).unlink()
+    run_benchmark(Benchmark(**folder, jobs=2))
+    assert handed[1:] == [["pose/obj_000001", "pose/obj_000005"]]
+    report = run_benchmark(Benchmark(**folder))  # jobs=1: nothing is handed over
+    assert len(handed) == 2 and report["jobs"] == 1
+    assert "at a time" not in (tmp_path / "bench" / "report.md").read_text()
+    for bad in (0, -1, 1.5):
+        with pytest.raises(ValueError, match="jobs: expected a positive number of processes"):
+            Benchmark(**folder, jobs=bad)
+
+
 def test_keypointnet_reuses_the_data_and_detector_and_adds_its_scores_to_the_report(mocked, tmp_path):
     data, calls = mocked
     aae = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False)
@@ -252,6 +292,10 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
                  "5=keypointnet_robust", "--object-method", "1=keypointnet", "--no-progress"]) == 0
     assert jobs[1].object_methods == {1: "keypointnet", 5: "keypointnet_robust"}
+    assert jobs[1].jobs == 1
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--jobs", "2",
+                 "--no-progress"]) == 0
+    assert jobs[2].jobs == 2
     for bad in ("5", "x=aae", "5=aae 5=keypointnet"):
         assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
                      *bad.split()]) == 2

@@ -33,9 +33,8 @@ class LmoOptions:
     aae_lr_drop_steps: int | None = option(None, "the last this many AAE steps at a tenth of the learning rate "
                                                  "(default: 0 quick, 500 full); with a larger "
                                                  "--aae-steps on a finished --out the drop moves to the new end")
-    jobs: int = option(1, "trainings (the detector, the pose models) run side by side, each in its own process "
-                          "with its share of the CPU cores: 2 on 2 cores saves about a seventh of the wall time "
-                          "(docs/real_photos.md)")
+    jobs: int = option(1, "pose models trained side by side, each in its own process with its share of the CPU "
+                          "cores (docs/real_photos.md for what it saves)")
     progress: bool = option(True, "progress bars")
 
 

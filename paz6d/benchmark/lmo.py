@@ -130,7 +130,7 @@ class Benchmark:
     aae_steps: int | None = None  # default: the settings'; a larger number on a finished run extends its AAEs
     aae_lr_drop_steps: int | None = None  # default: the settings'
     object_methods: dict[int, str] = field(default_factory=dict)
-    jobs: int = 1  # trainings run side by side (the detector and the pose models), each in its own process
+    jobs: int = 1  # pose models trained side by side, each in its own process
 
     def __post_init__(self):
         self.out, self.lmo = Path(self.out), Path(self.lmo)
@@ -424,9 +424,11 @@ def _forget_report_rows(job: Benchmark, labels: list[str]) -> None:
     write_json_atomically(job.out / "report.json", report, indent=2)
 
 
-def trains_a_model(name: str) -> bool:
-    """Whether a stage trains a network (the detector, a pose model): those can run side by side."""
-    return name == "detector" or name.startswith("pose")
+def trains_a_pose_model(name: str) -> bool:
+    """Whether a stage trains a pose model: those run side by side with ``jobs`` > 1. The detector does not:
+    at one thread next to an AAE it trains 2.2 times slower than alone on two cores, which costs more than
+    the AAE gains (docs/real_photos.md)."""
+    return name.startswith("pose")
 
 
 def _run_stage(job: Benchmark, name: str, function: Callable[[], dict]) -> float:
@@ -455,15 +457,16 @@ def _run_side_by_side(job: Benchmark, names: list[str]) -> None:
     from paz6d.benchmark.parallel import run_in_processes, threads_per_job
 
     threads = threads_per_job(job.jobs)
-    print(f"[benchmark lmo] {len(names)} trainings, {job.jobs} at a time ({threads} threads each)", flush=True)
+    print(f"[benchmark lmo] {len(names)} pose models, {job.jobs} at a time ({threads} CPU thread(s) each)",
+          flush=True)
     run_in_processes([(name, _stage_in_own_process, (job, name, threads)) for name in names], job.jobs)
 
 
 def run_benchmark(job: Benchmark, only: tuple[str, ...] | None = None) -> dict:
     """Runs (or resumes) every stage, then writes the report; returns ``report.json``'s content.
 
-    With ``job.jobs`` > 1 the unfinished trainings (detector and pose models) run side by side in their own
-    processes once the data exist, ``job.jobs`` at a time.
+    With ``job.jobs`` > 1 the unfinished pose models train side by side in their own processes once the data
+    and the detector exist, ``job.jobs`` at a time.
 
     Args:
         only: run just the stages whose name starts with one of these (tests, partial runs).
@@ -476,7 +479,7 @@ def run_benchmark(job: Benchmark, only: tuple[str, ...] | None = None) -> dict:
     started = time.perf_counter()
     selected = [stage for stage in stages(job) if only is None or stage[0].startswith(only)]
     side_by_side = [name for name, _, outputs in selected
-                    if trains_a_model(name) and not stage_done(job, name, outputs)]
+                    if trains_a_pose_model(name) and not stage_done(job, name, outputs)]
     if job.jobs == 1 or len(side_by_side) < 2:
         side_by_side = []
     timings: dict[str, float] = {}
@@ -675,11 +678,11 @@ def _overlays(job: Benchmark, condition: str) -> list[Path]:
 
 
 def _wall_note(report: dict) -> str:
-    """`` (this run: N min of wall time, trainings J at a time)`` when trainings ran side by side."""
+    """`` (this run: N min of wall time, pose models J at a time)`` when they trained side by side."""
     if report["jobs"] == 1 or report["run_wall_minutes"] is None:
         return ""
-    return (f" (this run: {report['run_wall_minutes']:.1f} min of wall time, trainings {report['jobs']} at a "
-            f"time; stages run side by side overlap)")
+    return (f" (this run: {report['run_wall_minutes']:.1f} min of wall time, pose models {report['jobs']} at "
+            f"a time; stages run side by side overlap)")
 
 
 def _scored_last(rows: dict, label: str, value) -> dict:
