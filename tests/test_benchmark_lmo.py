@@ -304,7 +304,7 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
 @pytest.mark.slow
 def test_every_real_stage_runs_on_the_shared_lmo_data_at_toy_size(tmp_path, shared_data):
     job = Benchmark(out=tmp_path / "bench", lmo=shared_data / "bop_lmo", quick=True, settings=TINY, objects=(5, 8),
-                    progress=False, object_methods={8: "keypointnet_robust"})
+                    progress=False, object_methods={8: "keypointnet_robust"}, jobs=2)  # pose models side by side
     report = run_benchmark(job)
     for condition in ("gt_visible_boxes", "detections", "synthetic_gt_visible_boxes"):
         scores = report["methods"]["aae+keypointnet_robust@8"][condition]

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -47,6 +48,23 @@ def test_a_failing_task_is_named_and_later_tasks_do_not_start(tmp_path):
     assert not (tmp_path / "later.done").exists()
     with pytest.raises(ValueError, match="jobs: expected at least 1"):
         run_in_processes([], jobs=0)
+
+
+def test_a_benchmark_stage_runs_in_a_spawned_process_and_leaves_its_marker(tmp_path):
+    from paz6d.benchmark.lmo import Benchmark, BenchmarkSettings, _run_side_by_side, stage_done, stages
+
+    (tmp_path / "lmo" / "models").mkdir(parents=True)
+    (tmp_path / "lmo" / "models" / "obj_000001.ply").write_text("ply\n")
+    settings = BenchmarkSettings(images=2, backgrounds=2, detector_steps=1, aae_steps=1, aae_in_plane=1,
+                                 keypointnet_steps=1, keypointnet_views=1, detector_input_size=64)
+    job = Benchmark(out=tmp_path / "bench", lmo=tmp_path / "lmo", settings=settings, progress=False, jobs=2)
+    _run_side_by_side(job, ["backgrounds"])
+    name, _, outputs = stages(job)[0]
+    assert name == "backgrounds" and stage_done(job, name, outputs)
+    assert len(list((job.out / "backgrounds").iterdir())) == 2
+    assert json.loads(job.marker(name).read_text())["seconds"] > 0
+    with pytest.raises(RuntimeError, match="synthetic: its process failed"):  # the meshes are not meshes
+        _run_side_by_side(job, ["synthetic"])
 
 
 def test_cores_are_shared_out_between_jobs():
