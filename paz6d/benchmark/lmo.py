@@ -425,9 +425,8 @@ def _forget_report_rows(job: Benchmark, labels: list[str]) -> None:
 
 
 def trains_a_pose_model(name: str) -> bool:
-    """Whether a stage trains a pose model: those run side by side with ``jobs`` > 1. The detector does not:
-    at one thread next to an AAE it trained 2.2 times slower than alone on two cores (its first 100 steps),
-    which costs more than the AAE gains (docs/real_photos.md)."""
+    """Whether a stage trains a pose model: those run side by side with ``jobs`` > 1. The detector trains alone
+    on every core before them, so it is the same model as without ``jobs`` (docs/real_photos.md)."""
     return name.startswith("pose")
 
 
