@@ -43,6 +43,7 @@ import numpy as np
 from paz6d.abstract import Box2D, Pose6D
 from paz6d.backend.checks import is_whole_number
 from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
+from paz6d.benchmark.parallel import run_in_processes, threads_per_job
 from paz6d.cli import build_parser
 from paz6d.datasets.bop import read_pose_results
 from paz6d.datasets.bop.models import MODELS_INFO, load_models_info
@@ -453,8 +454,6 @@ def _stage_in_own_process(job: Benchmark, name: str, threads: int) -> None:
 
 def _run_side_by_side(job: Benchmark, names: list[str]) -> None:
     """Runs these stages in ``job.jobs`` processes at once, the CPU cores shared out between them."""
-    from paz6d.benchmark.parallel import run_in_processes, threads_per_job
-
     threads = threads_per_job(job.jobs)
     print(f"[benchmark lmo] {len(names)} pose models, {job.jobs} at a time ({threads} CPU thread(s) each)",
           flush=True)
