@@ -933,6 +933,7 @@ def train_cases() -> list[Case]:
         "--workers": [(("-1",), "")],
         "--mesh-scale": [(("nan",), ""), (("0",), "")],
         "--pair-fraction": [(("2",), ""), (("nan",), ""), (("-0.5",), "")],
+        "--crop-box": [(("whole",), "whole")],
         "--seed": [(("-1",), "")],
         "--config": [(("huge",), "")],
         "--out": [(("{world}/results.csv",), "results.csv"), (("/dev/null",), "/dev/null")],

@@ -362,3 +362,52 @@ def test_config_json_round_trip_and_unknown_fields_at_either_level_are_named():
         AAEConfig.from_dict({**stored, "colour": 1})
     with pytest.raises(ValueError, match=r"AAE config: augmentation: unknown field\(s\) \['blurr'\]"):
         AAEConfig.from_dict({**stored, "augmentation": {**stored["augmentation"], "blurr": 1.0}})
+
+
+def test_visible_box_crops_keep_the_whole_object_targets(toy_run, tmp_path):
+    """crop_box="visib": each input is the crop of the instance's visible-part box (what a detector sees),
+    its target the same whole-object view as with "obj"; a run directory keeps its choice, and the other
+    pose formats (no visible boxes) are refused."""
+    from data_gen.config import GenerationConfig
+    from data_gen.generator import generate
+    from paz6d.aae.config import AAETraining
+    from paz6d.aae.dataset import dataset_pairs
+    from paz6d.aae.model import crop_object
+    from paz6d.datasets.bop import BOPDataset
+
+    root, mesh, _ = toy_run
+    data = tmp_path / "data"
+    generate(GenerationConfig(meshes=(mesh,), out=data, num_images=4, seed=7, mesh_scale=0.001,
+                              objects_per_image=(3, 3), occluder_probability=1.0, occluders=2),
+             workers=1, show_progress=False)
+    whole, seen = (dataset_pairs(data, 1, mesh, 0.001, TOY.crop_size, TOY.padding, workers=0, progress=False,
+                                 crop_box=box) for box in ("obj", "visib"))
+    np.testing.assert_array_equal(seen.targets, whole.targets)
+    np.testing.assert_array_equal(seen.T_model2cam, whole.T_model2cam)
+    expected, hidden = [], []
+    for sample in BOPDataset(data, split="train"):
+        for instance in sample.objects:
+            if instance.info["visib_fract"] >= 0.1:
+                x, y, w, h = instance.info["bbox_visib"]
+                expected.append(crop_object(sample.image, (x, y, x + w, y + h), TOY.crop_size, TOY.padding))
+                hidden.append(instance.info["bbox_visib"] != instance.info["bbox_obj"])
+    np.testing.assert_array_equal(seen.inputs, np.stack(expected))
+    assert any(hidden)  # the set holds partly hidden instances, whose two crops differ
+    differs = [not np.array_equal(a, b) for a, b in zip(seen.inputs, whole.inputs)]
+    assert differs == hidden
+
+    train_aae(mesh, tmp_path / "run", replace(TOY, steps=2), mesh_scale=0.001, workers=0, progress=False,
+              dataset=data, object_id=1, crop_box="visib")
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["crop_box"] == "visib"
+    with pytest.raises(ValueError, match="'visib' boxes; use another --out for --crop-box obj"):
+        train_aae(mesh, tmp_path / "run", replace(TOY, steps=4), mesh_scale=0.001, workers=0, progress=False,
+                  dataset=data, object_id=1)
+    with pytest.raises(ValueError, match="crop_box: expected one of"):
+        train_aae(mesh, tmp_path / "other", TOY, mesh_scale=0.001, workers=0, progress=False, dataset=data,
+                  object_id=1, crop_box="whole")
+    with pytest.raises(ValueError, match="needs a BOP data set"):
+        dataset_pairs(data, 1, mesh, 0.001, TOY.crop_size, TOY.padding, workers=0, progress=False,
+                      dataset_format="fat", object_class="x", crop_box="visib")
+    with pytest.raises(ValueError, match="crop_box: 'visib' needs a BOP --dataset"):
+        AAETraining(out=tmp_path / "fat", dataset=data, format="fat", dataset_mesh=mesh, object_class="x",
+                    crop_box="visib")

@@ -57,6 +57,6 @@ def run(args: argparse.Namespace) -> int:
         summary = train_aae(mesh, job.out, job.model_config, scale, job.seed, job.workers, job.platform,
                             job.progress, dataset=job.dataset, object_id=object_id, split=split,
                             pair_fraction=job.pair_fraction, dataset_format=job.format or "bop",
-                            object_class=object_class)
+                            object_class=object_class, crop_box=job.crop_box)
     print(json.dumps(summary, indent=2))
     return 0

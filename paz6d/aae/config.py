@@ -17,6 +17,17 @@ from paz6d.training.source import checked_mesh_scale
 from renderers.platform import PLATFORMS
 
 
+#: Boxes a data set's input crop can be cut around: the whole object's projection, or its visible part.
+CROP_BOXES = ("obj", "visib")
+
+
+def check_crop_box(crop_box: str) -> str:
+    """``crop_box`` if it is one of :data:`CROP_BOXES`, else a ValueError naming the choices."""
+    if crop_box not in CROP_BOXES:
+        raise ValueError(f"crop_box: expected one of {list(CROP_BOXES)}, got {crop_box!r}")
+    return crop_box
+
+
 @dataclass(frozen=True)
 class Augmentation:
     """Strengths of the input augmentations (paper: background, occlusion, lighting, colour, crop shift).
@@ -177,6 +188,9 @@ class AAETraining:
                                      "(default: train; FAT: mixed)")
     pair_fraction: float = option(0.5, "with --dataset: share of training samples taken from its crops "
                                        "(the rest: rendered views)")
+    crop_box: str = option("obj", "with a BOP --dataset: the box each input crop is cut around: obj (the whole "
+                                  "object's) or visib (its visible part, as a detector's box); the clean target "
+                                  "is always the whole object's view", choices=CROP_BOXES)
     config: str = option("quick", "quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
                                   "92,232-view codebook (hours on a CPU)", choices=tuple(sorted(CONFIGS)))
     steps: int | None = option(None, "training steps (default: the config's)")
@@ -199,6 +213,10 @@ class AAETraining:
             raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
         if not 0.0 <= self.pair_fraction <= 1.0:
             raise ValueError(f"pair_fraction: expected a fraction in [0, 1], got {self.pair_fraction}")
+        check_crop_box(self.crop_box)
+        if self.crop_box != "obj" and self.format not in (None, "bop"):
+            raise ValueError(f"crop_box: {self.crop_box!r} needs a BOP --dataset (visible boxes); got format "
+                             f"{self.format!r}")
 
     @property
     def model_config(self) -> AAEConfig:

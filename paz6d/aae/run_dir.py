@@ -3,7 +3,8 @@
 ``paz6d train aae`` writes, and :class:`~paz6d.aae.pipeline.ImplicitPose6D`, the demo and
 ``paz6d estimate`` read::
 
-    RUN_DIR/config.json    {"config": {... "crop_size", "padding" ...}, "mesh", "mesh_scale", "seed", "dataset"}
+    RUN_DIR/config.json    {"config": {... "crop_size", "padding" ...}, "mesh", "mesh_scale", "seed", "dataset",
+                            "crop_box"}
     RUN_DIR/object.npz     hull_points (M, 3), surface_points (P, 3), diameter, vertices (V, 3); metres
     RUN_DIR/model.keras    the trained autoencoder (native Keras format, loaded in safe mode)
     RUN_DIR/codebook.npz   latent codes of every view x in-plane rotation (:class:`~paz6d.aae.codebook.Codebook`)
@@ -87,13 +88,14 @@ def pairs_path(run_dir: str | Path) -> Path:
 
 
 def write_config(run_dir: str | Path, config: dict[str, Any], mesh: str | Path, mesh_scale: float, seed: int,
-                 dataset: str | Path | None) -> Path:
+                 dataset: str | Path | None, crop_box: str = "obj") -> Path:
     """Writes ``config.json`` (creating ``run_dir``).
 
     Args:
         config: the model/training settings (``AAEConfig.to_dict()``), with ``crop_size`` and ``padding``.
         mesh: the object's mesh; mesh_scale: mesh units to metres; seed: the run's seed;
         dataset: the BOP data set whose crops were training inputs, or None.
+        crop_box: the box the data set's input crops were cut around (``"obj"`` or ``"visib"``).
     """
     missing = [key for key in MODEL_CONFIG_KEYS if key not in config]
     if missing:
@@ -102,7 +104,7 @@ def write_config(run_dir: str | Path, config: dict[str, Any], mesh: str | Path, 
     run_dir.mkdir(parents=True, exist_ok=True)
     return write_json_atomically(run_dir / CONFIG_FILE, {
         "config": dict(config), "mesh": str(Path(mesh).resolve()), "mesh_scale": mesh_scale, "seed": int(seed),
-        "dataset": None if dataset is None else str(Path(dataset).resolve())}, indent=2)
+        "dataset": None if dataset is None else str(Path(dataset).resolve()), "crop_box": crop_box}, indent=2)
 
 
 def read_config(run_dir: str | Path) -> dict[str, Any]:

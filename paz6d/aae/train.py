@@ -20,13 +20,13 @@ import numpy as np
 
 from paz6d.aae import run_dir as run_files
 from paz6d.aae.codebook import fibonacci_sphere, look_at_rotations
-from paz6d.aae.config import QUICK, AAEConfig
+from paz6d.aae.config import QUICK, AAEConfig, check_crop_box
 from paz6d.backend.files import read_cache, save_npz_atomically
 
 
 
 def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, seed: int,
-                 dataset: Path | None) -> tuple[AAEConfig, int]:
+                 dataset: Path | None, crop_box: str) -> tuple[AAEConfig, int]:
     """Writes ``config.json`` for a new run, or reads the stored one (only ``steps`` may change)."""
     path = run_files.config_path(run_dir)
     if path.exists():
@@ -42,8 +42,11 @@ def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEC
         if stored.get("dataset") != wanted:
             raise ValueError(f"{path}: this run directory was trained with --dataset {stored.get('dataset')}; "
                              f"use another --out for --dataset {wanted}")
+        if stored.get("crop_box", "obj") != crop_box:  # runs from before the option cut whole-object crops
+            raise ValueError(f"{path}: this run directory's data set crops were cut around the "
+                             f"{stored.get('crop_box', 'obj')!r} boxes; use another --out for --crop-box {crop_box}")
         config, seed = replace(stored_config, steps=config.steps), int(stored["seed"])
-    run_files.write_config(run_dir, config.to_dict(), mesh_path, mesh_scale, seed, dataset)
+    run_files.write_config(run_dir, config.to_dict(), mesh_path, mesh_scale, seed, dataset, crop_box)
     return config, seed
 
 
@@ -104,7 +107,7 @@ def measure_loader(sampler, batch_size: int, batches: int = 4) -> float:
 
 def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Path, mesh_scale: float,
            config: AAEConfig, workers: int, platform: str | None, progress: bool, dataset_format: str = "bop",
-           object_class: str | None = None):
+           object_class: str | None = None, crop_box: str = "obj"):
     from paz6d.aae.dataset import CropPairs, dataset_pairs
 
     path = run_files.pairs_path(run_dir)
@@ -112,7 +115,8 @@ def _pairs(run_dir: Path, dataset: Path, obj_id: int, split: str, mesh_path: Pat
     if cached is not None and cached["inputs"].ndim == 4 and cached["inputs"].shape[1] == config.crop_size:
         return CropPairs(cached["inputs"], cached["targets"], cached["poses"])
     pairs = dataset_pairs(dataset, obj_id, mesh_path, mesh_scale, config.crop_size, config.padding, split, workers,
-                          platform, progress, dataset_format=dataset_format, object_class=object_class)
+                          platform, progress, dataset_format=dataset_format, object_class=object_class,
+                          crop_box=crop_box)
     save_npz_atomically(path, inputs=pairs.inputs, targets=pairs.targets, poses=pairs.T_model2cam)
     return pairs
 
@@ -127,7 +131,8 @@ def learning_rate_at(config: AAEConfig, step: int) -> float:
 def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QUICK, mesh_scale: float = 1.0,
               seed: int = 0, workers: int = 2, platform: str | None = None, progress: bool = True,
               dataset: str | Path | None = None, object_id: int = 1, split: str = "train",
-              pair_fraction: float = 0.5, dataset_format: str = "bop", object_class: str | None = None) -> dict:
+              pair_fraction: float = 0.5, dataset_format: str = "bop", object_class: str | None = None,
+              crop_box: str = "obj") -> dict:
     """Trains an AAE on renderings of ``mesh_path`` and writes a run directory ``ImplicitPose6D`` loads.
 
     Args:
@@ -142,6 +147,9 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
             the training inputs, with clean rendered targets (the rest are rendered views): BOP
             (``dataset_format="bop"``, object ``object_id``) or YCB-Video / FAT (``"ycb_video"``, ``"fat"``,
             object ``object_class``; see :mod:`paz6d.datasets.pose_crops`).
+        crop_box: the box each data set crop is cut around: ``"obj"`` (the whole object's) or ``"visib"``
+            (a BOP data set's visible-part box, as a detector sees a partly hidden object); the targets are
+            always the whole object's view (:func:`paz6d.aae.dataset.dataset_pairs`).
 
     Returns:
         The summary written to ``summary.json``.
@@ -161,13 +169,13 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     if not mesh_path.is_file():
         raise ValueError(f"--mesh: {mesh_path}: mesh file not found")
     dataset = None if dataset is None else Path(dataset)
-    config, seed = _prepare_run(run_dir, mesh_path, mesh_scale, config, seed, dataset)
+    config, seed = _prepare_run(run_dir, mesh_path, mesh_scale, config, seed, dataset, check_crop_box(crop_box))
     geometry_data = _object_geometry(run_dir, mesh_path, mesh_scale, seed)
     geometry = ViewGeometry.for_points(geometry_data["vertices"], config.render_size)
     pairs, tick = None, time.perf_counter()
     if dataset is not None:  # before the views: a bad data set file fails before minutes of rendering
         pairs = _pairs(run_dir, dataset, object_id, split, mesh_path, mesh_scale, config, workers, platform,
-                       progress, dataset_format, object_class)
+                       progress, dataset_format, object_class, crop_box)
     timings["pairs_seconds"] = time.perf_counter() - tick
     views = _views(run_dir, mesh_path, mesh_scale, config, geometry, workers, platform, progress)
     timings["views_seconds"] = time.perf_counter() - started - timings["pairs_seconds"]
