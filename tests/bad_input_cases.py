@@ -1018,6 +1018,7 @@ def train_cases() -> list[Case]:
     found += _flag_cases("benchmark-lmo-", BENCHMARK_LMO, {  # every case fails before any stage runs
         "--lmo": [(("{case}/none",), "none")],
         "--method": [(("pvnet",), "")],
+        "--aae-crop-box": [(("whole",), "whole")],
         "--out": [(("{world}/results.csv",), "results.csv")],
     })
     return found

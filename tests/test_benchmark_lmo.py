@@ -235,9 +235,13 @@ def test_aae_learning_rate_drop_reaches_the_aae_and_folders_from_before_it_resum
 
     seen = {}
     monkeypatch.setattr(paz6d.aae.train, "train_aae", lambda mesh, run_dir, config, **kwargs: seen.update(
-        steps=config.steps, lr_drop_steps=config.lr_drop_steps))
+        steps=config.steps, lr_drop_steps=config.lr_drop_steps, crop_box=kwargs["crop_box"]))
     lmo._stage_pose(job, 5)
-    assert seen == {"steps": 4, "lr_drop_steps": 3}
+    assert seen == {"steps": 4, "lr_drop_steps": 3, "crop_box": TINY.aae_crop_box}
+    lmo._stage_pose(replace(job, settings=replace(TINY, aae_crop_box="visib")), 5)
+    assert seen["crop_box"] == "visib"
+    with pytest.raises(ValueError, match="crop_box: expected one of"):
+        replace(TINY, aae_crop_box="whole")
     for bad, match in ((-1, "expected 0 or a number of steps"), (2.5, "expected 0 or a number of steps"),
                        (5, r"expected at most aae_steps \(4\)")):
         with pytest.raises(ValueError, match=f"aae_lr_drop_steps: {match}"):
@@ -249,11 +253,13 @@ def test_a_folder_written_before_the_learning_rate_drop_resumes_with_none(mocked
     run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
     path = tmp_path / "bench" / "benchmark.json"
     stored = json.loads(path.read_text())
-    for key in ("aae_lr_drop_steps", "keypointnet_robust_steps", "keypointnet_robust_views", "validation_images"):
+    for key in ("aae_lr_drop_steps", "keypointnet_robust_steps", "keypointnet_robust_views", "validation_images",
+                "aae_crop_box"):
         del stored["settings"][key]  # as written by the versions before these settings
     path.write_text(json.dumps(stored))
     calls.clear()
-    settings = replace(TINY, keypointnet_robust_steps=None, keypointnet_robust_views=None, validation_images=60)
+    settings = replace(TINY, keypointnet_robust_steps=None, keypointnet_robust_views=None, validation_images=60,
+                       aae_crop_box="obj")
     run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=settings, progress=False))
     assert calls == []
     with pytest.raises(ValueError, match=r"other settings \(settings differ"):
@@ -295,7 +301,10 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
     assert jobs[1].jobs == 1
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--jobs", "2",
                  "--no-progress"]) == 0
-    assert jobs[2].jobs == 2
+    assert jobs[2].jobs == 2 and jobs[2].settings.aae_crop_box == lmo.FULL.aae_crop_box
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-crop-box", "visib",
+                 "--quick", "--no-progress"]) == 0
+    assert jobs[3].settings == replace(lmo.QUICK, aae_crop_box="visib")
     for bad in ("5", "x=aae", "5=aae 5=keypointnet"):
         assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
                      *bad.split()]) == 2

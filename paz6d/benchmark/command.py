@@ -10,6 +10,7 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
+from paz6d.aae.config import CROP_BOXES
 from paz6d.backend.paths import check_output_folder
 from paz6d.benchmark.lmo import DEFAULT_LMO, METHODS, Benchmark, run_benchmark
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
@@ -33,6 +34,9 @@ class LmoOptions:
     aae_lr_drop_steps: int | None = option(None, "the last this many AAE steps at a tenth of the learning rate "
                                                  "(default: 0 quick, 500 full); with a larger "
                                                  "--aae-steps on a finished --out the drop moves to the new end")
+    aae_crop_box: str | None = option(None, "the box the AAEs' scene crops are cut around: obj (whole object) or "
+                                            "visib (visible part, as at test time) (default: the sizes' own, "
+                                            "docs/real_photos.md)", choices=CROP_BOXES)
     jobs: int = option(1, "pose models trained side by side, each in its own process with its share of the CPU "
                           "cores (2 on 2 cores: 1.2x faster, docs/real_photos.md)")
     progress: bool = option(True, "progress bars")
@@ -63,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         check_output_folder(options.out, "out")
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
                         progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
-                        aae_lr_drop_steps=options.aae_lr_drop_steps,
+                        aae_lr_drop_steps=options.aae_lr_drop_steps, aae_crop_box=options.aae_crop_box,
                         object_methods=parse_object_methods(options.object_method), jobs=options.jobs)
         report = run_benchmark(job)
     print(f"wrote {Path(options.out) / 'report.json'} and {Path(options.out) / 'report.md'} "

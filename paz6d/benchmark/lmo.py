@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.aae.config import check_crop_box
 from paz6d.abstract import Box2D, Pose6D
 from paz6d.backend.checks import is_whole_number
 from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
@@ -81,6 +82,8 @@ class BenchmarkSettings:
         keypointnet_robust_steps / keypointnet_robust_views: the same for ``keypointnet_robust`` (None: the
             ``robust`` preset's own, 10,000 and 4,000).
         scene_crops: share of AAE training samples cut from the synthetic scenes (0: rendered views only).
+        aae_crop_box: the box those scene crops are cut around: ``"obj"`` (the whole object's) or ``"visib"``
+            (its visible part's, as the benchmark's boxes are at test time).
         validation_images: held-out synthetic images the pose models are also scored on.
         workers: rendering processes.
     """
@@ -100,6 +103,10 @@ class BenchmarkSettings:
     keypointnet_robust_steps: int | None = None
     keypointnet_robust_views: int | None = None
     validation_images: int = 60
+    aae_crop_box: str = "obj"
+
+    def __post_init__(self):
+        check_crop_box(self.aae_crop_box)
 
 
 # The quick benchmark keeps the detector at 320 px to stay within 45 minutes; 448 px (the SSD quick config's
@@ -130,6 +137,7 @@ class Benchmark:
     objects: tuple[int, ...] = field(default=())  # default: every mesh in <lmo>/models
     aae_steps: int | None = None  # default: the settings'; a larger number on a finished run extends its AAEs
     aae_lr_drop_steps: int | None = None  # default: the settings'
+    aae_crop_box: str | None = None  # default: the settings'
     object_methods: dict[int, str] = field(default_factory=dict)
     jobs: int = 1  # pose models trained side by side, each in its own process
 
@@ -152,6 +160,8 @@ class Benchmark:
             if not is_whole_number(self.aae_lr_drop_steps) or self.aae_lr_drop_steps < 0:
                 raise ValueError(f"aae_lr_drop_steps: expected 0 or a number of steps, got {self.aae_lr_drop_steps!r}")
             self.settings = replace(self.settings, aae_lr_drop_steps=int(self.aae_lr_drop_steps))
+        if self.aae_crop_box is not None:
+            self.settings = replace(self.settings, aae_crop_box=self.aae_crop_box)
         if self.settings.aae_lr_drop_steps > self.settings.aae_steps:
             raise ValueError(f"aae_lr_drop_steps: expected at most aae_steps ({self.settings.aae_steps}), got "
                              f"{self.settings.aae_lr_drop_steps}")
@@ -257,7 +267,8 @@ def _stage_pose(job: Benchmark, obj_id: int) -> dict:
         return train_aae(job.mesh(obj_id), job.pose_dir(obj_id), config, mesh_scale=0.001, seed=job.seed,
                          workers=job.settings.workers, progress=job.progress,
                          dataset=job.out / "synthetic" if crops else None, object_id=obj_id,
-                         pair_fraction=job.settings.scene_crops if crops else 0.5)
+                         pair_fraction=job.settings.scene_crops if crops else 0.5,
+                         crop_box=job.settings.aae_crop_box)
 
     # objects with one half-turn symmetry (LM-O's eggbox and glue) get the orientation network
     symmetries = load_models_info(job.mesh(obj_id).parent / MODELS_INFO)[obj_id].symmetries_discrete
@@ -353,7 +364,7 @@ def stage_done(job: Benchmark, name: str, outputs: list[Path]) -> bool:
 
 #: settings newer than some benchmark folders, with the value the versions before them used
 _EARLIER_SETTINGS = {"aae_lr_drop_steps": 0, "keypointnet_robust_steps": None, "keypointnet_robust_views": None,
-                     "validation_images": 60}
+                     "validation_images": 60, "aae_crop_box": "obj"}
 
 
 def _check_settings(job: Benchmark) -> None:
