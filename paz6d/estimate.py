@@ -39,13 +39,13 @@ from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.keypointnet.config import CROP_JITTERS, check_crops
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION, read_targets
+from paz6d.datasets.bop.fields import BOX_FIELDS, box_field
 from paz6d.ssd import run_dir as ssd_run_dir
 
 METHODS = ("aae", "keypoints", "keypointnet")
 #: ``--method`` value -> the method name of its run directories (:func:`paz6d.run_dirs.method_of`).
 RUN_METHODS = {"aae": "aae", "keypoints": "keypointnet", "keypointnet": "keypointnet"}
 _OBJECT_MESH = re.compile(r"^obj_(\d+)$")
-BOXES = {"obj": "bbox_obj", "visib": "bbox_visib"}
 DEFAULT_SCORE_THRESHOLD = 0.1
 
 
@@ -74,7 +74,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--flip", action="store_true",
                         help="with --detector: also detect on each image's mirror image and average (a second "
                              "network pass; see DetectSingleShot's flip)")
-    parser.add_argument("--box", choices=sorted(BOXES), default="obj",
+    parser.add_argument("--box", choices=sorted(BOX_FIELDS), default="obj",
                         help="without --detector, the ground-truth box given to the model: of the whole projected "
                              "object (obj) or of its visible part (visib, what a detector would see)")
     parser.add_argument("--targets-out", type=Path, default=None,
@@ -280,8 +280,7 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
 
     from paz6d.datasets.bop.reader import BOPDataset  # here: the image reader loads OpenCV, which `--help` does not need
 
-    if box not in BOXES:
-        raise ValueError(f"box: expected one of {sorted(BOXES)}, got {box!r}")
+    field = box_field(box)
     data = BOPDataset(dataset, split=split)
     estimators, unusable = None, {}  # loaded at the first instance to estimate
     estimates, targets = _Estimates(), []
@@ -307,10 +306,10 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
         for instance in instances:
             if instance.obj_id in unusable:
                 continue
-            if not instance.info or BOXES[box] not in instance.info:
-                raise ValueError(f"{dataset}: scene {sample.scene_id} image {sample.im_id} has no {BOXES[box]} in "
+            if not instance.info or field not in instance.info:
+                raise ValueError(f"{dataset}: scene {sample.scene_id} image {sample.im_id} has no {field} in "
                                  f"scene_gt_info.json (needed for the ground-truth box)")
-            x, y, width, height = instance.info[BOXES[box]]
+            x, y, width, height = instance.info[field]
             started = time.perf_counter()
             try:
                 pose = estimators[instance.obj_id](sample.image, (float(x), float(y), float(x + width),

@@ -405,6 +405,10 @@ def test_visible_box_crops_keep_the_whole_object_targets(toy_run, tmp_path):
     with pytest.raises(ValueError, match="crop_box: expected one of"):
         train_aae(mesh, tmp_path / "other", TOY, mesh_scale=0.001, workers=0, progress=False, dataset=data,
                   object_id=1, crop_box="whole")
+    with pytest.raises(ValueError, match="crop_box: 'visib' needs a BOP --dataset"):  # before anything is written
+        train_aae(mesh, tmp_path / "fat_run", TOY, mesh_scale=0.001, workers=0, progress=False, dataset=data,
+                  dataset_format="fat", object_class="x", crop_box="visib")
+    assert not (tmp_path / "fat_run").exists()
     with pytest.raises(ValueError, match="needs a BOP data set"):
         dataset_pairs(data, 1, mesh, 0.001, TOY.crop_size, TOY.padding, workers=0, progress=False,
                       dataset_format="fat", object_class="x", crop_box="visib")

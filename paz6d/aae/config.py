@@ -12,19 +12,20 @@ from pathlib import Path
 
 from paz6d.backend.checks import is_whole_number, unknown_fields
 from paz6d.cli_options import option
+from paz6d.datasets.bop.fields import BOX_FIELDS, box_field
 from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
 from paz6d.training.source import checked_mesh_scale
 from renderers.platform import PLATFORMS
 
 
-#: Boxes a data set's input crop can be cut around: the whole object's projection, or its visible part.
-CROP_BOXES = ("obj", "visib")
-
-
-def check_crop_box(crop_box: str) -> str:
-    """``crop_box`` if it is one of :data:`CROP_BOXES`, else a ValueError naming the choices."""
-    if crop_box not in CROP_BOXES:
-        raise ValueError(f"crop_box: expected one of {list(CROP_BOXES)}, got {crop_box!r}")
+def check_crop_box(crop_box: str, dataset_format: str | None = None) -> str:
+    """``crop_box``, the box a data set's input crops are cut around (a key of
+    :data:`~paz6d.datasets.bop.fields.BOX_FIELDS`); ``"visib"`` needs a BOP data set (``dataset_format``
+    ``"bop"``, or None when not known yet), the only format with visible-part boxes."""
+    box_field(crop_box, "crop_box")
+    if crop_box != "obj" and dataset_format not in (None, "bop"):
+        raise ValueError(f"crop_box: {crop_box!r} needs a BOP --dataset (visible boxes); got format "
+                         f"{dataset_format!r}")
     return crop_box
 
 
@@ -190,7 +191,7 @@ class AAETraining:
                                        "(the rest: rendered views)")
     crop_box: str = option("obj", "with a BOP --dataset: the box each input crop is cut around: obj (the whole "
                                   "object's) or visib (its visible part, as a detector's box); the clean target "
-                                  "is always the whole object's view", choices=CROP_BOXES)
+                                  "is always the whole object's view", choices=tuple(sorted(BOX_FIELDS)))
     config: str = option("quick", "quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
                                   "92,232-view codebook (hours on a CPU)", choices=tuple(sorted(CONFIGS)))
     steps: int | None = option(None, "training steps (default: the config's)")
@@ -213,10 +214,7 @@ class AAETraining:
             raise ValueError(f"steps: expected a positive number of steps, got {self.steps}")
         if not 0.0 <= self.pair_fraction <= 1.0:
             raise ValueError(f"pair_fraction: expected a fraction in [0, 1], got {self.pair_fraction}")
-        check_crop_box(self.crop_box)
-        if self.crop_box != "obj" and self.format not in (None, "bop"):
-            raise ValueError(f"crop_box: {self.crop_box!r} needs a BOP --dataset (visible boxes); got format "
-                             f"{self.format!r}")
+        check_crop_box(self.crop_box, self.format)
 
     @property
     def model_config(self) -> AAEConfig:

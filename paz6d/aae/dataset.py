@@ -23,6 +23,7 @@ from paz6d.aae.model import crop_object
 from paz6d.aae.views import render_at_transforms
 from paz6d.backend.square_crop import crop_intrinsics, square_window
 from paz6d.datasets.bop import BOPDataset
+from paz6d.datasets.bop.fields import box_field
 from paz6d.datasets.pose_crops import load_samples, object_instances
 
 
@@ -44,7 +45,7 @@ def dataset_crops(root: str | Path, obj_id: int, crop_size: int, padding: float,
     """Crops ``(N, S, S, 3)`` around each instance's ``bbox_obj`` or ``bbox_visib`` (``crop_box``), the
     intrinsics ``(N, 3, 3)`` of the crop of its whole-object box and its pose ``(N, 4, 4)``, for every
     instance of ``obj_id`` with both boxes and visible fraction >= ``min_visible_fraction``."""
-    key = f"bbox_{check_crop_box(crop_box)}"
+    key = box_field(crop_box, "crop_box")
     dataset = BOPDataset(root, split=split)
     crops, Ks, poses = [], [], []
     for sample in tqdm(dataset, total=len(dataset), desc="read data set", unit="img", disable=not progress,

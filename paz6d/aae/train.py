@@ -169,7 +169,8 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     if not mesh_path.is_file():
         raise ValueError(f"--mesh: {mesh_path}: mesh file not found")
     dataset = None if dataset is None else Path(dataset)
-    config, seed = _prepare_run(run_dir, mesh_path, mesh_scale, config, seed, dataset, check_crop_box(crop_box))
+    check_crop_box(crop_box, dataset_format)  # before the run directory records it
+    config, seed = _prepare_run(run_dir, mesh_path, mesh_scale, config, seed, dataset, crop_box)
     geometry_data = _object_geometry(run_dir, mesh_path, mesh_scale, seed)
     geometry = ViewGeometry.for_points(geometry_data["vertices"], config.render_size)
     pairs, tick = None, time.perf_counter()

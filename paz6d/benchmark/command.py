@@ -10,10 +10,10 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
-from paz6d.aae.config import CROP_BOXES
 from paz6d.backend.paths import check_output_folder
 from paz6d.benchmark.lmo import DEFAULT_LMO, METHODS, Benchmark, run_benchmark
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
+from paz6d.datasets.bop.fields import BOX_FIELDS
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ class LmoOptions:
                                                  "--aae-steps on a finished --out the drop moves to the new end")
     aae_crop_box: str | None = option(None, "the box the AAEs' scene crops are cut around: obj (whole object) or "
                                             "visib (visible part, as at test time) (default: the sizes' own, "
-                                            "docs/real_photos.md)", choices=CROP_BOXES)
+                                            "docs/real_photos.md)", choices=tuple(sorted(BOX_FIELDS)))
     jobs: int = option(1, "pose models trained side by side, each in its own process with its share of the CPU "
                           "cores (2 on 2 cores: 1.2x faster, docs/real_photos.md)")
     progress: bool = option(True, "progress bars")

@@ -11,7 +11,18 @@ from pathlib import Path
 from paz6d.backend.checks import integer_field, number_field, required_field
 from paz6d.backend.files import load_json
 
-__all__ = ["entries_by_id", "integer_field", "number_field", "required_field"]
+__all__ = ["BOX_FIELDS", "box_field", "entries_by_id", "integer_field", "number_field", "required_field"]
+
+#: The ground-truth boxes of ``scene_gt_info.json`` by short name: the whole projected object, its visible part.
+BOX_FIELDS = {"obj": "bbox_obj", "visib": "bbox_visib"}
+
+
+def box_field(box: str, name: str = "box") -> str:
+    """The ``scene_gt_info.json`` field of ``box`` (a key of :data:`BOX_FIELDS`); ``name`` names the
+    argument in the ValueError for any other value."""
+    if box not in BOX_FIELDS:
+        raise ValueError(f"{name}: expected one of {sorted(BOX_FIELDS)}, got {box!r}")
+    return BOX_FIELDS[box]
 
 
 def entries_by_id(path: Path, kind: str = "image") -> dict[int, object]:
