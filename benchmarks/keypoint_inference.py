@@ -28,7 +28,7 @@ def _random_run(folder: Path, settings: dict) -> Path:
     """A run directory with a randomly initialised KeypointNet of ``settings`` and a random 3D keypoint set."""
     from paz6d.keypointnet.model import build_keypointnet, save_keypointnet
     from paz6d.keypointnet import run_dir as run_files
-    from paz6d.keypointnet.config import resolve_precision
+    from paz6d.training.precision import resolve_precision
 
     model = build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
                               settings["downsample"], tuple(settings["dilations"]),

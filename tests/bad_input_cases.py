@@ -934,6 +934,7 @@ def train_cases() -> list[Case]:
         "--mesh-scale": [(("nan",), ""), (("0",), "")],
         "--pair-fraction": [(("2",), ""), (("nan",), ""), (("-0.5",), "")],
         "--crop-box": [(("whole",), "whole")],
+        "--precision": [(("half",), "half")],
         "--seed": [(("-1",), "")],
         "--config": [(("huge",), "")],
         "--out": [(("{world}/results.csv",), "results.csv"), (("/dev/null",), "/dev/null")],

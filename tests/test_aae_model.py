@@ -93,3 +93,25 @@ def test_model_input_checks():
         aae.to_model_input(np.zeros((1, 4, 4, 3), np.float32))
     with pytest.raises(ValueError, match="RGB"):
         aae.to_model_input(np.zeros((1, 4, 4, 4), np.uint8))
+
+
+def test_bfloat16_body_keeps_the_code_and_reconstruction_float32(tmp_path):
+    model = aae.build_autoencoder(**TINY, batch_norm=True, compute_dtype="bfloat16")
+    encoder = aae.encoder_of(model)
+    decoder = model.get_layer(aae.DECODER_NAME)
+    assert encoder.get_layer("encoder_conv0").compute_dtype == "bfloat16"
+    assert decoder.get_layer("decoder_deconv0").compute_dtype == "bfloat16"
+    assert encoder.get_layer("latent").compute_dtype == "float32"
+    assert decoder.get_layer("reconstruction").compute_dtype == "float32"
+    assert all(weight.dtype == "float32" for weight in model.weights)
+    x = np.random.default_rng(4).random((3, 16, 16, 3), dtype=np.float32)
+    output, code = model(x), encoder(x)
+    assert output.dtype == "float32" and code.dtype == "float32"
+    reference = aae.build_autoencoder(**TINY, batch_norm=True)  # the same weights, computed in float32
+    reference.set_weights(model.get_weights())
+    np.testing.assert_allclose(np.asarray(code), np.asarray(aae.encoder_of(reference)(x)), rtol=0.05, atol=0.02)
+    loaded = aae.load_model(aae.save_model(model, tmp_path / "bf16.keras"))
+    assert aae.encoder_of(loaded).get_layer("encoder_conv0").compute_dtype == "bfloat16"
+    np.testing.assert_array_equal(np.asarray(loaded(x)), np.asarray(output))
+    with pytest.raises(ValueError, match="compute_dtype: expected one of"):
+        aae.build_encoder(**TINY, compute_dtype="float16")

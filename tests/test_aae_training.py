@@ -351,6 +351,35 @@ def test_boxes_far_larger_than_the_image_are_rejected_at_once(toy_run):
         assert time.perf_counter() - started < 1.0  # was > 10 minutes (blur and resampling grew with the box)
 
 
+def test_precision_is_resolved_once_recorded_and_kept_on_resume(toy_run, monkeypatch):
+    """A new run records the resolved precision and builds its model with it; a resume keeps the stored one."""
+    from paz6d.aae.config import AAEConfig, AAETraining
+    from paz6d.aae.model import encoder_of, load_model
+    from paz6d.training import precision
+
+    monkeypatch.setattr(precision, "native_bfloat16", lambda: True)  # "auto" resolves to bfloat16 on a CPU
+    expected = precision.resolve_precision("auto")
+    root, mesh, _ = toy_run
+    run = root / "precision"
+    run.mkdir()
+    for name in ("object.npz", "views.npz"):  # cached: no rendering
+        shutil.copy(root / "run" / name, run / name)
+    summary = train_aae(mesh, run, replace(TOY, steps=10, precision="auto"), mesh_scale=0.001, workers=0,
+                        progress=False)
+    stored = json.loads((run / "config.json").read_text())["config"]
+    assert stored["precision"] == summary["precision"] == expected
+    assert encoder_of(load_model(run / "model.keras")).get_layer("encoder_conv0").compute_dtype == expected
+    summary = train_aae(mesh, run, replace(TOY, steps=15, precision="float32"), mesh_scale=0.001, workers=0,
+                        progress=False)
+    assert summary["precision"] == expected and summary["resumed_from_step"] == 10
+    legacy = {key: value for key, value in json.loads(json.dumps(stored)).items() if key != "precision"}
+    assert AAEConfig.from_dict(legacy).precision == "float32"  # runs from before the setting
+    assert AAETraining(out=root / "x", mesh=mesh, precision="bfloat16").model_config.precision == "bfloat16"
+    assert AAETraining(out=root / "x", mesh=mesh).model_config.precision == "auto"
+    with pytest.raises(ValueError, match="AAEConfig.precision: expected 'auto'"):
+        replace(TOY, precision="half")
+
+
 def test_config_json_round_trip_and_unknown_fields_at_either_level_are_named():
     from dataclasses import asdict
 

@@ -79,15 +79,6 @@ def test_bfloat16_body_with_float32_heads_survives_save_and_load(tmp_path):
         kp.build_keypointnet(compute_dtype="float16")
 
 
-@pytest.mark.parametrize("flags, expected", [("fpu avx2 avx512f", False), ("fpu avx512f avx512_bf16 avx512vl", True),
-                                             ("fpu amx_bf16 amx_tile", True), ("fpu avx512_bf16x", False)])
-def test_native_bfloat16_reads_the_cpu_flags(tmp_path, flags, expected):
-    cpuinfo = tmp_path / "cpuinfo"
-    cpuinfo.write_text(f"processor\t: 0\nflags\t\t: {flags}\n")
-    assert kp.native_bfloat16(cpuinfo) is expected
-    assert kp.native_bfloat16(tmp_path / "missing") is False
-
-
 def test_save_load_round_trip_gives_identical_outputs(tiny_model, tmp_path):
     path = kp.save_keypointnet(tiny_model, tmp_path / "model.keras")
     loaded = kp.load_keypointnet(path)

@@ -390,19 +390,6 @@ def test_bop_object_views_crop_around_visible_instances(mesh_path, tmp_path):
         bop_object_views(tmp_path, input_size=32, max_views=1)
 
 
-def test_precision_setting_resolves_auto_from_the_cpu(monkeypatch):
-    from paz6d.keypointnet import model as kp
-    from paz6d.keypointnet.config import resolve_precision
-
-    assert resolve_precision("float32") == "float32" and resolve_precision("bfloat16") == "bfloat16"
-    monkeypatch.setattr(kp, "native_bfloat16", lambda: True)
-    assert resolve_precision("auto") == ("float32" if kp.tf.config.list_physical_devices("GPU") else "bfloat16")
-    monkeypatch.setattr(kp, "native_bfloat16", lambda: False)
-    assert resolve_precision("auto") == "float32"
-    with pytest.raises(ValueError, match="precision: expected 'auto'"):
-        resolve_precision("half")
-
-
 def test_keypoint_demo_trains_evaluates_and_reports(mesh_path, tmp_path, capsys):
     from paz6d.demo.keypoint_demo import run_keypoint_demo
 

@@ -14,6 +14,7 @@ from paz6d.backend.checks import is_whole_number, unknown_fields
 from paz6d.cli_options import option
 from paz6d.datasets.bop.fields import BOX_FIELDS, box_field
 from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
+from paz6d.training.precision import PRECISIONS
 from paz6d.training.source import checked_mesh_scale
 from renderers.platform import PLATFORMS
 
@@ -98,6 +99,10 @@ class AAEConfig:
             throughout). Extending a finished run (more ``steps``) moves the drop to the new end.
         lr_drop_factor: the rate's factor for those steps, in (0, 1].
         bootstrap_fraction: fraction of largest pixel errors in the loss (1 = plain L2; paper 0.25).
+        precision: compute dtype of the network's convolutions: ``"float32"``, ``"bfloat16"`` (float32
+            weights, latent code and reconstruction) or ``"auto"`` (bfloat16 on CPUs that compute it
+            natively, :mod:`paz6d.training.precision`). A new run directory records the resolved value;
+            runs from before the setting are float32.
         augmentation: input augmentation strengths.
         checkpoint_every / sample_every / log_every: Trainer intervals in steps.
     """
@@ -117,6 +122,7 @@ class AAEConfig:
     lr_drop_steps: int = 0
     lr_drop_factor: float = 0.1
     bootstrap_fraction: float = 0.25
+    precision: str = "float32"
     augmentation: Augmentation = field(default_factory=Augmentation)
     checkpoint_every: int = 500
     sample_every: int = 500
@@ -128,6 +134,8 @@ class AAEConfig:
                              f"got {self.lr_drop_steps!r}")
         if not 0.0 < self.lr_drop_factor <= 1.0:
             raise ValueError(f"AAEConfig.lr_drop_factor: expected a factor in (0, 1], got {self.lr_drop_factor!r}")
+        if self.precision not in ("auto",) + PRECISIONS:
+            raise ValueError(f"AAEConfig.precision: expected 'auto' or one of {PRECISIONS}, got {self.precision!r}")
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -157,13 +165,13 @@ class AAEConfig:
 #: Sized for a 2-core CPU (the demo): 64x64 crops, batch normalisation (several times faster convergence),
 #: latent 128, 1,000 views x 72 in-plane = 72,000-entry codebook, 5,000 steps (~10 minutes); small crop
 #: shifts (the demo uses ground-truth boxes: measured, shifts of +-8 % doubled the rotation error at this
-#: training length).
-QUICK = AAEConfig(latent_size=128, batch_norm=True, in_plane=72, steps=5000,
+#: training length). Convolutions in bfloat16 on CPUs that compute it natively (1.5 times faster steps).
+QUICK = AAEConfig(latent_size=128, batch_norm=True, in_plane=72, steps=5000, precision="auto",
                   augmentation=Augmentation(shift=0.03, scale=(0.95, 1.05)))
 #: The paper's setting: 128x128 crops, latent 128, 30k iterations of 64, 2,562 x 36 = 92,232 codebook views.
 FULL = AAEConfig(crop_size=128, latent_size=128, filters=(128, 256, 256, 512), render_size=192, views=2562,
                  in_plane=36, steps=30000, batch_size=64, learning_rate=2e-4, checkpoint_every=1000,
-                 sample_every=2000, log_every=50)
+                 sample_every=2000, log_every=50, precision="auto")
 CONFIGS = {"quick": QUICK, "full": FULL}
 
 
@@ -195,6 +203,9 @@ class AAETraining:
     config: str = option("quick", "quick: 64x64, minutes on a 2-core CPU; full: the paper's 128x128, 30k steps, "
                                   "92,232-view codebook (hours on a CPU)", choices=tuple(sorted(CONFIGS)))
     steps: int | None = option(None, "training steps (default: the config's)")
+    precision: str | None = option(None, "compute dtype of the convolutions (default: the config's, auto: bfloat16 "
+                                         "on CPUs that compute it natively, else float32); a resumed run keeps its "
+                                         "own", choices=("auto",) + PRECISIONS)
     seed: int = option(0, "seed of the model initialisation and of the data stream")
     mesh_scale: float | None = option(None, "mesh units to metres (default: 1 with --mesh, --dataset-mesh or a "
                                             "YCB-Video model; 0.001 for BOP models, which are millimetres)")
@@ -218,6 +229,8 @@ class AAETraining:
 
     @property
     def model_config(self) -> AAEConfig:
-        """The preset :attr:`config` with :attr:`steps` applied."""
+        """The preset :attr:`config` with :attr:`steps` and :attr:`precision` applied."""
         preset = CONFIGS[self.config]
+        if self.precision is not None:
+            preset = replace(preset, precision=self.precision)
         return preset if self.steps is None else replace(preset, steps=self.steps)

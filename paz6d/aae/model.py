@@ -23,6 +23,7 @@ import numpy as np
 from paz6d.backend.square_crop import crop_square, square_window
 from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.tensorflow_guard import import_keras, load_keras_model
+from paz6d.training.precision import body_policy
 
 ENCODER_NAME = "encoder"
 DECODER_NAME = "decoder"
@@ -41,60 +42,66 @@ def _check_architecture(input_size: int, latent_size: int, filters: Sequence[int
         raise ValueError(f"kernel_size: expected a positive integer, got {kernel_size}")
 
 
-def _activate(keras, x, batch_norm: bool, name: str):
-    """ReLU, preceded by batch normalisation when ``batch_norm``."""
+def _activate(keras, x, batch_norm: bool, name: str, body: str):
+    """ReLU, preceded by batch normalisation when ``batch_norm`` (dtype policy ``body``)."""
     if batch_norm:
-        x = keras.layers.BatchNormalization(name=f"{name}_bn")(x)
-    return keras.layers.ReLU(name=f"{name}_relu")(x)
+        x = keras.layers.BatchNormalization(name=f"{name}_bn", dtype=body)(x)
+    return keras.layers.ReLU(name=f"{name}_relu", dtype=body)(x)
 
 
 def build_encoder(input_size: int = 64, latent_size: int = 64, filters: Sequence[int] = (32, 64, 64, 128),
-                  kernel_size: int = 5, batch_norm: bool = False):
+                  kernel_size: int = 5, batch_norm: bool = False, compute_dtype: str = "float32"):
     """Encoder ``(B, S, S, 3) -> (B, latent_size)``: strided convolutions (ReLU, optional batch
     normalisation), then a linear dense layer.
 
     The paper's architecture is ``input_size=128, latent_size=128, filters=(128, 256, 256, 512)``, 5×5 kernels.
+    With ``compute_dtype="bfloat16"`` the convolutions compute in bfloat16 (float32 weights); the latent
+    code, which the codebook compares by cosine similarity, is always float32.
     """
     _check_architecture(input_size, latent_size, filters, kernel_size)
+    body = body_policy(compute_dtype)
     keras = import_keras()
     inputs = keras.Input((input_size, input_size, 3), name="crop")
     x = inputs
     for index, channels in enumerate(filters):
         x = keras.layers.Conv2D(int(channels), kernel_size, strides=2, padding="same", use_bias=not batch_norm,
-                                name=f"encoder_conv{index}")(x)
-        x = _activate(keras, x, batch_norm, f"encoder_conv{index}")
-    x = keras.layers.Flatten(name="encoder_flatten")(x)
-    code = keras.layers.Dense(int(latent_size), name="latent")(x)
+                                name=f"encoder_conv{index}", dtype=body)(x)
+        x = _activate(keras, x, batch_norm, f"encoder_conv{index}", body)
+    x = keras.layers.Flatten(name="encoder_flatten", dtype=body)(x)
+    code = keras.layers.Dense(int(latent_size), name="latent", dtype="float32")(x)
     return keras.Model(inputs, code, name=ENCODER_NAME)
 
 
 def build_decoder(input_size: int = 64, latent_size: int = 64, filters: Sequence[int] = (32, 64, 64, 128),
-                  kernel_size: int = 5, batch_norm: bool = False):
+                  kernel_size: int = 5, batch_norm: bool = False, compute_dtype: str = "float32"):
     """Decoder ``(B, latent_size) -> (B, S, S, 3)`` in [0, 1]: dense layer, then strided transposed
-    convolutions mirroring the encoder, sigmoid output."""
+    convolutions mirroring the encoder, sigmoid output (always float32, as the loss)."""
     _check_architecture(input_size, latent_size, filters, kernel_size)
+    body = body_policy(compute_dtype)
     keras = import_keras()
     side = input_size // 2 ** len(filters)
     code = keras.Input((int(latent_size),), name="code")
-    x = keras.layers.Dense(side * side * int(filters[-1]), use_bias=not batch_norm, name="decoder_dense")(code)
-    x = _activate(keras, x, batch_norm, "decoder_dense")
-    x = keras.layers.Reshape((side, side, int(filters[-1])), name="decoder_reshape")(x)
+    x = keras.layers.Dense(side * side * int(filters[-1]), use_bias=not batch_norm, name="decoder_dense",
+                           dtype=body)(code)
+    x = _activate(keras, x, batch_norm, "decoder_dense", body)
+    x = keras.layers.Reshape((side, side, int(filters[-1])), name="decoder_reshape", dtype=body)(x)
     for index, channels in enumerate(list(filters[:-1])[::-1]):
         x = keras.layers.Conv2DTranspose(int(channels), kernel_size, strides=2, padding="same",
-                                         use_bias=not batch_norm, name=f"decoder_deconv{index}")(x)
-        x = _activate(keras, x, batch_norm, f"decoder_deconv{index}")
+                                         use_bias=not batch_norm, name=f"decoder_deconv{index}", dtype=body)(x)
+        x = _activate(keras, x, batch_norm, f"decoder_deconv{index}", body)
     image = keras.layers.Conv2DTranspose(3, kernel_size, strides=2, padding="same", activation="sigmoid",
-                                         name="reconstruction")(x)
+                                         name="reconstruction", dtype="float32")(x)
     return keras.Model(code, image, name=DECODER_NAME)
 
 
 def build_autoencoder(input_size: int = 64, latent_size: int = 64, filters: Sequence[int] = (32, 64, 64, 128),
-                      kernel_size: int = 5, batch_norm: bool = False):
+                      kernel_size: int = 5, batch_norm: bool = False, compute_dtype: str = "float32"):
     """Autoencoder ``(B, S, S, 3) -> (B, S, S, 3)`` made of the nested models ``encoder`` and ``decoder``
-    (reach them with :func:`encoder_of` / ``model.get_layer("decoder")``)."""
+    (reach them with :func:`encoder_of` / ``model.get_layer("decoder")``); ``compute_dtype`` as in
+    :func:`build_encoder`."""
     keras = import_keras()
-    encoder = build_encoder(input_size, latent_size, filters, kernel_size, batch_norm)
-    decoder = build_decoder(input_size, latent_size, filters, kernel_size, batch_norm)
+    encoder = build_encoder(input_size, latent_size, filters, kernel_size, batch_norm, compute_dtype)
+    decoder = build_decoder(input_size, latent_size, filters, kernel_size, batch_norm, compute_dtype)
     inputs = keras.Input((input_size, input_size, 3), name="augmented_crop")
     return keras.Model(inputs, decoder(encoder(inputs)), name="augmented_autoencoder")
 

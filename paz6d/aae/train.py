@@ -22,12 +22,13 @@ from paz6d.aae import run_dir as run_files
 from paz6d.aae.codebook import fibonacci_sphere, look_at_rotations
 from paz6d.aae.config import QUICK, AAEConfig, check_crop_box
 from paz6d.backend.files import read_cache, save_npz_atomically
-
+from paz6d.training.precision import resolve_precision
 
 
 def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEConfig, seed: int,
                  dataset: Path | None, crop_box: str) -> tuple[AAEConfig, int]:
-    """Writes ``config.json`` for a new run, or reads the stored one (only ``steps`` may change)."""
+    """Writes ``config.json`` for a new run (``precision`` resolved), or reads the stored one (only ``steps``
+    may change)."""
     path = run_files.config_path(run_dir)
     if path.exists():
         stored = run_files.read_config(run_dir)
@@ -46,6 +47,8 @@ def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEC
             raise ValueError(f"{path}: this run directory's data set crops were cut around the "
                              f"{stored.get('crop_box', 'obj')!r} boxes; use another --out for --crop-box {crop_box}")
         config, seed = replace(stored_config, steps=config.steps), int(stored["seed"])
+    else:
+        config = replace(config, precision=resolve_precision(config.precision))
     run_files.write_config(run_dir, config.to_dict(), mesh_path, mesh_scale, seed, dataset, crop_box)
     return config, seed
 
@@ -185,7 +188,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     loader_speed = measure_loader(sampler, config.batch_size)
     keras.utils.set_random_seed(seed)
     model = build_autoencoder(config.crop_size, config.latent_size, config.filters, config.kernel_size,
-                              config.batch_norm)
+                              config.batch_norm, config.precision)
     optimizer = keras.optimizers.Adam(config.learning_rate)
 
     def loss_fn(model, batch):
@@ -214,6 +217,6 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     summary = {"steps": training.final_step, "resumed_from_step": training.start_step,
                "final_metrics": training.metrics, "loader_samples_per_second_one_thread": loader_speed,
                "model_samples_per_second": training.model_samples_per_second,
-               "codebook_size": len(codebook), "dataset_pairs": 0 if pairs is None else len(pairs), **timings}
+               "precision": config.precision, "codebook_size": len(codebook), "dataset_pairs": 0 if pairs is None else len(pairs), **timings}
     run_files.write_summary(run_dir, summary)
     return summary

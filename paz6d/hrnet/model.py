@@ -28,12 +28,12 @@ from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
                                             output_names)
 from paz6d.hrnet.config import STRIDE
+from paz6d.training.precision import body_policy
 
 tf = import_tensorflow()
 keras = import_keras()
 
 OUTPUT_NAME = "heatmaps"
-COMPUTE_DTYPES = ("float32", "bfloat16")
 
 
 class HRNetError(ValueError):
@@ -52,11 +52,10 @@ def _check_arguments(num_keypoints: int, input_size: int, widths: Sequence[int],
     coarsest = STRIDE * 2 ** (len(widths) - 1)
     if input_size < coarsest or input_size % coarsest:
         raise ValueError(f"input_size: expected a multiple of {coarsest} (the coarsest branch's stride), got {input_size}")
+    body_policy(compute_dtype)  # checks it
     if blocks < 1 or stem_width < 1 or stem_blocks < 0:
         raise ValueError(f"blocks/stem_width/stem_blocks: expected >= 1, >= 1, >= 0, got {blocks}, {stem_width}, "
                          f"{stem_blocks}")
-    if compute_dtype not in COMPUTE_DTYPES:
-        raise ValueError(f"compute_dtype: expected one of {COMPUTE_DTYPES}, got {compute_dtype!r}")
 
 
 def build_hrnet(num_keypoints: int, input_size: int = 128, widths: Sequence[int] = (24, 48, 96),
@@ -79,7 +78,7 @@ def build_hrnet(num_keypoints: int, input_size: int = 128, widths: Sequence[int]
     """
     _check_arguments(num_keypoints, input_size, widths, stage_modules, blocks, stem_width, stem_blocks, compute_dtype)
     widths = [int(width) for width in widths]
-    body = "mixed_bfloat16" if compute_dtype == "bfloat16" else "float32"
+    body = body_policy(compute_dtype)
     layers = keras.layers
 
     def conv_bn(x, filters, name, kernel=3, stride=1, relu=True):

@@ -30,7 +30,7 @@ from paz6d.hrnet.config import FIXED_SETTINGS, MARGIN, STRIDE, HRNetTraining
 from paz6d.hrnet.evaluate import (HEADLINE_ALPHA, save_keypoint_grid, save_pck_plot, score_keypoints, score_poses,
                                   true_keypoints)
 from paz6d.hrnet.heatmaps import DEFAULT_DECODER, decode_heatmaps
-from paz6d.keypointnet.config import resolve_precision
+from paz6d.training.precision import resolve_precision
 from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
 from paz6d.processors.predict import predict_in_batches
 

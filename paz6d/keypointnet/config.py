@@ -58,7 +58,6 @@ def check_crops(count: int, name: str = "crops") -> int:
 
 
 MODES = ("discovery", "supervised")
-PRECISIONS = ("float32", "bfloat16")  # compute dtype of the network body (see build_keypointnet)
 LIFTINGS = ("triangulate", "median")
 #: A lifted keypoint is usable when its median re-projection error over the lifting views is below
 #: this fraction of the crop side.
@@ -177,13 +176,3 @@ def anchors_due(step: int, lifted_at: int | None, settings: dict) -> bool:
     return lifted_at is None or step - lifted_at >= int(settings.get("anchor_every", 250))
 
 
-def resolve_precision(precision: str) -> str:
-    """``"float32"`` or ``"bfloat16"`` for a ``precision`` setting; ``"auto"`` is bfloat16 on CPUs that
-    compute it natively (:func:`paz6d.keypointnet.model.native_bfloat16`) when TensorFlow sees no GPU."""
-    if precision == "auto":
-        from paz6d.keypointnet.model import native_bfloat16, tf
-
-        return "bfloat16" if native_bfloat16() and not tf.config.list_physical_devices("GPU") else "float32"
-    if precision not in PRECISIONS:
-        raise ValueError(f"precision: expected 'auto' or one of {PRECISIONS}, got {precision!r}")
-    return precision

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import save_keras_model_atomically
+from paz6d.training.precision import body_policy
 from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
                                             output_names)
 
@@ -40,7 +41,6 @@ keras = import_keras()
 PACKAGE = "paz6d"
 OUTPUT_NAMES = ("uv", "depth", "probabilities")
 ORIENTATION_OUTPUTS = ("chart_logits", "chart")
-COMPUTE_DTYPES = ("float32", "bfloat16")
 
 
 class KeypointNetError(ValueError):
@@ -150,7 +150,7 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
             light U-Net decoder). Finer maps for little more compute than the coarse stack.
         compute_dtype: ``"float32"`` or ``"bfloat16"``: the convolutional body computes in bfloat16
             with float32 weights (Keras ``mixed_bfloat16``; faster on CPUs with native bf16 such as
-            AVX512-BF16/AMX, see :func:`native_bfloat16`); the 1×1 heads and the spatial softmax and
+            AVX512-BF16/AMX, see :mod:`paz6d.training.precision`); the 1×1 heads and the spatial softmax and
             expectation always run in float32, so keypoints keep sub-pixel resolution.
         orientation: add the orientation network for a 2-fold symmetric object
             (:mod:`paz6d.keypointnet.orientation`): three strided convolutions on the stem's features,
@@ -175,9 +175,7 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
     if filters < 1 or not dilations or any(int(rate) < 1 for rate in dilations):
         raise ValueError(f"filters/dilations: expected filters >= 1 and positive dilation rates, "
                          f"got {filters}, {dilations}")
-    if compute_dtype not in COMPUTE_DTYPES:
-        raise ValueError(f"compute_dtype: expected one of {COMPUTE_DTYPES}, got {compute_dtype!r}")
-    body = "mixed_bfloat16" if compute_dtype == "bfloat16" else "float32"
+    body = body_policy(compute_dtype)
     layers = keras.layers
     made = {}
 
@@ -242,18 +240,6 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
 def has_orientation(model) -> bool:
     """Whether ``model`` carries the orientation network (outputs ``chart_logits`` and ``chart``)."""
     return set(ORIENTATION_OUTPUTS) <= output_names(model)
-
-
-def native_bfloat16(cpuinfo: str | Path = "/proc/cpuinfo") -> bool:
-    """Whether this CPU computes bfloat16 natively (``avx512_bf16`` or ``amx_bf16`` flags, Linux).
-
-    Elsewhere TensorFlow emulates bfloat16 and a ``"bfloat16"`` model trains slower than float32.
-    """
-    try:
-        flags = Path(cpuinfo).read_text()
-    except OSError:
-        return False
-    return any(flag in flags.split() for flag in ("avx512_bf16", "amx_bf16"))
 
 
 def save_keypointnet(model, path: str | Path) -> Path:

@@ -39,10 +39,10 @@ from paz6d.backend.transform import apply, compose, invert
 from paz6d.keypointnet import run_dir as run_files
 from paz6d.keypointnet.config import (DISCOVERY_WEIGHTS, LIFTINGS, MAX_LIFTING_ERROR, ORIENTATION_WEIGHT,
                                       OTHER_CHART_PROBABILITY, SEPARATION_DELTA, SEPARATION_DELTA_IMAGE,
-                                      SUPERVISED_WEIGHTS, KeypointTraining, anchors_due, pair_angle_at,
-                                      resolve_precision)
+                                      SUPERVISED_WEIGHTS, KeypointTraining, anchors_due, pair_angle_at)
 from paz6d.keypointnet.orientation import canonical_poses, chart_targets, one_hot, training_charts
 from paz6d.processors.predict import predict_in_batches
+from paz6d.training.precision import resolve_precision
 
 
 # ------------------------------------------------------------------------------- run directory

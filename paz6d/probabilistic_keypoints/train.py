@@ -31,7 +31,7 @@ import numpy as np
 from evaluation.calibration import ellipse_coverage, mahalanobis_squared, plot_calibration
 from evaluation.pose_errors import add_error, rotation_error_deg, translation_error
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
-from paz6d.keypointnet.config import resolve_precision
+from paz6d.training.precision import resolve_precision
 from paz6d.keypointnet.keypoints import triangulate_keypoints
 from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
 from paz6d.probabilistic_keypoints import run_dir as run_files
