@@ -26,12 +26,13 @@ def measure(config, entries: int, batch: int, repeats: int) -> dict:
     from paz6d.backend.tensorflow_guard import import_keras
     from paz6d.aae.model import build_encoder, encode_function, to_model_input
     from paz6d.aae.codebook import Codebook
+    from paz6d.training.precision import resolve_precision
 
     keras = import_keras()
     keras.utils.set_random_seed(0)
     crop_size, latent_size = config.crop_size, config.latent_size
     encoder = encode_function(build_encoder(crop_size, latent_size, config.filters, config.kernel_size,
-                                            config.batch_norm))  # as ImplicitPose6D runs it
+                                            config.batch_norm, resolve_precision(config.precision)))  # as trained
     rng = np.random.default_rng(0)
     codebook = Codebook(rng.normal(size=(entries, latent_size)), np.broadcast_to(np.eye(3), (entries, 3, 3)),
                         np.tile([0.0, 0.0, 10.0, 10.0], (entries, 1)), np.eye(3), 1.0)

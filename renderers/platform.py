@@ -114,7 +114,9 @@ def select_platform(platform: str | None = None) -> str:
     """Chooses the OpenGL platform and sets ``PYOPENGL_PLATFORM`` for this process.
 
     Order: ``platform`` argument, environment variable ``PAZ6D_GL_PLATFORM``, the platform
-    OpenGL is already bound to, then EGL if it initializes, else OSMesa.
+    OpenGL is already bound to, then EGL if it initializes, else OSMesa. With EGL it also sets
+    ``PYGLET_HEADLESS=true`` unless set: pyglet, which pyrender imports for its viewer, then loads no X11
+    libraries (a GPU machine without them failed at ``import pyrender``).
 
     Raises:
         ValueError: unknown platform, or a platform other than the one this process already uses.
@@ -136,6 +138,8 @@ def select_platform(platform: str | None = None) -> str:
         reason = _PROBES[candidate]()
         if reason is None:
             os.environ["PYOPENGL_PLATFORM"] = candidate
+            if candidate == "egl":  # pyrender imports pyglet, whose X11 window code a headless machine may lack
+                os.environ.setdefault("PYGLET_HEADLESS", "true")
             return candidate
         reasons[candidate] = reason
     raise PlatformUnavailableError(_unavailable_message(reasons))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from renderers import PlatformUnavailableError, Renderer, platform
@@ -10,7 +12,7 @@ from renderers import PlatformUnavailableError, Renderer, platform
 @pytest.fixture(autouse=True)
 def keep_environment(monkeypatch):
     monkeypatch.delenv("PAZ6D_GL_PLATFORM", raising=False)
-    monkeypatch.setenv("PYOPENGL_PLATFORM", __import__("os").environ.get("PYOPENGL_PLATFORM", ""))
+    monkeypatch.setenv("PYOPENGL_PLATFORM", os.environ.get("PYOPENGL_PLATFORM", ""))
 
 
 def test_unknown_platform_names_the_argument_or_variable(monkeypatch):
@@ -48,6 +50,20 @@ def test_a_requested_platform_is_probed_alone(monkeypatch):
     assert platform.select_platform() == "osmesa"  # auto falls back
     with pytest.raises(PlatformUnavailableError, match="egl: eglInitialize failed"):
         platform.select_platform("egl")
+
+
+def test_egl_makes_pyglet_headless_unless_the_user_chose(monkeypatch):
+    monkeypatch.setattr(platform, "_active_platform", lambda: None)
+    monkeypatch.setitem(platform._PROBES, "egl", lambda: None)
+    monkeypatch.setitem(platform._PROBES, "osmesa", lambda: None)
+    monkeypatch.delenv("PYGLET_HEADLESS", raising=False)
+    assert platform.select_platform("osmesa") == "osmesa"
+    assert "PYGLET_HEADLESS" not in os.environ
+    assert platform.select_platform("egl") == "egl"
+    assert os.environ["PYGLET_HEADLESS"] == "true"
+    monkeypatch.setenv("PYGLET_HEADLESS", "false")
+    platform.select_platform("egl")
+    assert os.environ["PYGLET_HEADLESS"] == "false"
 
 
 def test_missing_debian_packages_asks_dpkg():
