@@ -298,10 +298,10 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
                  "5=keypointnet_robust", "--object-method", "1=keypointnet", "--no-progress"]) == 0
     assert jobs[1].object_methods == {1: "keypointnet", 5: "keypointnet_robust"}
-    assert jobs[1].jobs == 1
-    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--jobs", "2",
+    assert jobs[1].jobs == 2  # side by side by default
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--jobs", "1",
                  "--no-progress"]) == 0
-    assert jobs[2].jobs == 2 and jobs[2].settings.aae_crop_box == lmo.FULL.aae_crop_box
+    assert jobs[2].jobs == 1 and jobs[2].settings.aae_crop_box == lmo.FULL.aae_crop_box
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-crop-box", "visib",
                  "--quick", "--no-progress"]) == 0
     assert jobs[3].settings == replace(lmo.QUICK, aae_crop_box="visib")
