@@ -179,6 +179,27 @@ def test_saturation_and_hue_adjustments_match_scikit_image(picture):
     assert np.abs(full_turn.astype(int) - picture).max() <= 4
 
 
+@pytest.mark.parametrize("amount", [-250.0, -37.5, 0.0, 13.0, 0.45, 1.7, 400.0])
+def test_colour_adjustments_equal_their_per_pixel_rules(picture, amount):
+    """The 256-entry tables give exactly what the per-pixel float rules give."""
+    import cv2
+
+    values = picture.astype(np.float32)
+    rule = lambda x: np.clip(np.rint(x), 0, 255).astype(np.uint8)  # noqa: E731
+    np.testing.assert_array_equal(image.adjust_brightness(picture, amount), rule(values + np.float32(amount)))
+    factor = abs(amount) % 3.0
+    mean = picture.reshape(-1, 3).mean(axis=0).astype(np.float32)
+    contrast = rule((values - mean) * np.float32(factor) + mean)
+    assert np.abs(image.adjust_contrast(picture, factor).astype(int) - contrast).max() <= 1  # the mean's rounding
+    hsv = cv2.cvtColor(picture, cv2.COLOR_RGB2HSV_FULL).astype(np.float32)
+    hsv[..., 1] = np.clip(hsv[..., 1] * np.float32(factor), 0, 255)
+    np.testing.assert_array_equal(image.adjust_saturation(picture, factor),
+                                  cv2.cvtColor(rule(hsv), cv2.COLOR_HSV2RGB_FULL))
+    hsv = cv2.cvtColor(picture, cv2.COLOR_RGB2HSV)
+    hsv[..., 0] = np.mod(np.rint(hsv[..., 0].astype(np.float32) + np.float32(amount / 2.0)), 180).astype(np.uint8)
+    np.testing.assert_array_equal(image.adjust_hue(picture, amount), cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB))
+
+
 def test_gaussian_blur_matches_a_separable_reference(picture):
     size, sigma = 5, 1.3
     offsets = np.arange(size) - size // 2

@@ -227,30 +227,40 @@ def _to_uint8(values: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(values), 0, 255).astype(np.uint8)
 
 
+_LEVELS = np.arange(256, dtype=np.float32)
+
+
+def _apply_table(channel_or_image: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """Maps every ``uint8`` value through ``table`` (256 entries, or ``(256, C)``: one column per channel);
+    a per-value rule computed once instead of per pixel."""
+    table = np.ascontiguousarray(table, dtype=np.uint8)
+    return cv2.LUT(channel_or_image, table.reshape(1, 256, -1) if table.ndim == 2 else table)
+
+
 def adjust_brightness(image, delta: float) -> np.ndarray:
     """Adds ``delta`` (intensity levels) to every channel, clipped to ``[0, 255]``."""
-    return _to_uint8(as_image(image).astype(np.float32) + float(delta))
+    return _apply_table(as_image(image), _to_uint8(_LEVELS + float(delta)))
 
 
 def adjust_contrast(image, factor: float) -> np.ndarray:
     """Scales each channel's deviation from its mean by ``factor`` (``tf.image.adjust_contrast`` rule)."""
-    values = as_image(image).astype(np.float32)
-    mean = values.mean(axis=(0, 1), keepdims=True)
-    return _to_uint8((values - mean) * float(factor) + mean)
+    image = as_image(image)
+    mean = np.float32(cv2.mean(image)[:3])  # per channel, summed in float64
+    return _apply_table(image, _to_uint8((_LEVELS[:, None] - mean) * np.float32(factor) + mean))
 
 
 def adjust_saturation(image, factor: float) -> np.ndarray:
     """Multiplies the HSV saturation by ``factor`` (clipped)."""
-    hsv = cv2.cvtColor(as_image(image), cv2.COLOR_RGB2HSV_FULL).astype(np.float32)
-    hsv[..., 1] = np.clip(hsv[..., 1] * float(factor), 0, 255)
-    return cv2.cvtColor(_to_uint8(hsv), cv2.COLOR_HSV2RGB_FULL)
+    hsv = cv2.cvtColor(as_image(image), cv2.COLOR_RGB2HSV_FULL)
+    hsv[..., 1] = _apply_table(np.ascontiguousarray(hsv[..., 1]), _to_uint8(_LEVELS * float(factor)))
+    return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB_FULL)
 
 
 def adjust_hue(image, delta_degrees: float) -> np.ndarray:
     """Rotates the hue by ``delta_degrees`` (wrapping around the colour circle)."""
     hsv = cv2.cvtColor(as_image(image), cv2.COLOR_RGB2HSV)
-    hue = hsv[..., 0].astype(np.float32) + float(delta_degrees) / 2.0  # 8-bit OpenCV hue is degrees / 2
-    hsv[..., 0] = np.mod(np.rint(hue), 180).astype(np.uint8)
+    hue = np.mod(np.rint(_LEVELS + float(delta_degrees) / 2.0), 180)  # 8-bit OpenCV hue is degrees / 2
+    hsv[..., 0] = _apply_table(np.ascontiguousarray(hsv[..., 0]), hue)
     return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
 
 
