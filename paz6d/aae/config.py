@@ -14,7 +14,7 @@ from paz6d.backend.checks import is_whole_number, unknown_fields
 from paz6d.cli_options import option
 from paz6d.datasets.bop.fields import BOX_FIELDS, box_field
 from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
-from paz6d.training.precision import PRECISIONS
+from paz6d.training import precision as precision_setting
 from paz6d.training.source import checked_mesh_scale
 from renderers.platform import PLATFORMS
 
@@ -134,8 +134,9 @@ class AAEConfig:
                              f"got {self.lr_drop_steps!r}")
         if not 0.0 < self.lr_drop_factor <= 1.0:
             raise ValueError(f"AAEConfig.lr_drop_factor: expected a factor in (0, 1], got {self.lr_drop_factor!r}")
-        if self.precision not in ("auto",) + PRECISIONS:
-            raise ValueError(f"AAEConfig.precision: expected 'auto' or one of {PRECISIONS}, got {self.precision!r}")
+        if self.precision not in precision_setting.SETTINGS:
+            raise ValueError(f"AAEConfig.precision: expected 'auto' or one of {precision_setting.PRECISIONS}, "
+                             f"got {self.precision!r}")
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -206,7 +207,7 @@ class AAETraining:
     steps: int | None = option(None, "training steps (default: the config's)")
     precision: str | None = option(None, "compute dtype of the convolutions (default: the config's, auto: bfloat16 "
                                          "on CPUs that compute it natively, else float32); a resumed run keeps its "
-                                         "own", choices=("auto",) + PRECISIONS)
+                                         "own", choices=precision_setting.SETTINGS)
     seed: int = option(0, "seed of the model initialisation and of the data stream")
     mesh_scale: float | None = option(None, "mesh units to metres (default: 1 with --mesh, --dataset-mesh or a "
                                             "YCB-Video model; 0.001 for BOP models, which are millimetres)")

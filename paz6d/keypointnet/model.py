@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.training.precision import body_policy
 from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
                                             output_names)
+from paz6d.training.precision import body_policy
 
 tf = import_tensorflow()
 keras = import_keras()

@@ -14,6 +14,8 @@ from paz6d.backend.tensorflow_guard import import_tensorflow
 
 #: Compute dtypes of a network body.
 PRECISIONS = ("float32", "bfloat16")
+#: Values of a ``precision`` setting: a compute dtype, or ``"auto"`` (:func:`resolve_precision`).
+SETTINGS = ("auto",) + PRECISIONS
 
 
 def native_bfloat16(cpuinfo: str | Path = "/proc/cpuinfo") -> bool:
@@ -38,7 +40,7 @@ def resolve_precision(precision: str) -> str:
     if precision == "auto":
         gpus = import_tensorflow().config.list_physical_devices("GPU")
         return "bfloat16" if native_bfloat16() and not gpus else "float32"
-    if precision not in PRECISIONS:
+    if precision not in SETTINGS:
         raise ValueError(f"precision: expected 'auto' or one of {PRECISIONS}, got {precision!r}")
     return precision
 
