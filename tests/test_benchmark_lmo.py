@@ -276,6 +276,18 @@ def test_quick_and_full_sizes_and_the_generator_settings(tmp_path, shared_data):
     assert Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo").settings == lmo.FULL
 
 
+def test_both_sizes_drop_the_aae_rate_at_the_end_and_fewer_steps_shorten_the_drop(tmp_path, shared_data):
+    data = shared_data / "bop_lmo"
+    assert (lmo.QUICK.aae_steps, lmo.QUICK.aae_lr_drop_steps) == (1000, 200)
+    assert (lmo.FULL.aae_steps, lmo.FULL.aae_lr_drop_steps) == (5000, 500)
+    short = Benchmark(out=tmp_path / "b", lmo=data, quick=True, aae_steps=50).settings
+    assert (short.aae_steps, short.aae_lr_drop_steps) == (50, 50)  # the sizes' drop never outlasts the run
+    longer = Benchmark(out=tmp_path / "b", lmo=data, quick=True, aae_steps=1500).settings
+    assert longer.aae_lr_drop_steps == 200  # kept, so a finished folder's AAEs can be extended
+    with pytest.raises(ValueError, match=r"aae_lr_drop_steps: expected at most aae_steps \(50\)"):
+        Benchmark(out=tmp_path / "b", lmo=data, quick=True, aae_steps=50, aae_lr_drop_steps=60)
+
+
 def test_command_is_registered_and_light(tmp_path):
     from paz6d.cli import build_parser, main
 
