@@ -218,6 +218,11 @@ def test_more_aae_steps_extend_the_aaes_and_score_them_again_and_fewer_are_refus
     with pytest.raises(ValueError, match=r"aae_steps: .* trained for 9 steps; expected at least that many"):
         run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False,
                                 aae_steps=5))
+    dropped = replace(TINY, aae_lr_drop_steps=2)
+    run_benchmark(Benchmark(out=tmp_path / "drop", lmo=data, quick=True, settings=dropped, progress=False))
+    with pytest.raises(ValueError, match=r"trained for 4 steps; expected at least that many"):  # not "other settings":
+        run_benchmark(Benchmark(out=tmp_path / "drop", lmo=data, quick=True, settings=dropped,  # fewer steps also
+                                progress=False, aae_steps=2))  # shorten the sizes' drop (2 -> 1)
     with pytest.raises(ValueError, match=r"other settings \(settings differ"):  # steps and another size: refused
         run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=replace(TINY, images=7),
                                 progress=False, aae_steps=12))
@@ -276,12 +281,13 @@ def test_quick_and_full_sizes_and_the_generator_settings(tmp_path, shared_data):
     assert Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo").settings == lmo.FULL
 
 
-def test_both_sizes_drop_the_aae_rate_at_the_end_and_fewer_steps_shorten_the_drop(tmp_path, shared_data):
+def test_both_sizes_drop_the_aae_rate_at_the_end_and_fewer_steps_keep_its_share(tmp_path, shared_data):
     data = shared_data / "bop_lmo"
     assert (lmo.QUICK.aae_steps, lmo.QUICK.aae_lr_drop_steps) == (1000, 200)
     assert (lmo.FULL.aae_steps, lmo.FULL.aae_lr_drop_steps) == (5000, 500)
     short = Benchmark(out=tmp_path / "b", lmo=data, quick=True, aae_steps=50).settings
-    assert (short.aae_steps, short.aae_lr_drop_steps) == (50, 50)  # the sizes' drop never outlasts the run
+    assert (short.aae_steps, short.aae_lr_drop_steps) == (50, 10)  # a fifth of the run, as in the quick sizes
+    assert Benchmark(out=tmp_path / "b", lmo=data, aae_steps=1000).settings.aae_lr_drop_steps == 100  # a tenth
     longer = Benchmark(out=tmp_path / "b", lmo=data, quick=True, aae_steps=1500).settings
     assert longer.aae_lr_drop_steps == 200  # kept, so a finished folder's AAEs can be extended
     with pytest.raises(ValueError, match=r"aae_lr_drop_steps: expected at most aae_steps \(50\)"):

@@ -32,9 +32,9 @@ class LmoOptions:
     aae_steps: int | None = option(None, "AAE training steps (default: 1,000 quick, 5,000 full); a larger number "
                                          "on a finished --out resumes its AAEs and scores them again")
     aae_lr_drop_steps: int | None = option(None, "the last this many AAE steps at a tenth of the learning rate "
-                                                 "(default: 200 quick, 500 full, at most --aae-steps); with a "
-                                                 "larger --aae-steps on a finished --out the drop moves to the new "
-                                                 "end")
+                                                 "(default: 200 quick, 500 full; the same share of a smaller "
+                                                 "--aae-steps); with a larger --aae-steps on a finished --out the "
+                                                 "drop moves to the new end")
     aae_crop_box: str | None = option(None, "the box the AAEs' scene crops are cut around: obj (whole object) or "
                                             "visib (visible part, as at test time) (default: the sizes' own, "
                                             "docs/real_photos.md)", choices=tuple(sorted(BOX_FIELDS)))

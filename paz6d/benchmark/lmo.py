@@ -157,9 +157,10 @@ class Benchmark:
         if self.aae_steps is not None:
             if not is_whole_number(self.aae_steps) or self.aae_steps < 1:
                 raise ValueError(f"aae_steps: expected a positive number of training steps, got {self.aae_steps!r}")
-            # the sizes' own drop never outlasts fewer steps (an explicit aae_lr_drop_steps is checked below)
-            self.settings = replace(self.settings, aae_steps=int(self.aae_steps),
-                                    aae_lr_drop_steps=min(self.settings.aae_lr_drop_steps, int(self.aae_steps)))
+            steps, drop = int(self.aae_steps), self.settings.aae_lr_drop_steps
+            if steps < self.settings.aae_steps:  # a shorter run keeps the sizes' drop as a share of its steps
+                drop = drop * steps // self.settings.aae_steps
+            self.settings = replace(self.settings, aae_steps=steps, aae_lr_drop_steps=drop)
         if self.aae_lr_drop_steps is not None:
             if not is_whole_number(self.aae_lr_drop_steps) or self.aae_lr_drop_steps < 0:
                 raise ValueError(f"aae_lr_drop_steps: expected 0 or a number of steps, got {self.aae_lr_drop_steps!r}")
@@ -404,11 +405,13 @@ def _extends_aae(job: Benchmark, stored: dict, current: dict) -> bool:
     current_settings = dict(current["settings"])
     steps = current_settings.pop("aae_steps")
     same_otherwise = all(stored.get(key) == current[key] for key in current if key != "settings")
-    if not same_otherwise or stored_settings != current_settings or stored_steps in (None, steps):
+    if not same_otherwise or stored_steps is None:
         return False
-    if steps < stored_steps:
+    if steps < stored_steps:  # checked first: a shorter run also shortens the sizes' drop
         raise ValueError(f"aae_steps: {job.out} holds AAEs trained for {stored_steps} steps; expected at least "
                          f"that many (a run resumes its AAEs, it cannot shorten them), got {steps}")
+    if stored_settings != current_settings or steps == stored_steps:
+        return False
     for name, _, _ in stages(replace(job, method="aae", object_methods={})):
         if name.startswith("pose/"):
             job.marker(name).unlink(missing_ok=True)
