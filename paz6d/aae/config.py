@@ -134,9 +134,7 @@ class AAEConfig:
                              f"got {self.lr_drop_steps!r}")
         if not 0.0 < self.lr_drop_factor <= 1.0:
             raise ValueError(f"AAEConfig.lr_drop_factor: expected a factor in (0, 1], got {self.lr_drop_factor!r}")
-        if self.precision not in precision_setting.SETTINGS:
-            raise ValueError(f"AAEConfig.precision: expected 'auto' or one of {precision_setting.PRECISIONS}, "
-                             f"got {self.precision!r}")
+        precision_setting.check_setting(self.precision, "AAEConfig.precision")
 
     def to_dict(self) -> dict:
         data = asdict(self)

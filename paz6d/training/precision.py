@@ -30,6 +30,17 @@ def native_bfloat16(cpuinfo: str | Path = "/proc/cpuinfo") -> bool:
     return any(flag in flags.split() for flag in ("avx512_bf16", "amx_bf16"))
 
 
+def check_setting(precision: str, name: str = "precision") -> str:
+    """``precision`` unchanged if it is one of :data:`SETTINGS`.
+
+    Raises:
+        ValueError: anything else, naming the setting ``name``.
+    """
+    if precision not in SETTINGS:
+        raise ValueError(f"{name}: expected 'auto' or one of {PRECISIONS}, got {precision!r}")
+    return precision
+
+
 def resolve_precision(precision: str) -> str:
     """``"float32"`` or ``"bfloat16"`` for a ``precision`` setting; ``"auto"`` is bfloat16 on CPUs that
     compute it natively (:func:`native_bfloat16`) when TensorFlow sees no GPU, else float32.
@@ -40,9 +51,7 @@ def resolve_precision(precision: str) -> str:
     if precision == "auto":
         gpus = import_tensorflow().config.list_physical_devices("GPU")
         return "bfloat16" if native_bfloat16() and not gpus else "float32"
-    if precision not in SETTINGS:
-        raise ValueError(f"precision: expected 'auto' or one of {PRECISIONS}, got {precision!r}")
-    return precision
+    return check_setting(precision)
 
 
 def body_policy(compute_dtype: str) -> str:
