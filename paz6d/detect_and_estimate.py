@@ -63,9 +63,12 @@ def bop_object_id(class_name: str) -> int | None:
     return int(match.group(1)) if match else None
 
 
-def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None = None, keypoint_crops: int = 1):
+def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None = None, keypoint_crops: int = 1,
+                        box_variants=None):
     """The pose pipeline of a run directory, its method found by :func:`paz6d.run_dirs.method_of`;
-    ``keypoint_crops`` is the ``crops`` option of a :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`.
+    ``keypoint_crops`` is the ``crops`` option of a :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`,
+    ``box_variants`` (a :class:`~paz6d.processors.crops.BoxVariants`) the one of an
+    :class:`~paz6d.aae.pipeline.ImplicitPose6D`.
 
     Returns:
         ``(method, estimator)``: ``"aae"`` with an :class:`~paz6d.aae.pipeline.ImplicitPose6D` or
@@ -79,7 +82,7 @@ def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None
     if method == "aae":
         from paz6d.aae.pipeline import ImplicitPose6D
 
-        return method, ImplicitPose6D(run_dir, camera, class_name=class_name)
+        return method, ImplicitPose6D(run_dir, camera, class_name=class_name, box_variants=box_variants)
     if method == "keypointnet":
         from paz6d.keypointnet.pipeline import KeypointPose6D
 
@@ -273,7 +276,7 @@ class DetectAndEstimatePose6D(SequentialProcessor):
     @classmethod
     def from_run_dirs(cls, detector_dir: str | Path, pose_dirs: Mapping[str | int, str | Path], camera=None,
                       score_threshold: float = 0.3, strict: bool = False, load_meshes: bool = True,
-                      verify: bool = False, flip: bool = False) -> "DetectAndEstimatePose6D":
+                      verify: bool = False, flip: bool = False, box_variants=None) -> "DetectAndEstimatePose6D":
         """Loads a ``DetectSingleShot`` run and one pose run directory per class (method found by itself).
 
         Args:
@@ -281,13 +284,15 @@ class DetectAndEstimatePose6D(SequentialProcessor):
             pose_dirs: class name or BOP object id -> AAE or KeypointNet run directory.
             load_meshes: load each pose run's mesh (when its file still exists) for :meth:`draw`.
             flip: the detector also sees the mirror image (``DetectSingleShot``'s ``flip``).
+            box_variants: the AAE runs choose among these copies of each detected box
+                (:class:`~paz6d.processors.crops.BoxVariants`, ``ImplicitPose6D``'s ``box_variants``).
         """
         from paz6d.ssd.pipeline import DetectSingleShot
 
         estimators, meshes = {}, {}
         for key, run_dir in pose_dirs.items():
             name = class_name_of(key)
-            estimators[name] = load_pose_estimator(run_dir, camera, class_name=name)[1]
+            estimators[name] = load_pose_estimator(run_dir, camera, class_name=name, box_variants=box_variants)[1]
             found = run_mesh(run_dir) if load_meshes else None
             if found is not None and found[0].is_file():
                 from paz6d.backend.mesh import load_mesh  # trimesh, only when outlines are wanted

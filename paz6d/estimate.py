@@ -37,6 +37,7 @@ from paz6d.backend.paths import check_output_file, check_outputs_apart, check_pl
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.keypointnet.config import CROP_JITTERS, check_crops
+from paz6d.processors.crops import BoxVariants
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION, read_targets
 from paz6d.datasets.bop.fields import BOX_FIELDS, box_field
@@ -74,6 +75,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--flip", action="store_true",
                         help="with --detector: also detect on each image's mirror image and average (a second "
                              "network pass; see DetectSingleShot's flip)")
+    parser.add_argument("--box-search", action="store_true",
+                        help="with --detector: each AAE run tries its detection's box shifted by 0, 5 and 10 %% of "
+                             "its sides either way along x and y and scaled by 0.9/1/1.1 (75 crops), and keeps the "
+                             "crop that matches its codebook best (a detector's boxes are loose; see BoxVariants)")
     parser.add_argument("--box", choices=sorted(BOX_FIELDS), default="obj",
                         help="without --detector, the ground-truth box given to the model: of the whole projected "
                              "object (obj) or of its visible part (visib, what a detector would see)")
@@ -233,16 +238,16 @@ class _Estimates:
         return result
 
 
-def _estimator(method: str, run_dir: Path, keypoint_crops: int = 1):
+def _estimator(method: str, run_dir: Path, keypoint_crops: int = 1, box_variants=None):
     """The pose pipeline of one run directory (``method`` as :func:`paz6d.run_dirs.method_of` names it),
     loaded once; each image's camera is given per call."""
     from paz6d.detect_and_estimate import load_pose_estimator
 
-    return load_pose_estimator(run_dir, keypoint_crops=keypoint_crops)[1]
+    return load_pose_estimator(run_dir, keypoint_crops=keypoint_crops, box_variants=box_variants)[1]
 
 
-def _load_estimators(runs: dict[int, tuple[Path, str]],
-                     keypoint_crops: int = 1) -> tuple[dict[int, object], dict[int, str]]:
+def _load_estimators(runs: dict[int, tuple[Path, str]], keypoint_crops: int = 1,
+                     box_variants=None) -> tuple[dict[int, object], dict[int, str]]:
     """``({obj_id: estimator}, {obj_id: reason})``: a run that loads but can never give a pose (a KeypointNet
     with fewer than 4 usable keypoints, a ``PnPError``) is left out with a warning, so its instances score as
     misses and the other objects are still estimated.
@@ -255,7 +260,7 @@ def _load_estimators(runs: dict[int, tuple[Path, str]],
     estimators, unusable = {}, {}
     for obj_id, (run_dir, method) in runs.items():
         try:
-            estimators[obj_id] = _estimator(method, run_dir, keypoint_crops)
+            estimators[obj_id] = _estimator(method, run_dir, keypoint_crops, box_variants)
         except PnPError as error:
             unusable[obj_id] = str(error)
     if not estimators:
@@ -357,10 +362,11 @@ def split_images(dataset: Path, split: str):
 def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path, dataset: Path, split: str,
                            score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True,
                            depth: bool = False, keypoint_crops: int = 1, verify: bool = False,
-                           flip: bool = False) -> dict:
+                           flip: bool = False, box_search: bool = False) -> dict:
     """Detect every RGB image of the split, then estimate each detection of an object that has a run
     (``verify``: scores of the detections with a pose model times their pose's score, ``VerifyBoxes``;
-    ``flip``: the detector also sees the mirror image, ``DetectSingleShot``).
+    ``flip``: the detector also sees the mirror image, ``DetectSingleShot``; ``box_search``: the AAE runs
+    choose among the default :class:`~paz6d.processors.crops.BoxVariants` of each box).
 
     Returns:
         ``{"estimates": _Estimates, "detections": [COCO result dicts], "images": [(scene_id, im_id)],
@@ -376,7 +382,7 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
     from paz6d.ssd.pipeline import DetectSingleShot
 
     detector = DetectSingleShot(detector_dir, score_threshold=score_threshold, flip=flip)
-    estimators, unusable = _load_estimators(runs, keypoint_crops)
+    estimators, unusable = _load_estimators(runs, keypoint_crops, BoxVariants() if box_search else None)
     pipeline = DetectAndEstimatePose6D(detector, estimators, verify=verify)
     estimates, detections, images = _Estimates(), [], []
     skipped_images, failed, without_model, total = 0, {obj_id: 0 for obj_id in runs}, {}, 0.0
@@ -502,6 +508,8 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
         raise ValueError("--verify: only with --detector (ground-truth boxes have no detection score)")
     if args.flip and args.detector is None:
         raise ValueError("--flip: only with --detector (it is how the detector sees the image)")
+    if args.box_search and args.detector is None:
+        raise ValueError("--box-search: only with --detector (it loosens exact ground-truth boxes)")
     detections = detections_path(args)
     check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
     check_output_file(args.out, "--out")
@@ -538,7 +546,7 @@ def estimate(args: argparse.Namespace) -> dict:
     else:
         found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
                                        args.progress, args.depth, args.keypoint_crops, args.verify,
-                                       args.flip)
+                                       args.flip, args.box_search)
         targets = detector_targets(args.dataset, found["images"], runs)
         if not found["images"]:
             raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "

@@ -174,6 +174,59 @@ def test_batch_api_matches_single_calls_and_accepts_box_types(toy_run):
     assert estimator.estimate_batch(images[0], []) == []
 
 
+def test_box_variants_pick_the_crop_that_matches_the_codebook_best(toy_run):
+    """``box_variants``: the pose equals the plain pose of the variant box with the highest cosine similarity
+    (a brute-force search over the same boxes); a single unchanged variant gives the plain pose."""
+    from paz6d.aae.pipeline import ImplicitPose6D
+    from paz6d.processors.crops import BoxVariants
+
+    root, _, _ = toy_run
+    views = np.load(root / "run" / "views.npz")
+    camera = Camera(views["K"], TOY.render_size, TOY.render_size)
+    plain = ImplicitPose6D(root / "run", camera)
+    variants = BoxVariants(shifts=(-0.1, 0.0, 0.1), scales=(0.9, 1.0, 1.1))
+    searching = ImplicitPose6D(root / "run", camera, box_variants=variants)
+    assert searching.names == ["vary", "crop", "encode", "lookup", "pick", "pose_from_codebook", "refine_with_depth"]
+    images = [views["rgb"][i] for i in (2, 9, 17)]
+    boxes = [(10.0, 8.0, 31.0, 33.0), (5.0, 6.0, 30.0, 28.0), (-4.0, 12.0, 20.0, 36.0)]  # the last at the border
+    found = searching.estimate_batch(images, boxes)
+    improved = 0
+    for image, box, pose in zip(images, boxes, found):
+        candidates = [variant for variant in variants(box) if variant[2] > 0]
+        brute = max(plain.estimate_batch([image] * len(candidates), candidates), key=lambda p: p.score)
+        np.testing.assert_allclose(pose.to_matrix(), brute.to_matrix(), atol=1e-5)
+        assert pose.score == pytest.approx(brute.score, abs=1e-5)
+        assert pose.score >= plain(image, box).score - 1e-6
+        improved += pose.score > plain(image, box).score + 1e-6
+        assert searching(image, box) == pose or np.allclose(searching(image, box).to_matrix(), pose.to_matrix(),
+                                                            atol=1e-5)
+    assert improved >= 1
+    identity = ImplicitPose6D(root / "run", camera, box_variants=BoxVariants(shifts=(0.0,), scales=(1.0,)))
+    np.testing.assert_allclose(identity(images[0], boxes[0]).to_matrix(), plain(images[0], boxes[0]).to_matrix(),
+                               atol=1e-6)
+
+
+def test_expand_boxes_and_pick_best_crop_keep_one_entry_per_box():
+    from paz6d.aae.pipeline import ExpandBoxes, PickBestCrop
+    from paz6d.processors.crops import BoxVariants
+
+    image = np.zeros((20, 30, 3), np.uint8)
+    expand = ExpandBoxes(BoxVariants(shifts=(-1.0, 0.0), scales=(1.0,)))
+    images, boxes, cameras, depths, groups = expand([image, image], [np.array([0.0, 0, 10, 10]),
+                                                                     np.array([15.0, 5, 25, 15])],
+                                                    ["a", "b"], [None, None])
+    # the first box's copies shifted by a whole side to the left or up leave the image: only it is kept
+    assert groups.tolist() == [0, 1, 1, 1, 1] and cameras == ["a", "b", "b", "b", "b"] and len(images) == 5
+    np.testing.assert_allclose(boxes[0], [0, 0, 10, 10])
+    similarities = np.array([[0.5, 0.1], [0.3, 0.2], [0.9, 0.0], [0.9, 0.5], [0.1, 0.0]])
+    indices = np.arange(10).reshape(5, 2)
+    rotations = np.arange(5)[:, None, None] * np.ones((5, 3, 3))
+    picked = PickBestCrop()(groups, indices, similarities, rotations, boxes, cameras, depths)
+    assert picked[0].tolist() == [[0, 1], [4, 5]]  # the first of two equal best similarities wins
+    np.testing.assert_allclose(picked[1], [[0.5, 0.1], [0.9, 0.0]])
+    assert picked[2][:, 0, 0].tolist() == [0, 2] and picked[4] == ["a", "b"] and len(picked[3]) == 2
+
+
 def test_bad_inputs_raise_clear_value_errors(toy_run, tmp_path):
     from paz6d.aae.pipeline import ImplicitPose6D
 

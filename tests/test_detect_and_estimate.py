@@ -283,6 +283,17 @@ def test_estimate_with_several_runs_and_with_the_detector_through_evaluate_bop(w
     assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(tmp_path / "x.csv"),
                  "--flip"]) == 2
     assert "--flip: only with --detector" in capsys.readouterr().err
+    # --box-search: the same detections; the AAEs pick among shifted and scaled copies of each box
+    assert main(["estimate", "--detector", str(world / "ssd"), *runs, "--dataset", str(world / "set"),
+                 "--out", str(tmp_path / "searched.csv"), "--score-threshold", "0", "--box-search",
+                 "--no-progress"]) == 0
+    searched = json.loads((tmp_path / "searched_detections.json").read_text())
+    assert sorted(map(key, searched)) == sorted(map(key, coco))
+    plain, moved = read_pose_results(detected), read_pose_results(tmp_path / "searched.csv")
+    assert len(moved) == len(plain) and not np.allclose(moved.translations, plain.translations)
+    assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(tmp_path / "x.csv"),
+                 "--box-search"]) == 2
+    assert "--box-search: only with --detector" in capsys.readouterr().err
     # a bare run directory with --object-id still works (and its object is checked)
     assert main(["estimate", "--run", str(world / "aae_5"), "--object-id", "5", "--dataset", str(world / "set"),
                  "--out", str(tmp_path / "bare.csv"), "--no-progress"]) == 0
@@ -317,10 +328,10 @@ def test_estimate_scores_an_object_whose_pose_model_cannot_estimate_as_misses(wo
 
     real = module._estimator
 
-    def estimator(method, run_dir, keypoint_crops=1):  # as a KeypointNet run with 2 usable keypoints fails to load
-        if run_dir.name == "aae_8":
+    def estimator(method, run_dir, keypoint_crops=1, box_variants=None):  # as a KeypointNet run with 2 usable
+        if run_dir.name == "aae_8":                                          # keypoints fails to load
             raise PnPError(f"{run_dir}/keypoints.json: only 2 usable keypoints, PnP needs at least 4")
-        return real(method, run_dir, keypoint_crops)
+        return real(method, run_dir, keypoint_crops, box_variants)
 
     monkeypatch.setattr(module, "_estimator", estimator)
     runs = [f"--run={obj_id}={world / f'aae_{obj_id}'}" for obj_id in OBJECTS]

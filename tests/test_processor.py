@@ -330,3 +330,25 @@ def test_pose_processors_solve_pnp_and_fit_depth_to_a_box():
     fitted = pose_processors.DepthFromBox(model)(far, projected_box(model, T, K), Camera(K, 640, 480))
     np.testing.assert_allclose(fitted.translation, T[:3, 3], rtol=2e-3)
     np.testing.assert_allclose(fitted.rotation_matrix, T[:3, :3], atol=1e-12)
+
+
+def test_box_variants_are_the_box_then_every_shift_and_scale():
+    from paz6d.processors.crops import BoxVariants
+
+    variants = BoxVariants(shifts=(-0.1, 0.0, 0.1), scales=(0.5, 1.0))
+    boxes = variants(Box2D(10, 20, 30, 60))  # 20 x 40 px, centre (20, 40)
+    assert len(variants) == len(boxes) == 18  # the unchanged box moved first, not repeated
+    np.testing.assert_allclose(boxes[0], [10, 20, 30, 60])
+    expected = {(round(20 + dx * 20 - s * 10, 6), round(40 + dy * 40 - s * 20, 6), round(20 + dx * 20 + s * 10, 6),
+                 round(40 + dy * 40 + s * 20, 6))
+                for dx in (-0.1, 0.0, 0.1) for dy in (-0.1, 0.0, 0.1) for s in (0.5, 1.0)}
+    assert {tuple(np.round(box, 6)) for box in boxes} == expected
+    assert len({tuple(box) for box in boxes}) == len(boxes)
+    only = BoxVariants(shifts=(0.05,), scales=(1.2,))  # no unchanged variant given: the box still comes first
+    assert len(only) == 2
+    np.testing.assert_allclose(only((0, 0, 10, 10)), [[0, 0, 10, 10], [-0.5, -0.5, 11.5, 11.5]])
+    for kwargs, message in (({"shifts": ()}, "shifts"), ({"shifts": (np.nan,)}, "shifts"),
+                            ({"scales": (0.0, 1.0)}, "scales"), ({"scales": ()}, "scales")):
+        with pytest.raises(ValueError, match=message):
+            BoxVariants(**kwargs)
+

@@ -36,7 +36,7 @@ from paz6d.backend.boxes import check_box_in_image
 from paz6d.backend.camera import Camera, as_camera, project_points, unproject
 from paz6d.backend.checks import as_array, as_camera_matrix, check_depth
 from paz6d.backend.image import as_image
-from paz6d.processors.crops import SquareCrop
+from paz6d.processors.crops import BoxVariants, SquareCrop
 from paz6d.processors.refine import RefineWithDepth
 
 
@@ -233,6 +233,40 @@ class PosesFromCodebook(Processor):
                 for rank, (index, similarity) in enumerate(zip(indices, similarities))]
 
 
+class ExpandBoxes(Processor):
+    """``(images, boxes, cameras, depths) -> (images, boxes, cameras, depths, groups)``: every box replaced by
+    its :class:`~paz6d.processors.crops.BoxVariants` that overlap the image (the box itself first), the other
+    values repeated with it; ``groups (N,)`` holds the index of the box each entry came from."""
+
+    def __init__(self, variants: BoxVariants, name: str | None = None):
+        super().__init__(name)
+        self.variants = variants
+
+    def call(self, images, boxes, cameras, depths) -> tuple[list, list, list, list, np.ndarray]:
+        expanded, groups = ([], [], [], []), []
+        for group, (image, box, camera, depth) in enumerate(zip(images, boxes, cameras, depths)):
+            height, width = image.shape[:2]
+            for variant in self.variants(box):
+                if variant[2] <= 0 or variant[3] <= 0 or variant[0] >= width or variant[1] >= height:
+                    continue  # a shifted copy of a box at the border may leave the image
+                for values, value in zip(expanded, (image, variant, camera, depth)):
+                    values.append(value)
+                groups.append(group)
+        return (*expanded, np.asarray(groups))
+
+
+class PickBestCrop(Processor):
+    """``(groups, indices, similarities, rotations, boxes, cameras, depths) -> (indices, similarities, rotations,
+    boxes, cameras, depths)``, one entry per group: the box variant whose crop matches its codebook best (the
+    highest cosine similarity; the box itself, first in its group, wins ties)."""
+
+    def call(self, groups, indices, similarities, rotations, boxes, cameras, depths) -> tuple:
+        best = [members[np.argmax(similarities[members, 0])]
+                for members in (np.flatnonzero(groups == group) for group in range(int(groups.max()) + 1))]
+        return (indices[best], similarities[best], rotations[best], [boxes[i] for i in best],
+                [cameras[i] for i in best], [depths[i] for i in best])
+
+
 # ------------------------------------------------------------------------------------------ pipeline
 class ImplicitPose6D(SequentialProcessor):
     """Estimates an object's 6D pose from an RGB image and its 2D box with a trained AAE run directory.
@@ -248,6 +282,10 @@ class ImplicitPose6D(SequentialProcessor):
     - ``refine_with_depth``: ``candidates``, ``depths``, ``boxes``, ``cameras`` -> ``poses``
       (:class:`~paz6d.processors.refine.RefineWithDepth`; without a depth image the first candidate).
 
+    With ``box_variants``, two steps search around each box: ``vary`` (before ``crop``,
+    :class:`ExpandBoxes`) replaces it by its variants, and ``pick`` (after ``lookup``, :class:`PickBestCrop`)
+    keeps the variant whose crop matches the codebook best; its box also places the translation.
+
     Args:
         run_dir: folder written by ``paz6d train aae`` (:mod:`paz6d.aae.run_dir`).
         camera: default camera of the images: a :class:`~paz6d.backend.camera.Camera` or a ``(3, 3)``
@@ -259,6 +297,10 @@ class ImplicitPose6D(SequentialProcessor):
         neighbour_radius_deg: only matches this close to the best one are averaged.
         top_k: codebook candidates kept; with a depth image the candidate ICP fits best wins.
         class_name: written into the returned poses.
+        box_variants: shifted and scaled copies of each box to choose from
+            (:class:`~paz6d.processors.crops.BoxVariants`), for boxes from a detector: on the real LM-O frames
+            they raise the scores with detections and lower them with exact ground-truth boxes
+            (``docs/real_photos.md``). ``None`` (default): the box as given.
 
     Example:
         >>> estimator = ImplicitPose6D("demo_output/model", K)        # doctest: +SKIP
@@ -267,7 +309,8 @@ class ImplicitPose6D(SequentialProcessor):
     """
 
     def __init__(self, run_dir: str | Path, camera=None, refine: bool = True, neighbours: int = 10,
-                 neighbour_radius_deg: float = 15.0, top_k: int = 1, class_name: str | None = None):
+                 neighbour_radius_deg: float = 15.0, top_k: int = 1, class_name: str | None = None,
+                 box_variants: BoxVariants | None = None):
         super().__init__(name="ImplicitPose6D")
         config = run_files.read_config(run_dir)["config"]
         self.crop_size, self.padding = int(config["crop_size"]), float(config["padding"])
@@ -283,11 +326,17 @@ class ImplicitPose6D(SequentialProcessor):
         geometry = run_files.read_object(run_dir)
         self.hull_points, self.surface_points = geometry["hull_points"], geometry["surface_points"]
         self.diameter = geometry["diameter"]
+        batch = ("boxes", "cameras", "depths")
+        if box_variants is not None:
+            self.add(KeyedStep(ExpandBoxes(box_variants), ("images", *batch), ("images", *batch, "groups"), "vary"))
         self.add(KeyedStep(SquareCrop(self.padding, self.crop_size), ("images", "boxes"), ("crops", "windows"),
                            "crop", per_sample=True))
         self.add(KeyedStep(EncodeCrops(encode_function(encoder), self.crop_size), "crops", "codes", "encode"))
         self.add(KeyedStep(CodebookLookup(self.codebook, neighbours, neighbour_radius_deg), ("codes", "top_k"),
                            ("indices", "similarities", "rotations"), "lookup"))
+        if box_variants is not None:
+            match = ("indices", "similarities", "rotations")
+            self.add(KeyedStep(PickBestCrop(), ("groups", *match, *batch), (*match, *batch), "pick"))
         self.add(KeyedStep(PosesFromCodebook(self.codebook, self.hull_points, refine, class_name),
                            ("indices", "similarities", "rotations", "boxes", "cameras"), "candidates",
                            "pose_from_codebook", per_sample=True))

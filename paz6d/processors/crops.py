@@ -51,3 +51,44 @@ class CropToImage(Processor):
 
     def call(self, points, window: tuple[int, int, int]) -> np.ndarray:
         return to_full_image(points, window, self.size)
+
+
+class BoxVariants(Processor):
+    """``box (4,) xyxy -> (V, 4)``: the box itself first, then every combination of a shift along x, a shift
+    along y (fractions of the box's width and height) and a scale about its centre.
+
+    A pose model that scores its own crops (the AAE: cosine similarity to its codebook) can pick the variant it
+    recognises best, which re-centres a detector's loose box (``ImplicitPose6D(box_variants=...)``).
+
+    Args:
+        shifts: shifts as fractions of the box's width (x) and height (y).
+        scales: side factors about the box centre.
+        The defaults (75 variants) are the grid measured in ``docs/real_photos.md``.
+    Raises:
+        ValueError: an empty or non-finite list, a scale that is not positive.
+    """
+
+    def __init__(self, shifts=(-0.1, -0.05, 0.0, 0.05, 0.1), scales=(0.9, 1.0, 1.1), name: str | None = None):
+        super().__init__(name)
+        self.shifts = np.asarray(shifts, dtype=np.float64).reshape(-1)
+        self.scales = np.asarray(scales, dtype=np.float64).reshape(-1)
+        if self.shifts.size == 0 or not np.all(np.isfinite(self.shifts)):
+            raise ValueError(f"shifts: expected finite fractions of the box side, got {list(shifts)}")
+        if self.scales.size == 0 or not np.all(np.isfinite(self.scales) & (self.scales > 0)):
+            raise ValueError(f"scales: expected positive side factors, got {list(scales)}")
+        dx, dy, scale = np.meshgrid(self.shifts, self.shifts, self.scales, indexing="ij")
+        variants = np.stack([dx.ravel(), dy.ravel(), scale.ravel()], axis=1)
+        identity = np.all(variants == (0.0, 0.0, 1.0), axis=1)
+        self.variants = np.concatenate([[(0.0, 0.0, 1.0)], variants[~identity]])  # (V, 3): dx, dy, scale
+
+    def __len__(self) -> int:
+        return len(self.variants)
+
+    def call(self, box) -> np.ndarray:
+        x_min, y_min, x_max, y_max = np.asarray(box.to_array() if isinstance(box, Box2D) else box, dtype=np.float64)
+        width, height = x_max - x_min, y_max - y_min
+        dx, dy, scale = self.variants.T
+        centre_x = 0.5 * (x_min + x_max) + dx * width
+        centre_y = 0.5 * (y_min + y_max) + dy * height
+        return np.stack([centre_x - 0.5 * scale * width, centre_y - 0.5 * scale * height,
+                         centre_x + 0.5 * scale * width, centre_y + 0.5 * scale * height], axis=1)
