@@ -34,6 +34,7 @@ from paz6d.backend.draw import draw_box, draw_model_outline, draw_pose_axes, dra
 from paz6d.backend.checks import check_depth
 from paz6d.backend.image import as_image
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
+from paz6d.processors.crops import BoxVariants
 
 _BOP_CLASS = re.compile(r"^obj_(\d+)$")
 
@@ -64,7 +65,7 @@ def bop_object_id(class_name: str) -> int | None:
 
 
 def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None = None, keypoint_crops: int = 1,
-                        box_variants=None):
+                        box_variants: BoxVariants | None = None):
     """The pose pipeline of a run directory, its method found by :func:`paz6d.run_dirs.method_of`;
     ``keypoint_crops`` is the ``crops`` option of a :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`,
     ``box_variants`` (a :class:`~paz6d.processors.crops.BoxVariants`) the one of an
@@ -276,7 +277,8 @@ class DetectAndEstimatePose6D(SequentialProcessor):
     @classmethod
     def from_run_dirs(cls, detector_dir: str | Path, pose_dirs: Mapping[str | int, str | Path], camera=None,
                       score_threshold: float = 0.3, strict: bool = False, load_meshes: bool = True,
-                      verify: bool = False, flip: bool = False, box_variants=None) -> "DetectAndEstimatePose6D":
+                      verify: bool = False, flip: bool = False,
+                      box_variants: BoxVariants | None = None) -> "DetectAndEstimatePose6D":
         """Loads a ``DetectSingleShot`` run and one pose run directory per class (method found by itself).
 
         Args:

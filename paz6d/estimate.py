@@ -238,7 +238,7 @@ class _Estimates:
         return result
 
 
-def _estimator(method: str, run_dir: Path, keypoint_crops: int = 1, box_variants=None):
+def _estimator(method: str, run_dir: Path, keypoint_crops: int = 1, box_variants: BoxVariants | None = None):
     """The pose pipeline of one run directory (``method`` as :func:`paz6d.run_dirs.method_of` names it),
     loaded once; each image's camera is given per call."""
     from paz6d.detect_and_estimate import load_pose_estimator
@@ -247,7 +247,7 @@ def _estimator(method: str, run_dir: Path, keypoint_crops: int = 1, box_variants
 
 
 def _load_estimators(runs: dict[int, tuple[Path, str]], keypoint_crops: int = 1,
-                     box_variants=None) -> tuple[dict[int, object], dict[int, str]]:
+                     box_variants: BoxVariants | None = None) -> tuple[dict[int, object], dict[int, str]]:
     """``({obj_id: estimator}, {obj_id: reason})``: a run that loads but can never give a pose (a KeypointNet
     with fewer than 4 usable keypoints, a ``PnPError``) is left out with a warning, so its instances score as
     misses and the other objects are still estimated.
@@ -509,7 +509,7 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
     if args.flip and args.detector is None:
         raise ValueError("--flip: only with --detector (it is how the detector sees the image)")
     if args.box_search and args.detector is None:
-        raise ValueError("--box-search: only with --detector (it loosens exact ground-truth boxes)")
+        raise ValueError("--box-search: only with --detector (with exact ground-truth boxes it lowers the scores)")
     detections = detections_path(args)
     check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
     check_output_file(args.out, "--out")

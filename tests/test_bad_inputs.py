@@ -216,7 +216,8 @@ def test_an_empty_results_file_scores_zero_with_a_note(world, tmp_path):
 def test_estimate_fails_when_every_estimate_failed(world, tmp_path, monkeypatch):
     from paz6d import estimate
 
-    monkeypatch.setattr(estimate, "_estimator", lambda method, run_dir, crops: lambda image, box, camera: None)
+    monkeypatch.setattr(estimate, "_estimator",
+                        lambda method, run_dir, crops, variants: lambda image, box, camera: None)
     out = tmp_path / "results.csv"
     outcome = cases.run_cli(["estimate", "--run", str(world.aae_run), "--dataset", str(world.bop), "--split", "test",
                              "--object-id", "1", "--out", str(out)])
