@@ -233,3 +233,13 @@ def test_bad_box_input_names_the_argument():
         boxes.encode([0.5, 0.5, 0.5, 0.7], [0.5, 0.5, 1, 1])
     with pytest.raises(ValueError, match=r"feature_map_sizes/steps/min_sizes/max_sizes/aspect_ratios"):
         boxes.prior_boxes(300, [38, 19], [8], [30], [60], [[2]])
+
+
+def test_overlaps_image_at_the_borders():
+    # pixel i covers [i, i+1): a box ending at 0 or starting at the width touches no pixel
+    assert boxes.overlaps_image([-5, -5, 0.5, 0.5], 10, 8)
+    assert not boxes.overlaps_image([-5, 2, 0, 4], 10, 8) and not boxes.overlaps_image([2, -5, 4, 0], 10, 8)
+    assert not boxes.overlaps_image([10, 2, 12, 4], 10, 8) and not boxes.overlaps_image([2, 8, 4, 9], 10, 8)
+    assert boxes.overlaps_image([9.9, 7.9, 20, 20], 10, 8)
+    with pytest.raises(ValueError, match="lies outside the 10x8 image"):
+        boxes.check_box_in_image([10, 2, 12, 4], 10, 8)

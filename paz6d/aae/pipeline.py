@@ -32,7 +32,7 @@ from paz6d.aae.codebook import Codebook
 from paz6d.aae.model import encode_function, encoder_of, to_model_input
 from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
 from paz6d.backend import quaternion
-from paz6d.backend.boxes import check_box_in_image
+from paz6d.backend.boxes import check_box_in_image, overlaps_image
 from paz6d.backend.camera import Camera, as_camera, project_points, unproject
 from paz6d.backend.checks import as_array, as_camera_matrix, check_depth
 from paz6d.backend.image import as_image
@@ -247,7 +247,7 @@ class ExpandBoxes(Processor):
         for group, (image, box, camera, depth) in enumerate(zip(images, boxes, cameras, depths)):
             height, width = image.shape[:2]
             for variant in self.variants(box):
-                if variant[2] <= 0 or variant[3] <= 0 or variant[0] >= width or variant[1] >= height:
+                if not overlaps_image(variant, width, height):
                     continue  # a shifted copy of a box at the border may leave the image
                 for values, value in zip(expanded, (image, variant, camera, depth)):
                     values.append(value)

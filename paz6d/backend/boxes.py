@@ -39,6 +39,12 @@ def as_boxes(value, name: str = "boxes") -> np.ndarray:
 MAX_BOX_TO_IMAGE = 4.0
 
 
+def overlaps_image(box, width: int, height: int) -> bool:
+    """Whether an xyxy ``box`` (pixels) reaches into the ``width x height`` image (pixel ``i`` covers ``[i, i+1)``)."""
+    x_min, y_min, x_max, y_max = box
+    return bool(x_max > 0 and y_max > 0 and x_min < width and y_min < height)
+
+
 def check_box_in_image(box, width: int, height: int, name: str = "box") -> np.ndarray:
     """``box`` ``(4,)`` xyxy as float64 when it is finite, non-empty, overlaps the ``width x height``
     image and its sides are at most :data:`MAX_BOX_TO_IMAGE` times the image's longer side.
@@ -52,7 +58,7 @@ def check_box_in_image(box, width: int, height: int, name: str = "box") -> np.nd
     x_min, y_min, x_max, y_max = coordinates
     if not (x_max > x_min and y_max > y_min):
         raise ValueError(f"{name}: empty box {coordinates.tolist()}; expected x_max > x_min and y_max > y_min")
-    if x_max <= 0 or y_max <= 0 or x_min >= width or y_min >= height:
+    if not overlaps_image(coordinates, width, height):
         raise ValueError(f"{name}: {coordinates.tolist()} lies outside the {width}x{height} image")
     limit = MAX_BOX_TO_IMAGE * max(width, height)
     if max(x_max - x_min, y_max - y_min) > limit:
