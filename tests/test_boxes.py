@@ -243,3 +243,9 @@ def test_overlaps_image_at_the_borders():
     assert boxes.overlaps_image([9.9, 7.9, 20, 20], 10, 8)
     with pytest.raises(ValueError, match="lies outside the 10x8 image"):
         boxes.check_box_in_image([10, 2, 12, 4], 10, 8)
+
+
+def test_move_box_shifts_by_fractions_of_the_sides_and_scales_about_the_centre():
+    # 20 x 40 px, centre (20, 40): right by 10 % of the width, up by 25 % of the height; then half size
+    moved = boxes.move_box([10, 20, 30, 60], [(0.1, -0.25, 1.0), (0.0, 0.0, 0.5), (0.0, 0.0, 1.0)])
+    np.testing.assert_allclose(moved, [[12, 10, 32, 50], [15, 30, 25, 50], [10, 20, 30, 60]])

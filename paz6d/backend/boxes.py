@@ -39,6 +39,19 @@ def as_boxes(value, name: str = "boxes") -> np.ndarray:
 MAX_BOX_TO_IMAGE = 4.0
 
 
+def move_box(box, moves) -> np.ndarray:
+    """Copies of an xyxy ``box`` ``(4,)`` (pixels) moved by ``moves`` ``(V, 3)`` rows of ``(dx, dy, scale)``: the
+    centre shifted by ``dx`` × its width and ``dy`` × its height, the sides scaled by ``scale`` about it -> ``(V, 4)``."""
+    x_min, y_min, x_max, y_max = np.asarray(box, dtype=np.float64)
+    width, height = x_max - x_min, y_max - y_min
+    dx, dy, scale = np.asarray(moves, dtype=np.float64).T
+    centre_x = 0.5 * (x_min + x_max) + dx * width
+    centre_y = 0.5 * (y_min + y_max) + dy * height
+    half_width, half_height = 0.5 * width * scale, 0.5 * height * scale
+    return np.stack([centre_x - half_width, centre_y - half_height, centre_x + half_width, centre_y + half_height],
+                    axis=1)
+
+
 def overlaps_image(box, width: int, height: int) -> bool:
     """Whether an xyxy ``box`` (pixels) reaches into the ``width x height`` image (pixel ``i`` covers ``[i, i+1)``)."""
     x_min, y_min, x_max, y_max = box

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.abstract import Box2D, KeyedStep, Keypoints2D, Pose6D, Processor, SequentialProcessor
-from paz6d.backend.boxes import check_box_in_image
+from paz6d.backend.boxes import check_box_in_image, move_box
 from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.checks import as_array
 from paz6d.backend.image import as_image
@@ -55,13 +55,7 @@ class JitterBoxes(Processor):
     def call(self, images: list, boxes: list) -> tuple[list, list]:
         moved = []
         for box in boxes:
-            x_min, y_min, x_max, y_max = box.to_array() if isinstance(box, Box2D) else np.asarray(box, float)
-            width, height = x_max - x_min, y_max - y_min
-            centre_x = 0.5 * (x_min + x_max) + self.jitters[:, 0] * width
-            centre_y = 0.5 * (y_min + y_max) + self.jitters[:, 1] * height
-            half_width, half_height = 0.5 * width * self.jitters[:, 2], 0.5 * height * self.jitters[:, 2]
-            moved.extend(np.stack([centre_x - half_width, centre_y - half_height, centre_x + half_width,
-                                   centre_y + half_height], axis=1))
+            moved.extend(move_box(box.to_array() if isinstance(box, Box2D) else box, self.jitters))
         return [image for image in images for _ in self.jitters], moved
 
 

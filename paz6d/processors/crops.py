@@ -11,7 +11,7 @@ import numpy as np
 
 from paz6d.abstract.messages import Box2D
 from paz6d.abstract.processor import Processor
-from paz6d.backend.boxes import check_box_in_image
+from paz6d.backend.boxes import check_box_in_image, move_box
 from paz6d.backend.square_crop import crop_square, square_window, to_full_image
 
 
@@ -85,10 +85,4 @@ class BoxVariants(Processor):
         return len(self.variants)
 
     def call(self, box) -> np.ndarray:
-        x_min, y_min, x_max, y_max = np.asarray(box.to_array() if isinstance(box, Box2D) else box, dtype=np.float64)
-        width, height = x_max - x_min, y_max - y_min
-        dx, dy, scale = self.variants.T
-        centre_x = 0.5 * (x_min + x_max) + dx * width
-        centre_y = 0.5 * (y_min + y_max) + dy * height
-        return np.stack([centre_x - 0.5 * scale * width, centre_y - 0.5 * scale * height,
-                         centre_x + 0.5 * scale * width, centre_y + 0.5 * scale * height], axis=1)
+        return move_box(box.to_array() if isinstance(box, Box2D) else box, self.variants)
