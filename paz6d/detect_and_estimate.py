@@ -155,6 +155,36 @@ class SelectBoxes(Processor):
         return kept
 
 
+class KeepTopPerClass(Processor):
+    """``boxes [Box2D] -> (kept [Box2D], left_out [Box2D])``: the ``count`` highest-scoring boxes of each class
+    (in their input order; equal scores keep the earlier box) and the others.
+
+    For scenes where each object appears at most ``count`` times (LM-O: once), the left-out detections cannot
+    be scored anyway (BOP keeps an object's best ``count`` estimates); skipping them saves their pose models.
+
+    Args:
+        count: boxes kept per class, at least 1.
+    """
+
+    def __init__(self, count: int, name: str | None = None):
+        super().__init__(name)
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+            raise ValueError(f"poses_per_class: expected a whole number >= 1, got {count!r}")
+        self.count = int(count)
+
+    def call(self, boxes) -> tuple[list[Box2D], list[Box2D]]:
+        ranked = sorted(range(len(boxes)), key=lambda index: -boxes[index].score)  # stable: ties keep order
+        taken: dict[str, int] = {}
+        kept = set()
+        for index in ranked:
+            name = boxes[index].class_name
+            if taken.get(name, 0) < self.count:
+                taken[name] = taken.get(name, 0) + 1
+                kept.add(index)
+        return ([box for index, box in enumerate(boxes) if index in kept],
+                [box for index, box in enumerate(boxes) if index not in kept])
+
+
 class EstimatePoses(Processor):
     """``(image, boxes [Box2D], camera, depth=None) -> poses [Pose6D | None]``: each box's pose model on the
     image, one pose per box (class name = the box's); ``None`` where the model raised ``ValueError`` (warned,
@@ -218,6 +248,8 @@ class DetectAndEstimatePose6D(SequentialProcessor):
                                                       ``camera``
     ``detect``      ``image``                         ``detections``   the detector
     ``select``      ``detections``                    ``boxes``        :class:`SelectBoxes`
+    ``top``         ``boxes``                         ``boxes``,       :class:`KeepTopPerClass` (only
+                                                      ``left_out``     with ``poses_per_class``)
     ``estimate``    ``image``, ``boxes``, ``camera``, ``poses``        :class:`EstimatePoses`
                     ``depth`` (``None``: no ICP)
     ``verify``      ``boxes``, ``poses``              ``boxes``        :class:`VerifyBoxes` (only
@@ -238,13 +270,16 @@ class DetectAndEstimatePose6D(SequentialProcessor):
             (default: the estimators' surface points, drawn as dots).
         verify: multiply each box's score by its pose's score (:class:`VerifyBoxes`): measured on the real
             LM-O frames, it ranks the detector's false positives lower (docs/real_photos.md).
+        poses_per_class: estimate poses only for this many highest-scoring detections of each class per image
+            (:class:`KeepTopPerClass`; the others are in ``left_out``); ``None``: every detection.
     Raises:
         ValueError: no estimators, a bad key, or a class the detector cannot output (when it lists
             ``class_names``).
     """
 
     def __init__(self, detector: Callable, estimators: Mapping[str | int, Callable], camera=None,
-                 strict: bool = False, meshes: Mapping[str | int, tuple] | None = None, verify: bool = False):
+                 strict: bool = False, meshes: Mapping[str | int, tuple] | None = None, verify: bool = False,
+                 poses_per_class: int | None = None):
         super().__init__(name="DetectAndEstimatePose6D")
         if not callable(detector):
             raise ValueError(f"detector: expected a callable image -> [Box2D], got {type(detector).__name__}")
@@ -268,6 +303,8 @@ class DetectAndEstimatePose6D(SequentialProcessor):
         self.add(KeyedStep(ImageCamera(camera), ("image", "camera"), ("image", "camera"), name="check"))
         self.add(KeyedStep(detector, "image", "detections", name="detect"))
         self.add(KeyedStep(SelectBoxes(tuple(named), strict), "detections", "boxes", name="select"))
+        if poses_per_class is not None:
+            self.add(KeyedStep(KeepTopPerClass(poses_per_class), "boxes", ("boxes", "left_out"), name="top"))
         self.add(KeyedStep(EstimatePoses(named, strict), ("image", "boxes", "camera", "depth"), "poses",
                            name="estimate"))
         if verify:
@@ -277,8 +314,8 @@ class DetectAndEstimatePose6D(SequentialProcessor):
     @classmethod
     def from_run_dirs(cls, detector_dir: str | Path, pose_dirs: Mapping[str | int, str | Path], camera=None,
                       score_threshold: float = 0.3, strict: bool = False, load_meshes: bool = True,
-                      verify: bool = False, flip: bool = False,
-                      box_variants: BoxVariants | None = None) -> "DetectAndEstimatePose6D":
+                      verify: bool = False, flip: bool = False, box_variants: BoxVariants | None = None,
+                      poses_per_class: int | None = None) -> "DetectAndEstimatePose6D":
         """Loads a ``DetectSingleShot`` run and one pose run directory per class (method found by itself).
 
         Args:
@@ -288,6 +325,7 @@ class DetectAndEstimatePose6D(SequentialProcessor):
             flip: the detector also sees the mirror image (``DetectSingleShot``'s ``flip``).
             box_variants: the AAE runs choose among these copies of each detected box
                 (:class:`~paz6d.processors.crops.BoxVariants`, ``ImplicitPose6D``'s ``box_variants``).
+            poses_per_class: poses only for each class's best detections (see the class).
         """
         from paz6d.ssd.pipeline import DetectSingleShot
 
@@ -302,7 +340,7 @@ class DetectAndEstimatePose6D(SequentialProcessor):
                 mesh = load_mesh(found[0], found[1])
                 meshes[name] = (np.asarray(mesh.vertices), np.asarray(mesh.faces))
         detector = DetectSingleShot(detector_dir, score_threshold=score_threshold, flip=flip)
-        return cls(detector, estimators, camera, strict, meshes, verify)
+        return cls(detector, estimators, camera, strict, meshes, verify, poses_per_class)
 
     def run(self, image, camera=None, depth=None) -> dict:
         """All named values of one image (``detections``, ``boxes``, ``poses``, ``results``...)."""

@@ -79,6 +79,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="with --detector: each AAE run tries its detection's box shifted by 0, 5 and 10 %% of "
                              "its sides either way along x and y and scaled by 0.9/1/1.1 (75 crops), and keeps the "
                              "crop that matches its codebook best (a detector's boxes are loose; see BoxVariants)")
+    parser.add_argument("--poses-per-class", type=int, default=None, metavar="N",
+                        help="with --detector: estimate poses only for the N highest-scoring detections of each "
+                             "class per image (BOP scores an object's best N estimates, N its instance count: 1 on "
+                             "LM-O); the detections JSON still holds every detection (default: all)")
     parser.add_argument("--box", choices=sorted(BOX_FIELDS), default="obj",
                         help="without --detector, the ground-truth box given to the model: of the whole projected "
                              "object (obj) or of its visible part (visib, what a detector would see)")
@@ -362,11 +366,12 @@ def split_images(dataset: Path, split: str):
 def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path, dataset: Path, split: str,
                            score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True,
                            depth: bool = False, keypoint_crops: int = 1, verify: bool = False,
-                           flip: bool = False, box_search: bool = False) -> dict:
+                           flip: bool = False, box_search: bool = False, poses_per_class: int | None = None) -> dict:
     """Detect every RGB image of the split, then estimate each detection of an object that has a run
     (``verify``: scores of the detections with a pose model times their pose's score, ``VerifyBoxes``;
     ``flip``: the detector also sees the mirror image, ``DetectSingleShot``; ``box_search``: the AAE runs
-    choose among the default :class:`~paz6d.processors.crops.BoxVariants` of each box).
+    choose among the default :class:`~paz6d.processors.crops.BoxVariants` of each box; ``poses_per_class``:
+    poses only for each class's best detections, ``KeepTopPerClass``).
 
     Returns:
         ``{"estimates": _Estimates, "detections": [COCO result dicts], "images": [(scene_id, im_id)],
@@ -383,7 +388,7 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
 
     detector = DetectSingleShot(detector_dir, score_threshold=score_threshold, flip=flip)
     estimators, unusable = _load_estimators(runs, keypoint_crops, BoxVariants() if box_search else None)
-    pipeline = DetectAndEstimatePose6D(detector, estimators, verify=verify)
+    pipeline = DetectAndEstimatePose6D(detector, estimators, verify=verify, poses_per_class=poses_per_class)
     estimates, detections, images = _Estimates(), [], []
     skipped_images, failed, without_model, total = 0, {obj_id: 0 for obj_id in runs}, {}, 0.0
     entries = list(split_images(dataset, split))
@@ -407,7 +412,8 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
         total += seconds
         images.append((scene_id, im_id))
         without = [box for box in values["detections"] if box.class_name not in pipeline.estimators]
-        for box in values["boxes"] + without:  # the boxes with a pose model carry the verified scores
+        # the boxes with a pose (values["boxes"]) carry the verified scores
+        for box in values["boxes"] + values.get("left_out", []) + without:
             obj_id = bop_object_id(box.class_name)
             if obj_id is None:
                 raise ValueError(f"--detector: class {box.class_name!r} is not a BOP object (obj_XXXXXX)")
@@ -510,6 +516,11 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
         raise ValueError("--flip: only with --detector (it is how the detector sees the image)")
     if args.box_search and args.detector is None:
         raise ValueError("--box-search: only with --detector (with exact ground-truth boxes it lowers the scores)")
+    if args.poses_per_class is not None:
+        if args.detector is None:
+            raise ValueError("--poses-per-class: only with --detector (ground-truth boxes are one per instance)")
+        if args.poses_per_class < 1:
+            raise ValueError(f"--poses-per-class: expected a whole number >= 1, got {args.poses_per_class}")
     detections = detections_path(args)
     check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
     check_output_file(args.out, "--out")
@@ -546,7 +557,7 @@ def estimate(args: argparse.Namespace) -> dict:
     else:
         found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
                                        args.progress, args.depth, args.keypoint_crops, args.verify,
-                                       args.flip, args.box_search)
+                                       args.flip, args.box_search, args.poses_per_class)
         targets = detector_targets(args.dataset, found["images"], runs)
         if not found["images"]:
             raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "

@@ -188,7 +188,14 @@ def test_a_pose_method_per_object_reuses_the_other_models_and_reports_under_its_
         "pose/obj_000001", "pose_keypointnet_robust/obj_000005", "estimate_aae+keypointnet_robust@5_gt"]
     assert {f"--run=1={mixed.pose_dir(1)}", f"--run=5={mixed.pose_dir(5)}"} <= set(lmo._estimate_args(mixed, "gt"))
     # the detections condition lets the detector see each frame's mirror image too (docs/ssd.md)
-    assert "--flip" in lmo._estimate_args(mixed, "detections") and "--flip" not in lmo._estimate_args(mixed, "gt")
+    detections, truth = lmo._estimate_args(mixed, "detections"), lmo._estimate_args(mixed, "gt")
+    assert "--flip" in detections and "--flip" not in truth
+    assert "--box-search" in detections and "--box-search" not in truth
+    assert detections[detections.index("--poses-per-class") + 1] == "1" and "--poses-per-class" not in truth
+    from paz6d.cli import build_parser
+
+    parsed = build_parser().parse_args(detections)  # the flags `paz6d estimate` runs with
+    assert parsed.poses_per_class == 1 and parsed.box_search and parsed.flip
     report = run_benchmark(mixed)
     assert calls == ["pose 5", *SCORING, "detector ap"]
     assert sorted(report["methods"]) == ["aae", "aae+keypointnet_robust@5"]

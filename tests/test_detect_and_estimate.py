@@ -168,6 +168,49 @@ def test_verify_multiplies_each_box_score_by_its_pose_score(world):
         np.testing.assert_allclose(verified_pose.translation, pose.translation)
 
 
+def test_keep_top_per_class_keeps_each_class_best_boxes_in_their_order():
+    from paz6d.detect_and_estimate import KeepTopPerClass
+
+    boxes = [Box2D(i, 0, i + 5, 5, score, name) for i, (score, name) in enumerate(
+        [(0.3, "a"), (0.9, "b"), (0.7, "a"), (0.7, "a"), (0.2, "b"), (0.8, "c")])]
+    kept, left_out = KeepTopPerClass(1)(boxes)
+    assert kept == [boxes[1], boxes[2], boxes[5]] and left_out == [boxes[0], boxes[3], boxes[4]]  # tie: earlier box
+    kept, left_out = KeepTopPerClass(2)(boxes)
+    assert kept == [boxes[1], boxes[2], boxes[3], boxes[4], boxes[5]] and left_out == [boxes[0]]
+    assert KeepTopPerClass(3)([]) == ([], [])
+    for bad in (0, -1, 1.5, True, "1"):
+        with pytest.raises(ValueError, match="poses_per_class: expected a whole number >= 1"):
+            KeepTopPerClass(bad)
+
+
+def test_poses_per_class_estimates_only_each_class_best_detection(world):
+    from paz6d.detect_and_estimate import DetectAndEstimatePose6D
+    from paz6d.pipelines import ImplicitPose6D
+
+    sample = _samples(world)[0]
+    estimators = {obj_id: ImplicitPose6D(world / f"aae_{obj_id}") for obj_id in OBJECTS}
+    truth = TruthDetector(sample)
+    weaker = [Box2D(box.x_min + 3, box.y_min, box.x_max + 3, box.y_max, 0.5, box.class_name) for box in truth.boxes]
+    detector = TruthDetector(sample, extra=tuple(weaker))  # each object twice, the shifted copy scoring lower
+    calls = []
+
+    def counted(estimator):
+        def estimate(image, box, camera=None):
+            calls.append(box)
+            return estimator(image, box, camera=camera)
+        return estimate
+
+    counting = {obj_id: counted(estimator) for obj_id, estimator in estimators.items()}
+    every = DetectAndEstimatePose6D(detector, estimators, sample.camera)(sample.image)
+    pipeline = DetectAndEstimatePose6D(detector, counting, sample.camera, poses_per_class=1)
+    assert pipeline.names == ["check", "detect", "select", "top", "estimate", "pair"]
+    values = pipeline.run(sample.image)
+    assert [box for box, _ in values["results"]] == truth.boxes == calls and values["left_out"] == weaker
+    for (box, pose), (same_box, same_pose) in zip(values["results"], every):
+        assert box == same_box and pose.class_name == same_pose.class_name
+        np.testing.assert_allclose(pose.to_matrix(), same_pose.to_matrix())
+
+
 def test_image_that_does_not_match_the_camera_is_refused(world):
     from paz6d.detect_and_estimate import DetectAndEstimatePose6D
 
@@ -294,6 +337,25 @@ def test_estimate_with_several_runs_and_with_the_detector_through_evaluate_bop(w
     assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(tmp_path / "x.csv"),
                  "--box-search"]) == 2
     assert "--box-search: only with --detector" in capsys.readouterr().err
+    # --poses-per-class 1: every detection in the JSON, a pose for each class's best detection per image only
+    assert main(["estimate", "--detector", str(world / "ssd"), *runs, "--dataset", str(world / "set"),
+                 "--out", str(tmp_path / "best.csv"), "--score-threshold", "0", "--poses-per-class", "1",
+                 "--no-progress"]) == 0
+    assert sorted(map(key, json.loads((tmp_path / "best_detections.json").read_text()))) == sorted(map(key, coco))
+    best, every = read_pose_results(tmp_path / "best.csv"), read_pose_results(detected)
+    pairs = list(zip(best.im_ids.tolist(), best.obj_ids.tolist()))
+    assert len(set(pairs)) == len(pairs) == len(set(zip(every.im_ids.tolist(), every.obj_ids.tolist()))) < len(every)
+    for row, (im_id, obj_id) in enumerate(pairs):
+        same = np.flatnonzero((every.im_ids == im_id) & (every.obj_ids == obj_id))
+        top = same[np.argmax(every.scores[same])]
+        assert best.scores[row] == every.scores[top]
+        np.testing.assert_allclose(best.translations[row], every.translations[top])
+    for flags, message in ((["--poses-per-class", "1"], "--poses-per-class: only with --detector"),
+                           (["--detector", str(world / "ssd"), "--poses-per-class", "0"],
+                            "--poses-per-class: expected a whole number >= 1, got 0")):
+        assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(tmp_path / "x.csv"),
+                     *flags]) == 2
+        assert message in capsys.readouterr().err
     # a bare run directory with --object-id still works (and its object is checked)
     assert main(["estimate", "--run", str(world / "aae_5"), "--object-id", "5", "--dataset", str(world / "set"),
                  "--out", str(tmp_path / "bare.csv"), "--no-progress"]) == 0
