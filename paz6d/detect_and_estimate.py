@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import re
 import warnings
+from collections import Counter
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -173,13 +174,10 @@ class KeepTopPerClass(Processor):
         self.count = int(count)
 
     def call(self, boxes) -> tuple[list[Box2D], list[Box2D]]:
-        ranked = sorted(range(len(boxes)), key=lambda index: -boxes[index].score)  # stable: ties keep order
-        taken: dict[str, int] = {}
-        kept = set()
-        for index in ranked:
-            name = boxes[index].class_name
-            if taken.get(name, 0) < self.count:
-                taken[name] = taken.get(name, 0) + 1
+        taken, kept = Counter(), set()
+        for index in sorted(range(len(boxes)), key=lambda index: -boxes[index].score):  # stable: ties keep order
+            if taken[boxes[index].class_name] < self.count:
+                taken[boxes[index].class_name] += 1
                 kept.add(index)
         return ([box for index, box in enumerate(boxes) if index in kept],
                 [box for index, box in enumerate(boxes) if index not in kept])
@@ -271,10 +269,11 @@ class DetectAndEstimatePose6D(SequentialProcessor):
         verify: multiply each box's score by its pose's score (:class:`VerifyBoxes`): measured on the real
             LM-O frames, it ranks the detector's false positives lower (docs/real_photos.md).
         poses_per_class: estimate poses only for this many highest-scoring detections of each class per image
-            (:class:`KeepTopPerClass`; the others are in ``left_out``); ``None``: every detection.
+            (:class:`KeepTopPerClass`; the others are in ``left_out``); ``None``: every detection. Not with
+            ``verify``, which re-ranks every detection by its pose.
     Raises:
-        ValueError: no estimators, a bad key, or a class the detector cannot output (when it lists
-            ``class_names``).
+        ValueError: no estimators, a bad key, a class the detector cannot output (when it lists
+            ``class_names``), or ``verify`` with ``poses_per_class``.
     """
 
     def __init__(self, detector: Callable, estimators: Mapping[str | int, Callable], camera=None,
@@ -285,6 +284,9 @@ class DetectAndEstimatePose6D(SequentialProcessor):
             raise ValueError(f"detector: expected a callable image -> [Box2D], got {type(detector).__name__}")
         if not estimators:
             raise ValueError("estimators: expected at least one pose model (class name or BOP id -> pipeline)")
+        if verify and poses_per_class is not None:
+            raise ValueError("verify: not with poses_per_class (verify re-ranks every detection by its pose's score, "
+                             "so every detection needs a pose)")
         named: dict[str, Callable] = {}
         for key, estimator in estimators.items():
             name = class_name_of(key)

@@ -521,6 +521,9 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
             raise ValueError("--poses-per-class: only with --detector (ground-truth boxes are one per instance)")
         if args.poses_per_class < 1:
             raise ValueError(f"--poses-per-class: expected a whole number >= 1, got {args.poses_per_class}")
+        if args.verify:
+            raise ValueError("--poses-per-class: not with --verify (it re-ranks every detection by its pose's score, "
+                             "so every detection needs a pose)")
     detections = detections_path(args)
     check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
     check_output_file(args.out, "--out")

@@ -206,6 +206,8 @@ def test_poses_per_class_estimates_only_each_class_best_detection(world):
     assert pipeline.names == ["check", "detect", "select", "top", "estimate", "pair"]
     values = pipeline.run(sample.image)
     assert [box for box, _ in values["results"]] == truth.boxes == calls and values["left_out"] == weaker
+    with pytest.raises(ValueError, match="verify: not with poses_per_class"):
+        DetectAndEstimatePose6D(detector, counting, sample.camera, verify=True, poses_per_class=1)
     for (box, pose), (same_box, same_pose) in zip(values["results"], every):
         assert box == same_box and pose.class_name == same_pose.class_name
         np.testing.assert_allclose(pose.to_matrix(), same_pose.to_matrix())
@@ -352,7 +354,9 @@ def test_estimate_with_several_runs_and_with_the_detector_through_evaluate_bop(w
         np.testing.assert_allclose(best.translations[row], every.translations[top])
     for flags, message in ((["--poses-per-class", "1"], "--poses-per-class: only with --detector"),
                            (["--detector", str(world / "ssd"), "--poses-per-class", "0"],
-                            "--poses-per-class: expected a whole number >= 1, got 0")):
+                            "--poses-per-class: expected a whole number >= 1, got 0"),
+                           (["--detector", str(world / "ssd"), "--poses-per-class", "1", "--verify"],
+                            "--poses-per-class: not with --verify")):
         assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(tmp_path / "x.csv"),
                      *flags]) == 2
         assert message in capsys.readouterr().err
