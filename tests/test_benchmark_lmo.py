@@ -19,7 +19,7 @@ TINY = BenchmarkSettings(images=6, backgrounds=3, detector_steps=4, aae_steps=4,
 
 #: the mocked estimate and evaluate stages of one run, in order
 SCORING = ["estimate gt", "evaluate gt", "estimate detections", "evaluate detections", "estimate synthetic",
-           "evaluate synthetic"]
+           "evaluate synthetic", "estimate synthetic_detections", "evaluate synthetic_detections"]
 
 
 def _fake_lmo(root: Path, objects=(1, 5)) -> Path:
@@ -81,11 +81,13 @@ def test_stages_run_in_order_once_and_a_rerun_skips_every_finished_one(mocked, t
     assert [name for name, _, _ in stages(job)] == [
         "backgrounds", "synthetic", "validation", "detector", "pose/obj_000001", "pose/obj_000005", "estimate_aae_gt",
         "evaluate_aae_gt", "estimate_aae_detections", "evaluate_aae_detections", "estimate_aae_synthetic",
-        "evaluate_aae_synthetic", "detector_ap_aae"]
+        "evaluate_aae_synthetic", "estimate_aae_synthetic_detections", "evaluate_aae_synthetic_detections",
+        "detector_ap_aae"]
     report = run_benchmark(job)
     assert calls == ["backgrounds", "synthetic", "validation", "detector", "pose 1", "pose 5", *SCORING,
                      "detector ap"]
-    assert sorted(report["methods"]["aae"]) == ["detections", "gt_visible_boxes", "synthetic_gt_visible_boxes"]
+    assert sorted(report["methods"]["aae"]) == ["detections", "gt_visible_boxes", "synthetic_detections",
+                                                "synthetic_gt_visible_boxes"]
     stored = json.loads((job.out / "report.json").read_text())
     assert stored == json.loads(json.dumps(report))
     assert stored["methods"]["aae"]["detections"]["mean_AR_MSSD_AR_MSPD"] == pytest.approx(0.3)
@@ -121,7 +123,7 @@ def test_jobs_hand_the_unfinished_pose_trainings_to_side_by_side_processes_after
     report = run_benchmark(Benchmark(**folder, jobs=2))
     assert handed == [["pose/obj_000001", "pose/obj_000005"]]
     assert calls[:4] == ["backgrounds", "synthetic", "validation", "detector"]
-    assert calls[4:7] == ["side by side", "pose 1", "pose 5"] and calls[7:13] == SCORING
+    assert calls[4:7] == ["side by side", "pose 1", "pose 5"] and calls[7:15] == SCORING
     assert report["jobs"] == 2 and report["run_wall_minutes"] >= 0
     assert "pose models 2 at a time" in (tmp_path / "bench" / "report.md").read_text()
     assert report["timings_seconds"].keys() >= {"detector", "pose/obj_000001", "pose/obj_000005"}
@@ -196,6 +198,13 @@ def test_a_pose_method_per_object_reuses_the_other_models_and_reports_under_its_
 
     parsed = build_parser().parse_args(detections)  # the flags `paz6d estimate` runs with
     assert parsed.poses_per_class == 1 and parsed.box_search and parsed.flip
+    # the held-out synthetic images with the detector's boxes: the same flags, scored on their visible-box targets
+    synthetic = build_parser().parse_args(lmo._estimate_args(mixed, "synthetic_detections"))
+    assert synthetic.detector == parsed.detector and synthetic.poses_per_class == 1 and synthetic.box_search
+    assert synthetic.dataset == tmp_path / "bench" / "validation" and synthetic.targets_out is None
+    assert lmo._targets(mixed, "synthetic_detections") == lmo._targets(mixed, "synthetic") == mixed.result(
+        "synthetic", "_targets.json")
+    assert lmo._targets(mixed, "detections") == mixed.result("detections", "_targets.json")
     report = run_benchmark(mixed)
     assert calls == ["pose 5", *SCORING, "detector ap"]
     assert sorted(report["methods"]) == ["aae", "aae+keypointnet_robust@5"]
@@ -341,7 +350,7 @@ def test_every_real_stage_runs_on_the_shared_lmo_data_at_toy_size(tmp_path, shar
     job = Benchmark(out=tmp_path / "bench", lmo=shared_data / "bop_lmo", quick=True, settings=TINY, objects=(5, 8),
                     progress=False, object_methods={8: "keypointnet_robust"}, jobs=2)  # pose models side by side
     report = run_benchmark(job)
-    for condition in ("gt_visible_boxes", "detections", "synthetic_gt_visible_boxes"):
+    for condition in ("gt_visible_boxes", "detections", "synthetic_gt_visible_boxes", "synthetic_detections"):
         scores = report["methods"]["aae+keypointnet_robust@8"][condition]
         assert scores is not None and sorted(scores["per_object"]) == ["5", "8"]
         assert 0 <= scores["mean_AR_MSSD_AR_MSPD"] <= 1

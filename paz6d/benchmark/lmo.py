@@ -16,7 +16,8 @@ From the 8 LM-O meshes (``<lmo>/models``) only:
    mirror image, ``paz6d estimate --flip``: real AP 0.252 -> 0.270; poses for each class's best detection, whose
    AAE searches around its box, ``--poses-per-class 1 --box-search``); ``estimate_synthetic``: on
    held-out synthetic images of the training scenes' kind (``validation``, another seed), ground-truth visible
-   boxes: what a user without real labels sees, to pick a method per object;
+   boxes: what a user without real labels sees, to pick a method per object; ``estimate_synthetic_detections``:
+   the same images with the detector's boxes (as on the real frames), what the boxes cost without the real photos;
 6. ``evaluate_*``: ``paz6d evaluate bop`` (AR_MSSD, AR_MSPD, ADD(-S), per object) of each, and
    ``paz6d evaluate coco`` of the detections;
 7. ``report``: ``DIR/report.json``, ``DIR/report.md`` (the table; once two methods were scored on an object,
@@ -63,8 +64,12 @@ LMO_INTRINSICS = (572.4114, 573.57043, 325.2611, 242.04899)
 #: (photo backgrounds, its own length): the one that does more than fail on the driller (docs/real_photos.md).
 METHODS = ("aae", "keypointnet", "keypointnet_robust")
 #: Estimate conditions: real frames with ground-truth visible boxes, real frames with the detector's boxes, and
-#: held-out synthetic images with ground-truth visible boxes (their names in report.json).
-CONDITIONS = {"gt": "gt_visible_boxes", "detections": "detections", "synthetic": "synthetic_gt_visible_boxes"}
+#: held-out synthetic images with ground-truth visible boxes and with the detector's boxes (their names in
+#: report.json).
+CONDITIONS = {"gt": "gt_visible_boxes", "detections": "detections", "synthetic": "synthetic_gt_visible_boxes",
+              "synthetic_detections": "synthetic_detections"}
+#: The conditions whose boxes come from the benchmark's detector.
+DETECTOR_CONDITIONS = ("detections", "synthetic_detections")
 #: Seed offset of the held-out synthetic images (image i of seed s + 1000 shares nothing with the training set's).
 VALIDATION_SEED_OFFSET = 1000
 
@@ -291,16 +296,23 @@ def _stage_pose(job: Benchmark, obj_id: int) -> dict:
 
 def _scored_split(job: Benchmark, condition: str) -> list[str]:
     """``--dataset DIR --split SPLIT`` of the images a condition is scored on."""
-    if condition == "synthetic":
+    if condition.startswith("synthetic"):
         return ["--dataset", str(job.out / "validation"), "--split", "train"]
     return ["--dataset", str(job.lmo), "--split", "test"]
 
 
+def _targets(job: Benchmark, condition: str) -> Path:
+    """The BOP'19 targets a condition is scored on. The held-out synthetic images have no targets file, so their
+    detections are scored on the targets written with their ground-truth boxes (visible fraction >= 0.1)."""
+    return job.result("synthetic" if condition == "synthetic_detections" else condition, "_targets.json")
+
+
 def _estimate_args(job: Benchmark, condition: str) -> list[str]:
     argv = ["estimate", *[f"--run={obj_id}={job.pose_dir(obj_id)}" for obj_id in job.objects],
-            *_scored_split(job, condition), "--out", str(job.result(condition, ".csv")),
-            "--targets-out", str(job.result(condition, "_targets.json"))]
-    if condition in ("gt", "synthetic"):
+            *_scored_split(job, condition), "--out", str(job.result(condition, ".csv"))]
+    if condition != "synthetic_detections":
+        argv += ["--targets-out", str(_targets(job, condition))]
+    if condition not in DETECTOR_CONDITIONS:
         argv += ["--box", "visib"]
     else:
         # LM-O shows each object once: BOP scores each object's best estimate, so only the best detection per class
@@ -328,7 +340,7 @@ def _stage_evaluate(job: Benchmark, condition: str) -> dict:
     scores = job.result(condition, "_scores.json")
     _run_command(["evaluate", "bop", *_scored_split(job, condition),
                   "--results", str(job.result(condition, ".csv")),
-                  "--targets", str(job.result(condition, "_targets.json")), "--metrics", "mssd,mspd,add",
+                  "--targets", str(_targets(job, condition)), "--metrics", "mssd,mspd,add",
                   "--out", str(scores), "--plots", str(job.out / "results" / f"{job.label}_{condition}_plots")]
                  + ([] if job.progress else ["--no-progress"]))
     return {"scores": str(scores)}
@@ -744,7 +756,8 @@ def write_report(job: Benchmark, timings: dict[str, float], wall_seconds: float 
               f"frame's mirror image, and whose best box per object is searched around by its AAE (`paz6d estimate "
               f"--flip --poses-per-class 1 --box-search`); `synthetic_gt_visible_boxes`: the same models on "
               f"{job.settings.validation_images} held-out synthetic images (what a user without real labels can "
-              f"measure, to pick a method per object). Total stage time {report['total_minutes']:.1f} min"
+              f"measure, to pick a method per object), and `synthetic_detections` with the detector's boxes on "
+              f"them. Total stage time {report['total_minutes']:.1f} min"
               f"{_wall_note(report)}.\n\n")
     write_text_atomically(job.out / "report.md", header + table)
     print(table)
