@@ -34,6 +34,10 @@ def test_box2d_properties_and_round_trips():
     assert Box2D.from_array(box.to_array(), 0.7, "duck") == box
     assert Box2D.from_dict({"x_min": 1, "y_min": 2, "x_max": 3, "y_max": 4}) == Box2D(1, 2, 3, 4)
     assert isinstance(Box2D(np.float32(1), 2, 3, 4).x_min, float)
+    # coordinates_of: a message's array, any other value untouched (its caller checks it)
+    np.testing.assert_array_equal(Box2D.coordinates_of(box), [10, 20, 50, 80])
+    plain = (1, 2, 3)
+    assert Box2D.coordinates_of(plain) is plain
 
 
 def test_box2d_validation():

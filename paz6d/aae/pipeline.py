@@ -153,7 +153,7 @@ def pose_from_codebook_view(R_codebook, box, K, render_box, render_K, render_dis
 # ------------------------------------------------------------------------------------------ steps
 def _as_box(box, image_shape: tuple[int, ...], name: str = "box") -> np.ndarray:
     height, width = image_shape[:2]
-    return check_box_in_image(box.to_array() if isinstance(box, Box2D) else box, width, height, name)
+    return check_box_in_image(Box2D.coordinates_of(box), width, height, name)
 
 
 class EncodeCrops(Processor):

@@ -71,6 +71,12 @@ class Box2D:
         return np.array([self.x_min, self.y_min, self.x_max, self.y_max])
 
     @classmethod
+    def coordinates_of(cls, box):
+        """``box.to_array()`` for a :class:`Box2D`, any other value as given (a pixel box
+        ``(x_min, y_min, x_max, y_max)`` that the caller checks)."""
+        return box.to_array() if isinstance(box, cls) else box
+
+    @classmethod
     def from_array(cls, coordinates, score: float = 1.0, class_name: str | None = None) -> "Box2D":
         x_min, y_min, x_max, y_max = as_array(coordinates, "coordinates", (4,)).reshape(4)
         return cls(x_min, y_min, x_max, y_max, score, class_name)

@@ -55,7 +55,7 @@ class JitterBoxes(Processor):
     def call(self, images: list, boxes: list) -> tuple[list, list]:
         moved = []
         for box in boxes:
-            moved.extend(move_box(box.to_array() if isinstance(box, Box2D) else box, self.jitters))
+            moved.extend(move_box(Box2D.coordinates_of(box), self.jitters))
         return [image for image in images for _ in self.jitters], moved
 
 

@@ -32,7 +32,7 @@ class SquareCrop(Processor):
         self.margin, self.size = float(margin), int(size)
 
     def call(self, image: np.ndarray, box) -> tuple[np.ndarray, tuple[int, int, int]]:
-        coordinates = check_box_in_image(box.to_array() if isinstance(box, Box2D) else box, image.shape[1],
+        coordinates = check_box_in_image(Box2D.coordinates_of(box), image.shape[1],
                                          image.shape[0])
         window = square_window(coordinates, self.margin)
         return crop_square(image, window, self.size), window
@@ -85,4 +85,4 @@ class BoxVariants(Processor):
         return len(self.variants)
 
     def call(self, box) -> np.ndarray:
-        return move_box(box.to_array() if isinstance(box, Box2D) else box, self.variants)
+        return move_box(Box2D.coordinates_of(box), self.variants)

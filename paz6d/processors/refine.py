@@ -69,7 +69,7 @@ class RefineWithDepth(Processor):
 
     def refine(self, pose: Pose6D, depth: np.ndarray, box, camera: Camera) -> ICPResult:
         """One candidate's :class:`~paz6d.backend.icp.ICPResult` (counted in :attr:`statistics`)."""
-        box = box.to_array() if isinstance(box, Box2D) else box
+        box = Box2D.coordinates_of(box)
         started = time.process_time()
         result = self.icp_model.refine(pose.to_matrix(), depth, camera.K, box=box, settings=self.settings)
         self.statistics["seconds"] += time.process_time() - started

@@ -117,7 +117,7 @@ class SegmentInstances(SequentialProcessor):
             class_names = [box.class_name if isinstance(box, Box2D) else None for box in boxes]
         if len(class_names) != len(boxes):
             raise ValueError(f"class_names: expected one per box ({len(boxes)}), got {len(class_names)}")
-        arrays = [check_box_in_image(box.to_array() if isinstance(box, Box2D) else box, width, height, f"boxes[{i}]")
+        arrays = [check_box_in_image(Box2D.coordinates_of(box), width, height, f"boxes[{i}]")
                   for i, box in enumerate(boxes)]
         if not arrays:
             return np.zeros((0, height, width), bool if stop is None else np.float32)
