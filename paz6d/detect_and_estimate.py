@@ -34,6 +34,7 @@ from paz6d.backend.camera import Camera, as_camera
 from paz6d.backend.draw import draw_box, draw_model_outline, draw_pose_axes, draw_projected_points, keypoint_colors
 from paz6d.backend.checks import check_depth
 from paz6d.backend.image import as_image
+from paz6d.backend.viewpoints import ViewpointRange
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.processors.crops import BoxVariants
 
@@ -66,11 +67,11 @@ def bop_object_id(class_name: str) -> int | None:
 
 
 def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None = None, keypoint_crops: int = 1,
-                        box_variants: BoxVariants | None = None):
+                        box_variants: BoxVariants | None = None, viewpoints: ViewpointRange | None = None):
     """The pose pipeline of a run directory, its method found by :func:`paz6d.run_dirs.method_of`;
     ``keypoint_crops`` is the ``crops`` option of a :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`,
-    ``box_variants`` (a :class:`~paz6d.processors.crops.BoxVariants`) the one of an
-    :class:`~paz6d.aae.pipeline.ImplicitPose6D`.
+    ``box_variants`` (a :class:`~paz6d.processors.crops.BoxVariants`) and ``viewpoints`` (a
+    :class:`~paz6d.backend.viewpoints.ViewpointRange`) those of an :class:`~paz6d.aae.pipeline.ImplicitPose6D`.
 
     Returns:
         ``(method, estimator)``: ``"aae"`` with an :class:`~paz6d.aae.pipeline.ImplicitPose6D` or
@@ -84,7 +85,8 @@ def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None
     if method == "aae":
         from paz6d.aae.pipeline import ImplicitPose6D
 
-        return method, ImplicitPose6D(run_dir, camera, class_name=class_name, box_variants=box_variants)
+        return method, ImplicitPose6D(run_dir, camera, class_name=class_name, box_variants=box_variants,
+                                      viewpoints=viewpoints)
     if method == "keypointnet":
         from paz6d.keypointnet.pipeline import KeypointPose6D
 
@@ -317,7 +319,8 @@ class DetectAndEstimatePose6D(SequentialProcessor):
     def from_run_dirs(cls, detector_dir: str | Path, pose_dirs: Mapping[str | int, str | Path], camera=None,
                       score_threshold: float = 0.3, strict: bool = False, load_meshes: bool = True,
                       verify: bool = False, flip: bool = False, box_variants: BoxVariants | None = None,
-                      poses_per_class: int | None = None) -> "DetectAndEstimatePose6D":
+                      poses_per_class: int | None = None,
+                      viewpoints: ViewpointRange | None = None) -> "DetectAndEstimatePose6D":
         """Loads a ``DetectSingleShot`` run and one pose run directory per class (method found by itself).
 
         Args:
@@ -328,13 +331,15 @@ class DetectAndEstimatePose6D(SequentialProcessor):
             box_variants: the AAE runs choose among these copies of each detected box
                 (:class:`~paz6d.processors.crops.BoxVariants`, ``ImplicitPose6D``'s ``box_variants``).
             poses_per_class: poses only for each class's best detections (see the class).
+            viewpoints: the AAE runs answer only with views in this range (``ImplicitPose6D``'s ``viewpoints``).
         """
         from paz6d.ssd.pipeline import DetectSingleShot
 
         estimators, meshes = {}, {}
         for key, run_dir in pose_dirs.items():
             name = class_name_of(key)
-            estimators[name] = load_pose_estimator(run_dir, camera, class_name=name, box_variants=box_variants)[1]
+            estimators[name] = load_pose_estimator(run_dir, camera, class_name=name, box_variants=box_variants,
+                                                   viewpoints=viewpoints)[1]
             found = run_mesh(run_dir) if load_meshes else None
             if found is not None and found[0].is_file():
                 from paz6d.backend.mesh import load_mesh  # trimesh, only when outlines are wanted

@@ -37,6 +37,7 @@ from paz6d.backend.paths import check_output_file, check_outputs_apart, check_pl
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.keypointnet.config import CROP_JITTERS, check_crops
+from paz6d.backend.viewpoints import ViewpointRange
 from paz6d.processors.crops import BoxVariants
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION, read_targets
@@ -83,6 +84,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="with --detector: estimate poses only for the N highest-scoring detections of each "
                              "class per image (BOP scores an object's best N estimates, N its instance count: 1 on "
                              "LM-O); the detections JSON still holds every detection (default: all)")
+    parser.add_argument("--elevation-degrees", type=float, nargs=2, default=(-90.0, 90.0), metavar=("MIN", "MAX"),
+                        help="AAE runs: answer only with views whose camera elevation above the model's xy plane "
+                             "(z up) lies in MIN..MAX degrees, as `paz6d generate --rotation view-sphere` draws "
+                             "them; e.g. your training scenes' range widened by a margin, for a camera that never "
+                             "sees the objects from below (default: -90 90, every view)")
+    parser.add_argument("--inplane-degrees", type=float, default=180.0, metavar="D",
+                        help="AAE runs: answer only with views whose in-plane angle (the model's z axis in the "
+                             "image against image-up) lies within ±D degrees, as `paz6d generate` draws it "
+                             "(default: 180, every view)")
     parser.add_argument("--box", choices=sorted(BOX_FIELDS), default="obj",
                         help="without --detector, the ground-truth box given to the model: of the whole projected "
                              "object (obj) or of its visible part (visib, what a detector would see)")
@@ -242,17 +252,18 @@ class _Estimates:
         return result
 
 
-def _estimator(method: str, run_dir: Path, keypoint_crops: int = 1, box_variants: BoxVariants | None = None):
+def _estimator(method: str, run_dir: Path, **options):
     """The pose pipeline of one run directory (``method`` as :func:`paz6d.run_dirs.method_of` names it),
-    loaded once; each image's camera is given per call."""
+    loaded once; each image's camera is given per call. ``options``: ``keypoint_crops``, ``box_variants``,
+    ``viewpoints`` of :func:`~paz6d.detect_and_estimate.load_pose_estimator`."""
     from paz6d.detect_and_estimate import load_pose_estimator
 
-    return load_pose_estimator(run_dir, keypoint_crops=keypoint_crops, box_variants=box_variants)[1]
+    return load_pose_estimator(run_dir, **options)[1]
 
 
-def _load_estimators(runs: dict[int, tuple[Path, str]], keypoint_crops: int = 1,
-                     box_variants: BoxVariants | None = None) -> tuple[dict[int, object], dict[int, str]]:
-    """``({obj_id: estimator}, {obj_id: reason})``: a run that loads but can never give a pose (a KeypointNet
+def _load_estimators(runs: dict[int, tuple[Path, str]], **options) -> tuple[dict[int, object], dict[int, str]]:
+    """``({obj_id: estimator}, {obj_id: reason})`` (``options`` as :func:`_estimator`'s): a run that loads but
+    can never give a pose (a KeypointNet
     with fewer than 4 usable keypoints, a ``PnPError``) is left out with a warning, so its instances score as
     misses and the other objects are still estimated.
 
@@ -264,7 +275,7 @@ def _load_estimators(runs: dict[int, tuple[Path, str]], keypoint_crops: int = 1,
     estimators, unusable = {}, {}
     for obj_id, (run_dir, method) in runs.items():
         try:
-            estimators[obj_id] = _estimator(method, run_dir, keypoint_crops, box_variants)
+            estimators[obj_id] = _estimator(method, run_dir, **options)
         except PnPError as error:
             unusable[obj_id] = str(error)
     if not estimators:
@@ -276,8 +287,10 @@ def _load_estimators(runs: dict[int, tuple[Path, str]], keypoint_crops: int = 1,
 
 def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path, split: str, box: str = "obj",
                                min_visible: float = TARGET_MIN_VISIBLE_FRACTION, progress: bool = True,
-                               depth: bool = False, keypoint_crops: int = 1) -> dict:
-    """Every visible-enough instance of the runs' objects, from its ground-truth box.
+                               depth: bool = False, keypoint_crops: int = 1,
+                               viewpoints: ViewpointRange | None = None) -> dict:
+    """Every visible-enough instance of the runs' objects, from its ground-truth box (``viewpoints``: the
+    AAE runs answer only with views in this range).
 
     Returns:
         ``{"estimates": _Estimates, "targets": [Target], "skipped_images", "failed": {obj_id: count},
@@ -308,7 +321,7 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
             counts[instance.obj_id] = counts.get(instance.obj_id, 0) + 1
         targets += [Target(sample.scene_id, sample.im_id, obj_id, count) for obj_id, count in sorted(counts.items())]
         if estimators is None:
-            estimators, unusable = _load_estimators(runs, keypoint_crops)
+            estimators, unusable = _load_estimators(runs, keypoint_crops=keypoint_crops, viewpoints=viewpoints)
         images += 1
         poses, seconds = [], 0.0
         extra = {"depth": checked_depth(sample, dataset, split)} if depth else {}
@@ -366,12 +379,14 @@ def split_images(dataset: Path, split: str):
 def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path, dataset: Path, split: str,
                            score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True,
                            depth: bool = False, keypoint_crops: int = 1, verify: bool = False,
-                           flip: bool = False, box_search: bool = False, poses_per_class: int | None = None) -> dict:
+                           flip: bool = False, box_search: bool = False, poses_per_class: int | None = None,
+                           viewpoints: ViewpointRange | None = None) -> dict:
     """Detect every RGB image of the split, then estimate each detection of an object that has a run
     (``verify``: scores of the detections with a pose model times their pose's score, ``VerifyBoxes``;
     ``flip``: the detector also sees the mirror image, ``DetectSingleShot``; ``box_search``: the AAE runs
     choose among the default :class:`~paz6d.processors.crops.BoxVariants` of each box; ``poses_per_class``:
-    poses only for each class's best detections, ``KeepTopPerClass``).
+    poses only for each class's best detections, ``KeepTopPerClass``; ``viewpoints``: the AAE runs answer only
+    with views in this range).
 
     Returns:
         ``{"estimates": _Estimates, "detections": [COCO result dicts], "images": [(scene_id, im_id)],
@@ -387,7 +402,8 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
     from paz6d.ssd.pipeline import DetectSingleShot
 
     detector = DetectSingleShot(detector_dir, score_threshold=score_threshold, flip=flip)
-    estimators, unusable = _load_estimators(runs, keypoint_crops, BoxVariants() if box_search else None)
+    estimators, unusable = _load_estimators(runs, keypoint_crops=keypoint_crops, viewpoints=viewpoints,
+                                            box_variants=BoxVariants() if box_search else None)
     pipeline = DetectAndEstimatePose6D(detector, estimators, verify=verify, poses_per_class=poses_per_class)
     estimates, detections, images = _Estimates(), [], []
     skipped_images, failed, without_model, total = 0, {obj_id: 0 for obj_id in runs}, {}, 0.0
@@ -498,6 +514,19 @@ def refinement_statistics(estimators) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ command
+def viewpoint_range(args: argparse.Namespace) -> ViewpointRange | None:
+    """The AAE runs' :class:`~paz6d.backend.viewpoints.ViewpointRange` of ``--elevation-degrees`` and
+    ``--inplane-degrees``, ``None`` for every view; ``ValueError`` naming the flag for a bad range."""
+    for flag, settings in (("--elevation-degrees", {"elevation_degrees": tuple(args.elevation_degrees)}),
+                           ("--inplane-degrees", {"inplane_degrees": args.inplane_degrees})):
+        try:
+            ViewpointRange(**settings)
+        except ValueError as error:
+            raise ValueError(f"{flag}: {error}") from None
+    viewpoints = ViewpointRange(tuple(args.elevation_degrees), args.inplane_degrees)
+    return None if viewpoints.is_everything else viewpoints
+
+
 def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
     """Checks every flag, the run directories (method, files, object), the detector and the output paths
     before any image is read; returns ``{obj_id: (run_dir, method)}``. Bad input raises ``ValueError``
@@ -524,6 +553,7 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
         if args.verify:
             raise ValueError("--poses-per-class: not with --verify (it re-ranks every detection by its pose's score, "
                              "so every detection needs a pose)")
+    viewpoint_range(args)
     detections = detections_path(args)
     check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
     check_output_file(args.out, "--out")
@@ -552,7 +582,7 @@ def estimate(args: argparse.Namespace) -> dict:
     objects = sorted(runs)
     if args.detector is None:
         found = estimate_with_ground_truth(runs, args.dataset, args.split, args.box, args.min_visible, args.progress,
-                                           args.depth, args.keypoint_crops)
+                                           args.depth, args.keypoint_crops, viewpoint_range(args))
         targets = found["targets"]
         if found["images"] == 0:
             raise ValueError(f"{args.dataset}: no instance of objects {objects} with an RGB image and visible "
@@ -560,7 +590,7 @@ def estimate(args: argparse.Namespace) -> dict:
     else:
         found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
                                        args.progress, args.depth, args.keypoint_crops, args.verify,
-                                       args.flip, args.box_search, args.poses_per_class)
+                                       args.flip, args.box_search, args.poses_per_class, viewpoint_range(args))
         targets = detector_targets(args.dataset, found["images"], runs)
         if not found["images"]:
             raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "
@@ -589,6 +619,8 @@ def estimate(args: argparse.Namespace) -> dict:
         summary.update(detections_out=str(path), detections=len(found["detections"]),
                        detections_without_pose_model=found["without_model"],
                        mean_seconds_per_image=found["seconds_per_image"])
+    if viewpoint_range(args) is not None:
+        summary["viewpoints"] = viewpoint_range(args).describe()
     if args.targets_out is not None:
         write_targets(args.targets_out, targets)
         summary["targets_out"] = str(args.targets_out)

@@ -115,3 +115,21 @@ def test_neighbour_average_refines_between_entries():
     np.testing.assert_allclose(book.neighbour_average([[5]], [[1.0]])[0], rotations[5], atol=1e-12)
     with pytest.raises(ValueError, match="radius_deg"):
         book.neighbour_average(indices, similarities, radius_deg=0)
+
+
+def test_within_keeps_the_entries_of_a_viewpoint_range_in_order_and_refuses_an_empty_one():
+    from paz6d.backend.viewpoints import ViewpointRange, elevation_and_inplane
+
+    codebook = _random_codebook(count=200, seed=4)
+    above = ViewpointRange((0, 90), 60)
+    kept = codebook.within(above)
+    elevation, inplane = elevation_and_inplane(codebook.rotations)
+    expected = np.flatnonzero((elevation >= 0) & (np.abs(inplane) <= 60))  # brute force
+    assert 0 < len(kept) == len(expected) < len(codebook)
+    np.testing.assert_allclose(kept.codes, codebook.codes[expected], rtol=1e-6)  # unit rows, normalised again
+    np.testing.assert_array_equal(kept.rotations, codebook.rotations[expected])
+    np.testing.assert_array_equal(kept.render_boxes, codebook.render_boxes[expected])
+    assert kept.render_distance == codebook.render_distance and np.array_equal(kept.render_K, codebook.render_K)
+    assert len(codebook.within(ViewpointRange())) == len(codebook)
+    with pytest.raises(ValueError, match="none of the codebook's 200 views lies within elevation 90..90"):
+        codebook.within(ViewpointRange((90, 90), 0))

@@ -194,7 +194,9 @@ def test_a_pose_method_per_object_reuses_the_other_models_and_reports_under_its_
     assert "--flip" in detections and "--flip" not in truth
     assert "--box-search" in detections and "--box-search" not in truth
     assert detections[detections.index("--poses-per-class") + 1] == "1" and "--poses-per-class" not in truth
+    from paz6d.backend.viewpoints import ViewpointRange
     from paz6d.cli import build_parser
+    from paz6d.estimate import viewpoint_range
 
     parsed = build_parser().parse_args(detections)  # the flags `paz6d estimate` runs with
     assert parsed.poses_per_class == 1 and parsed.box_search and parsed.flip
@@ -205,6 +207,12 @@ def test_a_pose_method_per_object_reuses_the_other_models_and_reports_under_its_
     assert lmo._targets(mixed, "synthetic_detections") == lmo._targets(mixed, "synthetic") == mixed.result(
         "synthetic", "_targets.json")
     assert lmo._targets(mixed, "detections") == mixed.result("detections", "_targets.json")
+    # every condition's AAEs answer only with the training scenes' viewpoints (15-80 degrees up, rolled by at most
+    # 30) widened by 15 degrees
+    assert lmo.viewpoints(mixed) == ViewpointRange((0, 90), 45)
+    for condition in lmo.CONDITIONS:
+        flags = build_parser().parse_args(lmo._estimate_args(mixed, condition))
+        assert viewpoint_range(flags) == ViewpointRange((0, 90), 45)
     report = run_benchmark(mixed)
     assert calls == ["pose 5", *SCORING, "detector ap"]
     assert sorted(report["methods"]) == ["aae", "aae+keypointnet_robust@5"]

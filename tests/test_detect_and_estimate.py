@@ -213,6 +213,31 @@ def test_poses_per_class_estimates_only_each_class_best_detection(world):
         np.testing.assert_allclose(pose.to_matrix(), same_pose.to_matrix())
 
 
+def test_viewpoints_keep_the_aae_answers_within_the_camera_range_in_the_pipeline_and_the_command(world, tmp_path):
+    from paz6d.backend.viewpoints import ViewpointRange
+    from paz6d.datasets.bop import read_pose_results
+    from paz6d.pipelines import ImplicitPose6D
+
+    above = ViewpointRange((30, 90))
+    every = ImplicitPose6D(world / "aae_5").codebook
+    estimator = ImplicitPose6D(world / "aae_5", viewpoints=above)
+    assert 0 < len(estimator.codebook) < len(every) and above.contains(estimator.codebook.rotations).all()
+    assert not above.contains(every.rotations).all()
+    with pytest.raises(ValueError, match=r"aae_5/codebook.npz: viewpoints: none of the codebook's \d+ views"):
+        ImplicitPose6D(world / "aae_5", viewpoints=ViewpointRange((90, 90), 0))
+    runs = [f"--run={obj_id}={world / f'aae_{obj_id}'}" for obj_id in OBJECTS]
+    out = tmp_path / "above.csv"
+    assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(out), "--box", "visib",
+                 "--elevation-degrees", "30", "90", "--no-progress"]) == 0
+    estimates = read_pose_results(out)
+    assert len(estimates) >= 6
+    # a pose R = ray_rotation(t) @ R_view sees its object along its codebook view: the object->camera ray in the
+    # model frame is the view's direction, above 30 degrees (less the neighbour average's 15-degree radius)
+    rays = -np.einsum("nji,nj->ni", estimates.rotations,
+                      estimates.translations / np.linalg.norm(estimates.translations, axis=1, keepdims=True))
+    assert np.degrees(np.arcsin(rays[:, 2])).min() >= 30 - 15
+
+
 def test_image_that_does_not_match_the_camera_is_refused(world):
     from paz6d.detect_and_estimate import DetectAndEstimatePose6D
 
@@ -394,10 +419,10 @@ def test_estimate_scores_an_object_whose_pose_model_cannot_estimate_as_misses(wo
 
     real = module._estimator
 
-    def estimator(method, run_dir, keypoint_crops=1, box_variants=None):  # as a KeypointNet run with 2 usable
-        if run_dir.name == "aae_8":                                          # keypoints fails to load
+    def estimator(method, run_dir, **options):  # as a KeypointNet run with 2 usable keypoints fails to load
+        if run_dir.name == "aae_8":
             raise PnPError(f"{run_dir}/keypoints.json: only 2 usable keypoints, PnP needs at least 4")
-        return real(method, run_dir, keypoint_crops, box_variants)
+        return real(method, run_dir, **options)
 
     monkeypatch.setattr(module, "_estimator", estimator)
     runs = [f"--run={obj_id}={world / f'aae_{obj_id}'}" for obj_id in OBJECTS]
@@ -428,6 +453,8 @@ def test_estimate_scores_an_object_whose_pose_model_cannot_estimate_as_misses(wo
     (["--run", "5={world}/aae_5", "--detector", "{world}/aae_8"], "--detector: .* is a aae run directory"),
     (["--run", "5={world}/aae_5", "--detector", "{world}/missing"], "--detector: .*missing is not a directory"),
     (["--run", "5={world}/aae_5", "--detections-out", "{tmp}/d.json"], "--detections-out: only with --detector"),
+    (["--run", "5={world}/aae_5", "--elevation-degrees", "50", "10"], "--elevation-degrees: elevation_degrees: expec"),
+    (["--run", "5={world}/aae_5", "--inplane-degrees", "200"], "--inplane-degrees: inplane_degrees: expected"),
     (["--run", "5={world}/corrupt"], "codebook.npz"),
     (["--run", "5={world}/aae_5", "--detector", "{world}/corrupt_ssd"], "detector.json"),
     (["--run", "5={world}/aae_5", "--detector", "{world}/ssd_only_8"], r"does not detect objects \[5\]"),

@@ -20,6 +20,7 @@ import numpy as np
 
 from paz6d.backend.checks import as_array, as_camera_matrix
 from paz6d.backend.files import load_npz, save_npz_atomically
+from paz6d.backend.viewpoints import ViewpointRange
 
 CODEBOOK_FORMAT = 1
 
@@ -179,6 +180,16 @@ class Codebook:
             weights = np.exp((values[keep] - values[0]) / temperature)
             output[row] = Rotation.from_matrix(rotations[keep]).mean(weights=weights).as_matrix()
         return output
+
+    def within(self, viewpoints: ViewpointRange) -> "Codebook":
+        """The entries whose rotation lies in ``viewpoints`` (a camera that never sees the object from
+        below, say), in their order; ``ValueError`` when none does."""
+        keep = viewpoints.contains(self.rotations)
+        if not keep.any():
+            raise ValueError(f"viewpoints: none of the codebook's {len(self)} views lies within "
+                             f"{viewpoints.describe()}")
+        return Codebook(self.codes[keep], self.rotations[keep], self.render_boxes[keep], self.render_K,
+                        self.render_distance)
 
     def save(self, path: str | Path) -> Path:
         """Writes an ``.npz`` (temp file, then atomic rename)."""

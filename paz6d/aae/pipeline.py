@@ -36,6 +36,7 @@ from paz6d.backend.boxes import check_box_in_image, overlaps_image
 from paz6d.backend.camera import Camera, as_camera, project_points, unproject
 from paz6d.backend.checks import as_array, as_camera_matrix, check_depth
 from paz6d.backend.image import as_image
+from paz6d.backend.viewpoints import ViewpointRange
 from paz6d.processors.crops import BoxVariants, SquareCrop
 from paz6d.processors.refine import RefineWithDepth
 
@@ -301,6 +302,10 @@ class ImplicitPose6D(SequentialProcessor):
             (:class:`~paz6d.processors.crops.BoxVariants`), for boxes from a detector: on the real LM-O frames
             they raise the scores with detections and lower them with exact ground-truth boxes
             (``docs/real_photos.md``). ``None`` (default): the box as given.
+        viewpoints: answer only with codebook views in this :class:`~paz6d.backend.viewpoints.ViewpointRange`
+            (the camera's possible viewpoints, e.g. the training scenes' range widened by a margin): on the
+            real LM-O frames it removes views from below the table (``docs/real_photos.md``). ``None``
+            (default): every view.
 
     Example:
         >>> estimator = ImplicitPose6D("demo_output/model", K)        # doctest: +SKIP
@@ -310,7 +315,7 @@ class ImplicitPose6D(SequentialProcessor):
 
     def __init__(self, run_dir: str | Path, camera=None, refine: bool = True, neighbours: int = 10,
                  neighbour_radius_deg: float = 15.0, top_k: int = 1, class_name: str | None = None,
-                 box_variants: BoxVariants | None = None):
+                 box_variants: BoxVariants | None = None, viewpoints: ViewpointRange | None = None):
         super().__init__(name="ImplicitPose6D")
         config = run_files.read_config(run_dir)["config"]
         self.crop_size, self.padding = int(config["crop_size"]), float(config["padding"])
@@ -323,6 +328,11 @@ class ImplicitPose6D(SequentialProcessor):
         if self.codebook.latent_size != encoder.output.shape[-1]:
             raise ValueError(f"{run_files.codebook_path(run_dir)}: latent size {self.codebook.latent_size} does not "
                              f"match the model's {encoder.output.shape[-1]}")
+        if viewpoints is not None:
+            try:
+                self.codebook = self.codebook.within(viewpoints)
+            except ValueError as error:
+                raise ValueError(f"{run_files.codebook_path(run_dir)}: {error}") from None
         geometry = run_files.read_object(run_dir)
         self.hull_points, self.surface_points = geometry["hull_points"], geometry["surface_points"]
         self.diameter = geometry["diameter"]

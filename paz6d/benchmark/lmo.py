@@ -14,7 +14,8 @@ From the 8 LM-O meshes (``<lmo>/models``) only:
 5. ``estimate_gt`` / ``estimate_detections``: ``paz6d estimate`` on the real RGB frames with the ground-truth
    visible boxes and with the detector's boxes (which reads no ground truth; the detector also sees each frame's
    mirror image, ``paz6d estimate --flip``: real AP 0.252 -> 0.270; poses for each class's best detection, whose
-   AAE searches around its box, ``--poses-per-class 1 --box-search``); ``estimate_synthetic``: on
+   AAE searches around its box, ``--poses-per-class 1 --box-search``); in every condition the AAEs answer only
+   with the training scenes' viewpoints widened by 15 degrees (:func:`viewpoints`); ``estimate_synthetic``: on
    held-out synthetic images of the training scenes' kind (``validation``, another seed), ground-truth visible
    boxes: what a user without real labels sees, to pick a method per object; ``estimate_synthetic_detections``:
    the same images with the detector's boxes (as on the real frames), what the boxes cost without the real photos;
@@ -46,6 +47,7 @@ from paz6d.aae.config import check_crop_box
 from paz6d.abstract import Box2D, Pose6D
 from paz6d.backend.checks import is_whole_number
 from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
+from paz6d.backend.viewpoints import ViewpointRange
 from paz6d.benchmark.parallel import run_in_processes, threads_per_job
 from paz6d.cli import build_parser
 from paz6d.datasets.bop import read_pose_results
@@ -72,6 +74,9 @@ CONDITIONS = {"gt": "gt_visible_boxes", "detections": "detections", "synthetic":
 DETECTOR_CONDITIONS = ("detections", "synthetic_detections")
 #: Seed offset of the held-out synthetic images (image i of seed s + 1000 shares nothing with the training set's).
 VALIDATION_SEED_OFFSET = 1000
+#: The AAEs answer only with viewpoints of the training scenes' range widened by this much (degrees) on every side
+#: (``paz6d estimate --elevation-degrees --inplane-degrees``): the camera is never below the table.
+VIEWPOINT_MARGIN_DEGREES = 15.0
 
 
 @dataclass(frozen=True)
@@ -240,6 +245,13 @@ def generation_config(job: Benchmark):
                             backgrounds=job.out / "backgrounds", rgb_format="jpg")
 
 
+def viewpoints(job: Benchmark) -> ViewpointRange:
+    """The viewpoints the AAEs may answer with: the synthetic scenes' elevations and in-plane angles widened by
+    :data:`VIEWPOINT_MARGIN_DEGREES` (a prior that comes from the generator's settings, not from the real frames)."""
+    config = generation_config(job)
+    return ViewpointRange(config.elevation_degrees, config.inplane_degrees).widened(VIEWPOINT_MARGIN_DEGREES)
+
+
 def _stage_synthetic(job: Benchmark) -> dict:
     from data_gen.generator import generate
 
@@ -310,6 +322,8 @@ def _targets(job: Benchmark, condition: str) -> Path:
 def _estimate_args(job: Benchmark, condition: str) -> list[str]:
     argv = ["estimate", *[f"--run={obj_id}={job.pose_dir(obj_id)}" for obj_id in job.objects],
             *_scored_split(job, condition), "--out", str(job.result(condition, ".csv"))]
+    (low, high), inplane = viewpoints(job).elevation_degrees, viewpoints(job).inplane_degrees
+    argv += ["--elevation-degrees", f"{low:g}", f"{high:g}", "--inplane-degrees", f"{inplane:g}"]
     if condition != "synthetic_detections":
         argv += ["--targets-out", str(_targets(job, condition))]
     if condition not in DETECTOR_CONDITIONS:
@@ -754,7 +768,9 @@ def write_report(job: Benchmark, timings: dict[str, float], wall_seconds: float 
               f"Synthetic training only; {len(job.objects)} LM-O objects; scored on the real RGB frames of "
               f"{job.lmo} with `paz6d evaluate bop`; `detections`: the benchmark's detector, which also sees each "
               f"frame's mirror image, and whose best box per object is searched around by its AAE (`paz6d estimate "
-              f"--flip --poses-per-class 1 --box-search`); `synthetic_gt_visible_boxes`: the same models on "
+              f"--flip --poses-per-class 1 --box-search`); in every condition the AAEs answer only with views of "
+              f"{viewpoints(job).describe()} (the training scenes' range widened by {VIEWPOINT_MARGIN_DEGREES:g}); "
+              f"`synthetic_gt_visible_boxes`: the same models on "
               f"{job.settings.validation_images} held-out synthetic images (what a user without real labels can "
               f"measure, to pick a method per object), and `synthetic_detections` with the detector's boxes on "
               f"them. Total stage time {report['total_minutes']:.1f} min"

@@ -11,6 +11,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera, project_points, unproject
+from paz6d.backend.viewpoints import POLE_SINE
 
 ROTATION_MODES = ("so3", "view-sphere")
 #: Tries of :func:`place_object` before it gives up.
@@ -44,7 +45,7 @@ def random_rotation(generator: np.random.Generator, mode: str = "so3",
     # Camera position (model frame) on the unit sphere; the camera looks at the model origin.
     eye = np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
     z_axis = -eye
-    up = np.array([0.0, 0.0, 1.0]) if abs(eye[2]) < 0.999 else np.array([0.0, 1.0, 0.0])
+    up = np.array([0.0, 0.0, 1.0]) if abs(eye[2]) < POLE_SINE else np.array([0.0, 1.0, 0.0])
     x_axis = np.cross(z_axis, up)
     x_axis /= np.linalg.norm(x_axis)
     y_axis = np.cross(z_axis, x_axis)
