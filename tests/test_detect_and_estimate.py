@@ -215,6 +215,7 @@ def test_poses_per_class_estimates_only_each_class_best_detection(world):
 
 def test_viewpoints_keep_the_aae_answers_within_the_camera_range_in_the_pipeline_and_the_command(world, tmp_path):
     from paz6d.backend.viewpoints import ViewpointRange
+    from paz6d.detect_and_estimate import DetectAndEstimatePose6D
     from paz6d.datasets.bop import read_pose_results
     from paz6d.pipelines import ImplicitPose6D
 
@@ -225,6 +226,8 @@ def test_viewpoints_keep_the_aae_answers_within_the_camera_range_in_the_pipeline
     assert not above.contains(every.rotations).all()
     with pytest.raises(ValueError, match=r"aae_5/codebook.npz: viewpoints: none of the codebook's \d+ views"):
         ImplicitPose6D(world / "aae_5", viewpoints=ViewpointRange((90, 90), 0))
+    loaded = DetectAndEstimatePose6D.from_run_dirs(world / "ssd", {5: world / "aae_5"}, viewpoints=above)
+    np.testing.assert_array_equal(loaded.estimators["obj_000005"].codebook.rotations, estimator.codebook.rotations)
     runs = [f"--run={obj_id}={world / f'aae_{obj_id}'}" for obj_id in OBJECTS]
     out = tmp_path / "above.csv"
     assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(out), "--box", "visib",

@@ -55,7 +55,8 @@ class ViewpointRange:
         low, high = float(values[0]), float(values[1])
         inplane = float(self.inplane_degrees)
         if not 0.0 <= inplane <= 180.0:
-            raise ValueError(f"inplane_degrees: expected a maximum absolute angle in [0, 180], got {self.inplane_degrees}")
+            raise ValueError(f"inplane_degrees: expected a maximum absolute angle in [0, 180], got "
+                             f"{self.inplane_degrees}")
         object.__setattr__(self, "elevation_degrees", (low, high))
         object.__setattr__(self, "inplane_degrees", inplane)
 
