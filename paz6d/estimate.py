@@ -564,6 +564,9 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
     if not args.dataset.is_dir():
         raise ValueError(f"--dataset: {args.dataset} is not a directory")
     runs = resolve_runs(args.run, args.object_id, args.method)
+    if viewpoint_range(args) is not None and all(method != "aae" for _, method in runs.values()):
+        raise ValueError("--elevation-degrees/--inplane-degrees: only AAE runs answer from a codebook of views; every "
+                         "--run is a KeypointNet run")
     if args.detector is not None:
         check_detector(args.detector, runs)
     return runs

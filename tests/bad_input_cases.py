@@ -833,7 +833,13 @@ def estimate_cases() -> list[Case]:
         "--keypoint-crops": [(("0",), "--keypoint-crops"), (("14",), "--keypoint-crops")],
         "--detector": [(("{case}/none",), "none"), (("{world}/runs/aae",), "aae run directory")],
         "--detections-out": [(("{out}/d.json",), "only with --detector")],
+        "--elevation-degrees": [(("50", "10"), "--elevation-degrees"), (("nan", "90"), "--elevation-degrees"),
+                                (("-100", "90"), "--elevation-degrees"), (("x", "9"), "")],
+        "--inplane-degrees": [(("200",), "--inplane-degrees"), (("-1",), "--inplane-degrees"), (("nan",), "")],
     })
+    found.append(Case("estimate-viewpoints-without-aae", replace_flag(replace_flag(
+        ESTIMATE, "--run", "{world}/runs/keypointnet"), "--elevation-degrees", "0", "90"), None,
+        ("only AAE runs answer from a codebook",)))
     found += _flag_cases("estimate-run-id-", ESTIMATE, {
         "--run": [(("0={world}/runs/aae",), "expected a BOP object id"),
                   (("2={world}/runs/aae",), "trained on object 1, not 2")],
