@@ -54,7 +54,7 @@ def mocked(tmp_path, monkeypatch):
         calls.append(f"estimate {condition}")
         touch(job.result(condition, ".csv"))
         unusable = {"5": "keypoints.json: only 2 usable keypoints"} if job.method == "keypointnet" else {}
-        return {"estimates": 3, "unusable": unusable}
+        return {"command": lmo._estimate_args(job, condition), "estimates": 3, "unusable": unusable}
 
     def evaluate(job, condition):
         calls.append(f"evaluate {condition}")
@@ -104,6 +104,25 @@ def test_stages_run_in_order_once_and_a_rerun_skips_every_finished_one(mocked, t
     job.marker("detector").unlink()
     run_benchmark(job)
     assert calls == ["detector"]
+
+
+def test_scores_made_with_another_estimate_command_are_made_again_and_the_models_kept(mocked, tmp_path):
+    data, calls = mocked
+    job = Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False)
+    run_benchmark(job)
+    calls.clear()
+    for condition, recorded in (("gt", None), ("detections", ["estimate", "--flip"])):  # before commands were
+        marker = job.marker(f"estimate_aae_{condition}")                                # recorded; other flags
+        content = json.loads(marker.read_text())
+        content["summary"].pop("command")
+        if recorded:
+            content["summary"]["command"] = recorded
+        marker.write_text(json.dumps(content))
+    run_benchmark(job)
+    assert calls == ["estimate gt", "evaluate gt", "estimate detections", "evaluate detections", "detector ap"]
+    calls.clear()
+    run_benchmark(job)
+    assert calls == []
 
 
 def test_jobs_hand_the_unfinished_pose_trainings_to_side_by_side_processes_after_the_detector(mocked, tmp_path,

@@ -347,7 +347,25 @@ def _run_command(argv: list[str]) -> dict | int:
 
 
 def _stage_estimate(job: Benchmark, condition: str) -> dict:
-    return _run_command(_estimate_args(job, condition))
+    argv = _estimate_args(job, condition)
+    return {"command": argv, **_run_command(argv)}
+
+
+def _forget_stale_scores(job: Benchmark) -> list[str]:
+    """Marks undone the estimate stages whose recorded ``paz6d estimate`` command differs from today's (flags
+    added since the folder was scored, e.g. the viewpoint prior; markers from before commands were recorded), with
+    their scores and, for the detections, the detector's AP; returns their names. The models are kept."""
+    stale = []
+    for condition in CONDITIONS:
+        name = f"estimate_{job.label}_{condition}"
+        marker = job.marker(name)
+        if marker.is_file() and (load_json_object(marker).get("summary") or {}).get("command") != \
+                _estimate_args(job, condition):
+            stale.append(name)
+            for undone in (name, f"evaluate_{job.label}_{condition}",
+                           *((f"detector_ap_{job.label}",) if condition == "detections" else ())):
+                job.marker(undone).unlink(missing_ok=True)
+    return stale
 
 
 def _stage_evaluate(job: Benchmark, condition: str) -> dict:
@@ -521,6 +539,8 @@ def run_benchmark(job: Benchmark, only: tuple[str, ...] | None = None) -> dict:
     import_tensorflow()  # first: anything rendered in this process is then safe next to TensorFlow
     job.out.mkdir(parents=True, exist_ok=True)
     _check_settings(job)
+    for name in _forget_stale_scores(job):
+        print(f"[benchmark lmo] {name}: scored with another command, scored again", flush=True)
     started = time.perf_counter()
     selected = [stage for stage in stages(job) if only is None or stage[0].startswith(only)]
     side_by_side = [name for name, _, outputs in selected
