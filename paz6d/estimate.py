@@ -553,7 +553,7 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
         if args.verify:
             raise ValueError("--poses-per-class: not with --verify (it re-ranks every detection by its pose's score, "
                              "so every detection needs a pose)")
-    viewpoint_range(args)
+    viewpoints = viewpoint_range(args)
     detections = detections_path(args)
     check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
     check_output_file(args.out, "--out")
@@ -564,7 +564,7 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
     if not args.dataset.is_dir():
         raise ValueError(f"--dataset: {args.dataset} is not a directory")
     runs = resolve_runs(args.run, args.object_id, args.method)
-    if viewpoint_range(args) is not None and all(method != "aae" for _, method in runs.values()):
+    if viewpoints is not None and all(method != "aae" for _, method in runs.values()):
         raise ValueError("--elevation-degrees/--inplane-degrees: only AAE runs answer from a codebook of views; every "
                          "--run is a KeypointNet run")
     if args.detector is not None:
@@ -581,11 +581,12 @@ def estimate(args: argparse.Namespace) -> dict:
     from paz6d.backend.tensorflow_guard import import_tensorflow
 
     runs = check_arguments(args)
+    viewpoints = viewpoint_range(args)
     import_tensorflow()
     objects = sorted(runs)
     if args.detector is None:
         found = estimate_with_ground_truth(runs, args.dataset, args.split, args.box, args.min_visible, args.progress,
-                                           args.depth, args.keypoint_crops, viewpoint_range(args))
+                                           args.depth, args.keypoint_crops, viewpoints)
         targets = found["targets"]
         if found["images"] == 0:
             raise ValueError(f"{args.dataset}: no instance of objects {objects} with an RGB image and visible "
@@ -593,7 +594,7 @@ def estimate(args: argparse.Namespace) -> dict:
     else:
         found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
                                        args.progress, args.depth, args.keypoint_crops, args.verify,
-                                       args.flip, args.box_search, args.poses_per_class, viewpoint_range(args))
+                                       args.flip, args.box_search, args.poses_per_class, viewpoints)
         targets = detector_targets(args.dataset, found["images"], runs)
         if not found["images"]:
             raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "
@@ -622,8 +623,8 @@ def estimate(args: argparse.Namespace) -> dict:
         summary.update(detections_out=str(path), detections=len(found["detections"]),
                        detections_without_pose_model=found["without_model"],
                        mean_seconds_per_image=found["seconds_per_image"])
-    if viewpoint_range(args) is not None:
-        summary["viewpoints"] = viewpoint_range(args).describe()
+    if viewpoints is not None:
+        summary["viewpoints"] = viewpoints.describe()
     if args.targets_out is not None:
         write_targets(args.targets_out, targets)
         summary["targets_out"] = str(args.targets_out)

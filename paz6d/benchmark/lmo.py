@@ -322,7 +322,8 @@ def _targets(job: Benchmark, condition: str) -> Path:
 def _estimate_args(job: Benchmark, condition: str) -> list[str]:
     argv = ["estimate", *[f"--run={obj_id}={job.pose_dir(obj_id)}" for obj_id in job.objects],
             *_scored_split(job, condition), "--out", str(job.result(condition, ".csv"))]
-    (low, high), inplane = viewpoints(job).elevation_degrees, viewpoints(job).inplane_degrees
+    prior = viewpoints(job)
+    (low, high), inplane = prior.elevation_degrees, prior.inplane_degrees
     argv += ["--elevation-degrees", f"{low:g}", f"{high:g}", "--inplane-degrees", f"{inplane:g}"]
     if condition != "synthetic_detections":
         argv += ["--targets-out", str(_targets(job, condition))]
