@@ -263,9 +263,8 @@ def _estimator(method: str, run_dir: Path, **options):
 
 def _load_estimators(runs: dict[int, tuple[Path, str]], **options) -> tuple[dict[int, object], dict[int, str]]:
     """``({obj_id: estimator}, {obj_id: reason})`` (``options`` as :func:`_estimator`'s): a run that loads but
-    can never give a pose (a KeypointNet
-    with fewer than 4 usable keypoints, a ``PnPError``) is left out with a warning, so its instances score as
-    misses and the other objects are still estimated.
+    can never give a pose (a KeypointNet with fewer than 4 usable keypoints, a ``PnPError``) is left out with a
+    warning, so its instances score as misses and the other objects are still estimated.
 
     Raises:
         ValueError: a corrupt run directory, or no run that can give a pose.

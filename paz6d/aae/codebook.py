@@ -20,7 +20,7 @@ import numpy as np
 
 from paz6d.backend.checks import as_array, as_camera_matrix
 from paz6d.backend.files import load_npz, save_npz_atomically
-from paz6d.backend.viewpoints import ViewpointRange
+from paz6d.backend.viewpoints import POLE_SINE, ViewpointRange
 
 CODEBOOK_FORMAT = 1
 
@@ -43,7 +43,7 @@ def look_at_rotations(directions) -> np.ndarray:
     directions = as_array(directions, "directions", (3,))
     directions = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
     z_axis = -directions
-    helper = np.where(np.abs(z_axis[:, 2:3]) < 0.999, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    helper = np.where(np.abs(z_axis[:, 2:3]) < POLE_SINE, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
     x_axis = np.cross(helper, z_axis)
     x_axis /= np.linalg.norm(x_axis, axis=-1, keepdims=True)
     y_axis = np.cross(z_axis, x_axis)

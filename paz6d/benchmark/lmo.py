@@ -225,6 +225,11 @@ class Benchmark:
     def marker(self, stage: str) -> Path:
         return self.out / "stages" / f"{stage.replace('/', '_')}.json"
 
+    def scoring_stage(self, step: str, condition: str | None = None) -> str:
+        """Name of a scoring stage of this label: ``estimate_<label>_<condition>``, ``evaluate_<label>_<condition>``
+        or ``detector_ap_<label>``."""
+        return f"{step}_{self.label}" + ("" if condition is None else f"_{condition}")
+
 
 # ------------------------------------------------------------------------------------------ stages
 def _stage_backgrounds(job: Benchmark) -> dict:
@@ -358,13 +363,13 @@ def _forget_stale_scores(job: Benchmark) -> list[str]:
     their scores and, for the detections, the detector's AP; returns their names. The models are kept."""
     stale = []
     for condition in CONDITIONS:
-        name = f"estimate_{job.label}_{condition}"
+        name = job.scoring_stage("estimate", condition)
         marker = job.marker(name)
         if marker.is_file() and (load_json_object(marker).get("summary") or {}).get("command") != \
                 _estimate_args(job, condition):
             stale.append(name)
-            for undone in (name, f"evaluate_{job.label}_{condition}",
-                           *((f"detector_ap_{job.label}",) if condition == "detections" else ())):
+            for undone in (name, job.scoring_stage("evaluate", condition),
+                           *((job.scoring_stage("detector_ap"),) if condition == "detections" else ())):
                 job.marker(undone).unlink(missing_ok=True)
     return stale
 
@@ -401,11 +406,11 @@ def stages(job: Benchmark) -> list[tuple[str, Callable[[], dict], list[Path]]]:
         found.append((f"{job.pose_dir(obj_id).parent.name}/obj_{obj_id:06d}",
                       lambda obj_id=obj_id: _stage_pose(job, obj_id), [job.pose_dir(obj_id)]))
     for condition in CONDITIONS:
-        found.append((f"estimate_{job.label}_{condition}", lambda c=condition: _stage_estimate(job, c),
+        found.append((job.scoring_stage("estimate", condition), lambda c=condition: _stage_estimate(job, c),
                       [job.result(condition, ".csv")]))
-        found.append((f"evaluate_{job.label}_{condition}", lambda c=condition: _stage_evaluate(job, c),
+        found.append((job.scoring_stage("evaluate", condition), lambda c=condition: _stage_evaluate(job, c),
                       [job.result(condition, "_scores.json")]))
-    found.append((f"detector_ap_{job.label}", lambda: _stage_detection_ap(job),
+    found.append((job.scoring_stage("detector_ap"), lambda: _stage_detection_ap(job),
                   [job.out / "results" / "detector_coco.json"]))
     return found
 
@@ -677,7 +682,7 @@ def _not_estimated(job: Benchmark) -> dict[str, str]:
     """``{obj_id: reason}`` of the objects whose pose model could not estimate (from the estimate stages)."""
     found = {}
     for condition in CONDITIONS:
-        marker = job.marker(f"estimate_{job.label}_{condition}")
+        marker = job.marker(job.scoring_stage("estimate", condition))
         if marker.is_file():
             found.update((load_json_object(marker).get("summary") or {}).get("unusable", {}))
     return found

@@ -32,8 +32,7 @@ class SquareCrop(Processor):
         self.margin, self.size = float(margin), int(size)
 
     def call(self, image: np.ndarray, box) -> tuple[np.ndarray, tuple[int, int, int]]:
-        coordinates = check_box_in_image(Box2D.coordinates_of(box), image.shape[1],
-                                         image.shape[0])
+        coordinates = check_box_in_image(Box2D.coordinates_of(box), image.shape[1], image.shape[0])
         window = square_window(coordinates, self.margin)
         return crop_square(image, window, self.size), window
 
