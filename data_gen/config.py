@@ -22,6 +22,9 @@ ROTATION_MODES = ("so3", "view-sphere")
 #: floating: objects at independent distances and orientations (paz6d.synthesis.scene); tabletop:
 #: upright on a textured table seen from above (paz6d.synthesis.tabletop).
 SCENE_STYLES = ("floating", "tabletop")
+#: How a tabletop scene's table looks, in the fingerprint: sets whose table was a vertex-coloured grid
+#: (before the texture map) do not resume into sets with a textured one.
+TABLE_LOOK = "texture-map"
 DISTRACTOR_STYLES = ("primitive", "textured", "household")
 RGB_FORMATS = ("png", "jpg")
 #: Key of the input digests in a run's fingerprint (see :meth:`GenerationConfig.input_contents`).
@@ -259,6 +262,8 @@ class GenerationConfig:
         data["scale"] = data.pop("mesh_scale")  # the key data sets made before the field's rename hold
         if data["scene"] == "floating":
             data.pop("scene")  # data sets made before scene styles existed are floating ones
+        else:
+            data["table"] = TABLE_LOOK
         for name in ("neutral_distractors", "object_colored_distractors", "cluster", "roughness", "metallic"):
             if not data[name]:
                 data.pop(name)  # nor do those made before these fields existed

@@ -85,10 +85,34 @@ def test_objects_stand_upright_on_the_table_inside_the_image():
 
 
 def test_table_mesh_carries_a_photographic_texture():
-    mesh = table_mesh(np.random.default_rng(0), sample_photographs()[:2], side=1.0, resolution=8)
-    assert len(mesh.vertices) == 64 and len(mesh.faces) == 2 * 7 * 7
-    assert mesh.visual.vertex_colors[:, :3].std() > 0
+    mesh = table_mesh(np.random.default_rng(0), sample_photographs()[:2], side=1.0, texture_pixels=64)
+    np.testing.assert_allclose(np.ptp(mesh.vertices, axis=0), [1.0, 1.0, 0.0])
     np.testing.assert_allclose(mesh.face_normals[:, 2], 1.0)  # facing up, towards the camera
+    texture = np.asarray(mesh.visual.material.baseColorTexture)
+    assert texture.shape == (64, 64, 3) and texture.std() > 0
+
+
+def test_the_table_renders_as_sharp_as_its_texture():
+    """Seen from above at one texel per pixel, the rendered table is its texture: pixel-level detail
+    survives (a vertex-coloured plane would blur it)."""
+    from renderers import Renderer
+    from renderers.lights import Lighting
+
+    mesh = table_mesh(np.random.default_rng(1), sample_photographs(), side=1.0, texture_pixels=256)
+    texture = np.asarray(mesh.visual.material.baseColorTexture).astype(np.float64)
+    T_table2cam = look_at(np.array([0.0, 0.0, 1.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    K = np.array([[256.0, 0.0, 63.5], [0.0, 256.0, 63.5], [0.0, 0.0, 1.0]])  # 1 texel (1/256 m) per pixel at 1 m
+    with Renderer(128, 128, antialias="none") as renderer:
+        rgb = renderer.render(K, [(mesh, T_table2cam)], lighting=Lighting(ambient=(1.0, 1.0, 1.0), lights=()),
+                              masks=False).rgb.astype(np.float64)
+    centre = texture[64:192, 64:192]  # image "up" along the table's +y: the texture appears upright
+    assert np.corrcoef(rgb.ravel(), centre.ravel())[0, 1] > 0.99
+    assert np.corrcoef(rgb.ravel(), _box_blur(centre).ravel())[0, 1] < 0.97  # pixel-level detail, not a blur of it
+
+
+def _box_blur(image: np.ndarray, size: int = 7) -> np.ndarray:
+    padded = np.pad(image, ((size // 2,) * 2, (size // 2,) * 2, (0, 0)), mode="edge")
+    return np.mean([padded[y:y + image.shape[0], x:x + image.shape[1]] for y in range(size) for x in range(size)], axis=0)
 
 
 def test_generation_config_checks_the_scene_style(tmp_path):
@@ -98,6 +122,7 @@ def test_generation_config_checks_the_scene_style(tmp_path):
     assert "scene" not in floating.fingerprint()  # data sets made before scene styles still resume
     tabletop = GenerationConfig(meshes=(mesh,), out=tmp_path / "out", num_images=1, scene="tabletop")
     assert tabletop.fingerprint()["scene"] == "tabletop"
+    assert tabletop.fingerprint()["table"] == "texture-map"  # sets with the old vertex-coloured table do not resume
     with pytest.raises(ValueError, match="scene: expected one of"):
         GenerationConfig(meshes=(mesh,), out=tmp_path / "out", num_images=1, scene="ocean")
     with pytest.raises(ValueError, match="elevation_degrees: a tabletop camera"):

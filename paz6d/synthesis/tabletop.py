@@ -14,8 +14,8 @@ scenes of :mod:`paz6d.synthesis.scene` draw every object's distance and orientat
   fully inside the image and with their bounding spheres apart;
 * distractor primitives resting on the table among them, and floating occluders in front of
   objects (:func:`paz6d.synthesis.scene.add_occluders`), as the floating scenes do;
-* the table: a square plane of :data:`TABLE_SIDE` metres whose vertex colours are a photographic
-  collage (:func:`paz6d.synthesis.photo_backgrounds.photo_collage`).
+* the table: a square plane of :data:`TABLE_SIDE` metres textured with a sharp photographic collage
+  (:func:`paz6d.synthesis.photo_backgrounds.photo_collage`, :data:`TABLE_TEXTURE_PIXELS` pixels per side).
 
 Frames: ``T_table2cam`` maps table coordinates (``z`` up, origin on the table) to the OpenCV camera.
 """
@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
+from PIL import Image
 
 from paz6d.backend import quaternion
 from paz6d.backend.camera import project_points
@@ -35,9 +36,12 @@ from paz6d.synthesis.scene import Scene, SceneAssets, SceneSettings, add_occlude
 #: Camera elevations above the table plane (degrees) a tabletop scene accepts.
 ELEVATION_LIMITS = (15.0, 85.0)
 MAX_ROLL_DEGREES = 30.0
-#: Side of the table plane (metres) and its vertices per side (the texture's resolution).
+#: Side of the table plane (metres) and of its texture (pixels: 2 mm per pixel, about one image pixel at 1 m).
 TABLE_SIDE = 2.0
-TABLE_RESOLUTION = 160
+TABLE_TEXTURE_PIXELS = 1024
+#: The table's collage: many small pieces (pieces per collage, piece side as a share of the texture's).
+TABLE_PIECES = (20, 60)
+TABLE_PIECE_SIZE = (0.03, 0.25)
 #: Objects are placed within this distance (metres) of the point the camera looks at, in the plane.
 PLACEMENT_RADIUS = 0.35
 
@@ -59,19 +63,21 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray, roll_degrees: f
 
 
 def table_mesh(generator: np.random.Generator, photographs: list[np.ndarray], side: float = TABLE_SIDE,
-               resolution: int = TABLE_RESOLUTION) -> trimesh.Trimesh:
-    """A ``side`` x ``side`` metres plane at height 0 (table frame, normal ``+z``) of ``resolution``²
-    vertices coloured by a photographic collage."""
-    texture = photo_collage(generator, photographs, resolution, resolution)
-    coordinates = (np.arange(resolution) / (resolution - 1) - 0.5) * side
-    x, y = np.meshgrid(coordinates, coordinates)
-    vertices = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
-    rows, cols = np.meshgrid(np.arange(resolution - 1), np.arange(resolution - 1), indexing="ij")
-    corner = (rows * resolution + cols).ravel()
-    faces = np.concatenate([np.column_stack([corner, corner + 1, corner + resolution + 1]),
-                            np.column_stack([corner, corner + resolution + 1, corner + resolution])])
-    colours = np.column_stack([texture.reshape(-1, 3), np.full(x.size, 255, np.uint8)])
-    return trimesh.Trimesh(vertices, faces, vertex_colors=colours, process=False)
+               texture_pixels: int = TABLE_TEXTURE_PIXELS) -> trimesh.Trimesh:
+    """A ``side`` x ``side`` metres plane at height 0 (table frame, normal ``+z``) textured with a
+    ``texture_pixels``² photographic collage of many small pieces (sharp, like a cluttered desk)."""
+    texture = photo_collage(generator, photographs, texture_pixels, texture_pixels, pieces=TABLE_PIECES,
+                            piece_size=TABLE_PIECE_SIZE)
+    half = side / 2.0
+    vertices = np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    # the same factors as pyrender's default material of vertex-coloured meshes (the objects')
+    material = trimesh.visual.material.PBRMaterial(baseColorTexture=Image.fromarray(texture),
+                                                   baseColorFactor=[255, 255, 255, 255],
+                                                   metallicFactor=0.2, roughnessFactor=0.8)
+    return trimesh.Trimesh(vertices, faces, visual=trimesh.visual.TextureVisuals(uv=uv, material=material),
+                           process=False)
 
 
 def _rest_on_table(rotation: np.ndarray, outline: np.ndarray, xy: np.ndarray) -> np.ndarray:
