@@ -138,7 +138,7 @@ def test_rendering_at_a_codebook_rotation_returns_that_rotation(toy_run):
 def test_in_plane_warp_matches_a_direct_rendering(toy_run):
     """The codebook's in-plane views come from image rotation; check it against rendering R_z @ R."""
     from paz6d.backend.mesh import load_mesh
-    from paz6d.aae.codebook import in_plane_rotations
+    from paz6d.backend.viewpoints import in_plane_rotation
     from paz6d.aae.views import rotate_view
     from renderers import Renderer
 
@@ -148,7 +148,7 @@ def test_in_plane_warp_matches_a_direct_rendering(toy_run):
     angle = 1.1
     with Renderer(TOY.render_size, TOY.render_size) as renderer:
         T = np.eye(4)
-        T[:3, :3] = in_plane_rotations([angle])[0] @ views["rotations"][7]
+        T[:3, :3] = in_plane_rotation(angle) @ views["rotations"][7]
         T[2, 3] = float(views["distance"])
         direct = renderer.render(views["K"], [(mesh, T)], masks=False)
     _, warped_alpha = rotate_view(views["rgb"][7], views["alpha"][7], angle, views["K"])

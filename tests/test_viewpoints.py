@@ -1,4 +1,5 @@
-"""The viewpoint convention (elevation, in-plane angle): hand-made cameras, the generator's draws, rolls."""
+"""The viewpoint convention (elevation, in-plane angle): hand-made cameras, the generator's draws, rolls; the
+look-at and in-plane rotations every camera construction shares."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
-from paz6d.backend.viewpoints import ViewpointRange, elevation_and_inplane
+from paz6d.backend.viewpoints import ViewpointRange, elevation_and_inplane, in_plane_rotation, look_at_rotation
 from paz6d.synthesis.sampling import random_rotation
 
 # A camera on the model's +x axis looking at the origin, model z up in the image (OpenCV: x right, y down, z
@@ -80,3 +81,37 @@ def test_bad_ranges_are_refused(arguments, message):
         ViewpointRange(*arguments)
     with pytest.raises(ValueError, match="margin_degrees"):
         ViewpointRange().widened(-1)
+
+
+def test_look_at_of_the_side_camera_and_a_parallel_up_is_refused():
+    np.testing.assert_allclose(look_at_rotation([-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]), SIDE_VIEW, atol=1e-12)
+    with pytest.raises(ValueError, match="up: expected a direction not parallel"):
+        look_at_rotation([0.0, 0.0, -1.0], [0.0, 0.0, 2.0])
+
+
+unit_vectors = st.tuples(*[st.floats(-1, 1)] * 3).map(np.array).filter(lambda v: np.linalg.norm(v) > 0.1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(forward=unit_vectors, up=unit_vectors)
+def test_look_at_points_the_camera_along_forward_with_up_image_up(forward, up):
+    forward = forward / np.linalg.norm(forward)
+    if np.linalg.norm(np.cross(forward, up)) < 1e-3:
+        return
+    rotation = look_at_rotation(forward, up)
+    np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(rotation) == pytest.approx(1.0)
+    np.testing.assert_allclose(rotation @ forward, [0.0, 0.0, 1.0], atol=1e-12)  # forward is the optical axis
+    up_in_camera = rotation @ up
+    assert abs(up_in_camera[0]) < 1e-12 and up_in_camera[1] < 0  # up: no sideways part, towards image-up (-y)
+    # batched over leading axes, the same as one at a time
+    np.testing.assert_allclose(look_at_rotation(np.stack([forward, -forward]), up)[0], rotation, atol=0)
+
+
+@settings(max_examples=100, deadline=None)
+@given(angle=st.floats(-10, 10))
+def test_in_plane_rotation_matches_scipy_about_the_optical_axis(angle):
+    expected = Rotation.from_euler("z", angle).as_matrix()
+    np.testing.assert_allclose(in_plane_rotation(angle), expected, atol=1e-12)
+    np.testing.assert_allclose(in_plane_rotation([[angle, 0.0]])[0, 0], expected, atol=1e-12)
+    assert in_plane_rotation(np.zeros((2, 5))).shape == (2, 5, 3, 3)

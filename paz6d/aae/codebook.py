@@ -20,7 +20,7 @@ import numpy as np
 
 from paz6d.backend.checks import as_array, as_camera_matrix
 from paz6d.backend.files import load_npz, save_npz_atomically
-from paz6d.backend.viewpoints import POLE_SINE, ViewpointRange
+from paz6d.backend.viewpoints import POLE_SINE, ViewpointRange, in_plane_rotation, look_at_rotation
 
 CODEBOOK_FORMAT = 1
 
@@ -39,27 +39,13 @@ def fibonacci_sphere(count: int) -> np.ndarray:
 def look_at_rotations(directions) -> np.ndarray:
     """``(N, 3, 3)`` rotations ``R_model2cam`` of cameras placed along ``directions`` (model frame,
     from the object towards the camera) looking at the model origin (OpenCV: camera z towards the
-    object). The in-plane angle is fixed by keeping camera x horizontal in the model's xy plane."""
+    object). The in-plane angle is fixed by keeping camera x horizontal in the model's xy plane, with the
+    model's -z axis image-up (the generator's views are the same turned by 180 degrees in-plane; the
+    codebook's in-plane angles cover the whole circle, so this only orders them)."""
     directions = as_array(directions, "directions", (3,))
-    directions = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
-    z_axis = -directions
-    helper = np.where(np.abs(z_axis[:, 2:3]) < POLE_SINE, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
-    x_axis = np.cross(helper, z_axis)
-    x_axis /= np.linalg.norm(x_axis, axis=-1, keepdims=True)
-    y_axis = np.cross(z_axis, x_axis)
-    return np.stack([x_axis, y_axis, z_axis], axis=-2)  # rows: camera axes in model coordinates
-
-
-def in_plane_rotations(angles) -> np.ndarray:
-    """``(N, 3, 3)`` rotations about the camera z axis by ``angles`` (radians); in the image (x right,
-    y down) a positive angle turns the x axis towards the y axis."""
-    angles = np.asarray(angles, dtype=np.float64).reshape(-1)
-    cos, sin = np.cos(angles), np.sin(angles)
-    rotations = np.zeros((len(angles), 3, 3))
-    rotations[:, 0, 0], rotations[:, 0, 1] = cos, -sin
-    rotations[:, 1, 0], rotations[:, 1, 1] = sin, cos
-    rotations[:, 2, 2] = 1.0
-    return rotations
+    z_axis = -directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+    down = np.where(np.abs(z_axis[:, 2:3]) < POLE_SINE, np.array([0.0, 0.0, -1.0]), np.array([0.0, -1.0, 0.0]))
+    return look_at_rotation(z_axis, down)
 
 
 def codebook_angles(in_plane: int) -> np.ndarray:
@@ -72,7 +58,7 @@ def codebook_angles(in_plane: int) -> np.ndarray:
 def codebook_rotations(view_rotations, in_plane: int) -> np.ndarray:
     """``(V * in_plane, 3, 3)`` rotations ``R_z(angle_k) @ R_view_v`` ordered view-major (index ``v * in_plane + k``)."""
     view_rotations = as_array(view_rotations, "view_rotations", (3, 3))
-    planes = in_plane_rotations(codebook_angles(in_plane))
+    planes = in_plane_rotation(codebook_angles(in_plane))
     return np.einsum("kij,vjl->vkil", planes, view_rotations).reshape(-1, 3, 3)
 
 

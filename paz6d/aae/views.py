@@ -71,7 +71,7 @@ def coverage_box(alpha: np.ndarray, threshold: int = 128) -> np.ndarray | None:
 
 def rotation_about_principal_point(angle: float, K) -> np.ndarray:
     """``(2, 3)`` affine map of pixel coordinates for an in-plane camera rotation by ``angle`` (radians,
-    :func:`paz6d.aae.codebook.in_plane_rotations` convention) about ``K``'s principal point (fx = fy)."""
+    :func:`paz6d.backend.viewpoints.in_plane_rotation` convention) about ``K``'s principal point (fx = fy)."""
     cos, sin = np.cos(angle), np.sin(angle)
     cx, cy = K[0, 2], K[1, 2]
     return np.array([[cos, -sin, cx - cos * cx + sin * cy], [sin, cos, cy - sin * cx - cos * cy]])

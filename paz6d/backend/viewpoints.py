@@ -25,6 +25,36 @@ from paz6d.backend.checks import as_array
 POLE_SINE = 0.999
 
 
+def look_at_rotation(forward, up) -> np.ndarray:
+    """``(..., 3, 3)`` rotation whose rows are an OpenCV camera's axes (x right, y down, z forward) in the
+    frame of ``forward`` and ``up``: z is the unit viewing direction ``forward`` ``(..., 3)``, x = z × up
+    (normalised) and y = z × x, so that ``up`` ``(3,)`` or ``(..., 3)`` points image-up. As a rotation it maps
+    that frame into the camera's (``R_world2cam``, or ``R_model2cam`` for a camera looking at a model).
+
+    Raises:
+        ValueError: ``up`` parallel to a viewing direction.
+    """
+    forward = np.asarray(forward, dtype=np.float64)
+    x_axis = np.cross(forward, np.broadcast_to(np.asarray(up, dtype=np.float64), forward.shape))
+    length = np.linalg.norm(x_axis, axis=-1, keepdims=True)
+    if np.any(length < 1e-9):
+        raise ValueError("up: expected a direction not parallel to the viewing direction")
+    x_axis = x_axis / length
+    return np.stack([x_axis, np.cross(forward, x_axis), forward], axis=-2)
+
+
+def in_plane_rotation(angles) -> np.ndarray:
+    """``(..., 3, 3)`` rotations about the camera z axis by ``angles`` (radians, any shape); in the image
+    (x right, y down) a positive angle turns the x axis towards the y axis."""
+    angles = np.asarray(angles, dtype=np.float64)
+    cos, sin = np.cos(angles), np.sin(angles)
+    rotations = np.zeros(angles.shape + (3, 3))
+    rotations[..., 0, 0], rotations[..., 0, 1] = cos, -sin
+    rotations[..., 1, 0], rotations[..., 1, 1] = sin, cos
+    rotations[..., 2, 2] = 1.0
+    return rotations
+
+
 def elevation_and_inplane(rotations) -> tuple[np.ndarray, np.ndarray]:
     """``(elevation (N,), in-plane angle (N,))`` in degrees of ``(N, 3, 3)`` (or one ``(3, 3)``)
     rotations ``R_model2cam`` (see the module docstring)."""

@@ -11,7 +11,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from paz6d.backend import quaternion
 from paz6d.backend.camera import Camera, project_points, unproject
-from paz6d.backend.viewpoints import POLE_SINE
+from paz6d.backend.viewpoints import POLE_SINE, in_plane_rotation, look_at_rotation
 
 ROTATION_MODES = ("so3", "view-sphere")
 #: Tries of :func:`place_object` before it gives up.
@@ -44,15 +44,8 @@ def random_rotation(generator: np.random.Generator, mode: str = "so3",
     inplane = np.radians(generator.uniform(-inplane_degrees, inplane_degrees))
     # Camera position (model frame) on the unit sphere; the camera looks at the model origin.
     eye = np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
-    z_axis = -eye
     up = np.array([0.0, 0.0, 1.0]) if abs(eye[2]) < POLE_SINE else np.array([0.0, 1.0, 0.0])
-    x_axis = np.cross(z_axis, up)
-    x_axis /= np.linalg.norm(x_axis)
-    y_axis = np.cross(z_axis, x_axis)
-    R_cam2model = np.stack([x_axis, y_axis, z_axis], axis=1)
-    cosine, sine = np.cos(inplane), np.sin(inplane)
-    R_inplane = np.array([[cosine, -sine, 0.0], [sine, cosine, 0.0], [0.0, 0.0, 1.0]])
-    return R_inplane @ R_cam2model.T
+    return in_plane_rotation(inplane) @ look_at_rotation(-eye, up)
 
 
 def inside_image(pixels: np.ndarray, width: int, height: int) -> bool:

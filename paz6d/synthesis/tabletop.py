@@ -29,6 +29,7 @@ from PIL import Image
 from paz6d.backend import quaternion
 from paz6d.backend.camera import project_points
 from paz6d.backend.transform import from_rotation_translation
+from paz6d.backend.viewpoints import in_plane_rotation, look_at_rotation
 from paz6d.synthesis.photo_backgrounds import photo_collage
 from paz6d.synthesis.sampling import PLACEMENT_ATTEMPTS, inside_image
 from paz6d.synthesis.scene import Scene, SceneAssets, SceneSettings, add_occluders
@@ -49,16 +50,8 @@ PLACEMENT_RADIUS = 0.35
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray, roll_degrees: float = 0.0) -> np.ndarray:
     """``T_world2cam (4, 4)`` of an OpenCV camera at ``eye`` looking at ``target`` with image "up" as
     close to ``up`` as possible, then turned by ``roll_degrees`` about its optical axis."""
-    z_axis = np.asarray(target, float) - np.asarray(eye, float)
-    z_axis /= np.linalg.norm(z_axis)
-    x_axis = np.cross(z_axis, up)
-    if np.linalg.norm(x_axis) < 1e-9:
-        raise ValueError("up: expected a direction not parallel to the viewing direction")
-    x_axis /= np.linalg.norm(x_axis)
-    y_axis = np.cross(z_axis, x_axis)
-    roll = np.radians(roll_degrees)
-    R_roll = np.array([[np.cos(roll), -np.sin(roll), 0.0], [np.sin(roll), np.cos(roll), 0.0], [0.0, 0.0, 1.0]])
-    R_world2cam = R_roll @ np.stack([x_axis, y_axis, z_axis])
+    forward = np.asarray(target, float) - np.asarray(eye, float)
+    R_world2cam = in_plane_rotation(np.radians(roll_degrees)) @ look_at_rotation(forward / np.linalg.norm(forward), up)
     return from_rotation_translation(R_world2cam, -R_world2cam @ np.asarray(eye, float))
 
 
