@@ -49,7 +49,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     coco.add_argument("--errors", action="store_true",
                       help="also break down each class's best-scoring detections (as many as it has objects) into "
                            "correct, duplicate, localization, other-class and background errors, and its recall at "
-                           "IoU 0.5 at any score (boxes only)")
+                           "IoU 0.5 at any score, and what each object is called (the class of its best-scoring "
+                           "detection at IoU 0.5; with --plots also as coco_<iou-type>_confusion.png; boxes only)")
 
     voc = subparsers.add_parser("voc", help="PASCAL VOC AP (11-point or all-point)",
                                 description="PASCAL VOC AP per class and mAP from XML/text annotations.")
@@ -101,7 +102,11 @@ def _run_coco(args: argparse.Namespace) -> int:
     write_json_atomically(args.out, report, indent=2)
     print(f"wrote {args.out}")
     if args.plots is not None:
-        for path in detection_plots.plot_coco(evaluation, args.plots):
+        paths = detection_plots.plot_coco(evaluation, args.plots)
+        if args.errors:
+            paths.append(detection_plots.plot_confusion(errors, Path(args.plots) / f"coco_{args.iou_type}_confusion.png",
+                                                        "What each object is called"))
+        for path in paths:
             print(f"wrote {path}")
     return 0
 

@@ -14,6 +14,10 @@ correct) are sorted into :data:`ERROR_KINDS`:
 
 Detections on crowd regions (at least half of the detection inside one) are left out. ``recall`` is
 the share of objects matched by a detection of any score. Boxes are ``[x, y, w, h]`` pixels.
+
+``confusion`` says what the detector calls each object: for every non-crowd ground-truth box, the category
+of the best-scoring detection of *any* category at IoU >= 0.5 with it, or ``none`` when no detection
+overlaps it so (a detector that finds an object but names it as another shows up off the diagonal).
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ from evaluation.coco import CocoDetections, CocoGroundTruth
 from evaluation.coco_masks import box_iou
 
 ERROR_KINDS = ("correct", "duplicate", "localization", "other_class", "background")
+#: The confusion column of objects that no detection overlaps at IoU >= ``MATCH_IOU``.
+NO_DETECTION = "none"
 MATCH_IOU = 0.5
 NEAR_IOU = 0.1
 
@@ -40,18 +46,26 @@ class DetectionErrors:
         recall: (K,) share of them found by a detection of any score at IoU >= 0.5.
         top: (K, len(ERROR_KINDS)) kinds of the ``objects[k]`` best-scoring detections (fewer when there
             are fewer detections).
+        called_names: the C + 1 confusion columns: every category of the ground truth, then ``"none"``.
+        confusion: (K, C + 1) objects of each row's category by the category of their best-scoring
+            overlapping detection (module docstring); each row sums to ``objects``.
     """
 
     category_names: tuple[str, ...]
     objects: np.ndarray
     recall: np.ndarray
     top: np.ndarray
+    called_names: tuple[str, ...]
+    confusion: np.ndarray
 
     def to_dict(self) -> dict:
-        """``{name: {"objects", "recall", kind: count, ...}}``."""
+        """``{name: {"objects", "recall", kind: count, ..., "called": {category or "none": count}}}`` (``called``:
+        the non-zero entries of the name's confusion row)."""
         return {name: {"objects": int(count), "recall": float(recall),
-                       **{kind: int(value) for kind, value in zip(ERROR_KINDS, row)}}
-                for name, count, recall, row in zip(self.category_names, self.objects, self.recall, self.top)}
+                       **{kind: int(value) for kind, value in zip(ERROR_KINDS, row)},
+                       "called": {called: int(value) for called, value in zip(self.called_names, confused) if value}}
+                for name, count, recall, row, confused in zip(self.category_names, self.objects, self.recall, self.top,
+                                                              self.confusion)}
 
     def table(self) -> str:
         """A plain-text table, one row per category."""
@@ -59,6 +73,10 @@ class DetectionErrors:
                  + " ".join(f"{kind:>12s}" for kind in ERROR_KINDS)]
         for name, count, recall, row in zip(self.category_names, self.objects, self.recall, self.top):
             lines.append(f"{name:<24s} {count:7d} {recall:6.2f}  {'':16s}" + " ".join(f"{v:12d}" for v in row))
+        lines.append("what each object is called (its best-scoring detection at IoU >= 0.5, any class):")
+        for name, confused in zip(self.category_names, self.confusion):
+            called = sorted(((int(v), n) for n, v in zip(self.called_names, confused) if v), key=lambda c: -c[0])
+            lines.append(f"{name:<24s} " + ", ".join(f"{n} {v}" for v, n in called))
         return "\n".join(lines)
 
 
@@ -83,8 +101,29 @@ def detection_errors(ground_truth: CocoGroundTruth, detections: CocoDetections) 
         objects.append(count)
         recalls.append(found / count)
         tops.append(np.bincount(kinds[:count], minlength=len(ERROR_KINDS)))
+    rows = [ground_truth.category_names.index(name) for name in names]
     return DetectionErrors(tuple(names), np.asarray(objects, dtype=np.int64), np.asarray(recalls, dtype=np.float64),
-                           np.asarray(tops, dtype=np.int64).reshape(-1, len(ERROR_KINDS)))
+                           np.asarray(tops, dtype=np.int64).reshape(-1, len(ERROR_KINDS)),
+                           (*ground_truth.category_names, NO_DETECTION), _confusion(ground_truth, detections)[rows])
+
+
+def _confusion(ground_truth: CocoGroundTruth, detections: CocoDetections) -> np.ndarray:
+    """``(C, C + 1)`` counts: ground-truth category (every one of ``category_ids``) by the category of each
+    non-crowd object's best-scoring detection at IoU >= ``MATCH_IOU`` (last column: none)."""
+    count = len(ground_truth.category_ids)
+    column = {int(category_id): k for k, category_id in enumerate(ground_truth.category_ids.tolist())}
+    confusion = np.zeros((count, count + 1), dtype=np.int64)
+    known = np.isin(detections.category_ids, ground_truth.category_ids)  # unknown categories are skipped, as in AP
+    for image in np.unique(ground_truth.image_index):
+        objects = np.flatnonzero((ground_truth.image_index == image) & ~ground_truth.is_crowd)
+        found = np.flatnonzero((detections.image_index == image) & known)
+        overlaps = box_iou(detections.boxes[found], ground_truth.boxes[objects])  # (detections, objects)
+        for obj, iou in zip(objects.tolist(), overlaps.T):
+            hits = found[iou >= MATCH_IOU]
+            best = hits[np.argmax(detections.scores[hits])] if len(hits) else None
+            called = count if best is None else column[int(detections.category_ids[best])]
+            confusion[ground_truth.category_index[obj], called] += 1
+    return confusion
 
 
 def _classify(ground_truth: CocoGroundTruth, detections: CocoDetections, rows: np.ndarray,

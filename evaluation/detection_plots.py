@@ -1,4 +1,4 @@
-"""PNG plots of detection results: precision-recall curves and per-class AP bars.
+"""PNG plots of detection results: precision-recall curves, per-class AP bars and what each object is called.
 
 Figures are drawn with matplotlib's Agg canvas (no display, no pyplot state) and written
 atomically (temporary file, then ``os.replace``). matplotlib is imported inside the functions so
@@ -15,6 +15,7 @@ import numpy as np
 from paz6d.backend.files import new_figure, save_figure_atomically
 
 from evaluation.coco import RECALL_THRESHOLDS, CocoEvaluation
+from evaluation.detection_errors import DetectionErrors
 from evaluation.voc import VocEvaluation
 
 
@@ -62,6 +63,28 @@ def plot_average_precision_bars(values: dict[str, float | None], path: str | Pat
     axes.set_xlabel("AP")
     axes.set_title(title)
     axes.grid(True, axis="x", alpha=0.3)
+    figure.tight_layout()
+    return save_figure_atomically(figure, path)
+
+
+def plot_confusion(errors: DetectionErrors, path: str | Path, title: str) -> Path:
+    """Writes a heat map of ``errors.confusion``: rows are the objects' categories, columns the category of
+    their best-scoring detection at IoU >= 0.5 (last: none); cells are shares of the row, with counts."""
+    counts = errors.confusion
+    shares = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
+    figure = new_figure(max(5.0, 0.6 * counts.shape[1] + 2.5), max(3.0, 0.45 * counts.shape[0] + 1.8))
+    axes = figure.add_subplot(1, 1, 1)
+    image = axes.imshow(shares, cmap="Blues", vmin=0.0, vmax=1.0, aspect="auto")
+    for (row, column), count in np.ndenumerate(counts):
+        if count:
+            axes.text(column, row, str(count), ha="center", va="center", fontsize="small",
+                      color="white" if shares[row, column] > 0.6 else "black")
+    axes.set_xticks(np.arange(counts.shape[1]), errors.called_names, rotation=45, ha="right", fontsize="small")
+    axes.set_yticks(np.arange(counts.shape[0]), errors.category_names, fontsize="small")
+    axes.set_xlabel("called (best-scoring detection at IoU >= 0.5)")
+    axes.set_ylabel("object")
+    axes.set_title(title)
+    figure.colorbar(image, ax=axes, label="share of the objects")
     figure.tight_layout()
     return save_figure_atomically(figure, path)
 

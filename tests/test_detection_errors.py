@@ -44,7 +44,12 @@ def test_breakdown_of_hand_made_detections():
     np.testing.assert_array_equal(errors.top[0], [expected.count(kind) for kind in ERROR_KINDS])
     np.testing.assert_array_equal(errors.top[1], np.zeros(len(ERROR_KINDS)))
     assert errors.to_dict()["class_1"] == {"objects": 6, "recall": 2 / 6, "correct": 2, "duplicate": 1,
-                                           "localization": 1, "other_class": 1, "background": 1}
+                                           "localization": 1, "other_class": 1, "background": 1,
+                                           "called": {"class_1": 2, "none": 4}}
+    # the class-2 object is found only by a class-1 detection (IoU 0.82): the detector calls it class 1
+    assert errors.called_names == ("class_1", "class_2", "none")
+    np.testing.assert_array_equal(errors.confusion, [[2, 0, 4], [1, 0, 0]])
+    assert "class_2                  class_1 1" in errors.table()
     masks_only = CocoDetections.from_list([{"image_id": 1, "category_id": 1, "score": 1.0,
                                             "segmentation": {"size": [100, 100], "counts": "PPYo1"}}], truth)
     with pytest.raises(ValueError, match="needs boxes"):
@@ -93,5 +98,46 @@ def test_evaluate_coco_errors_flag_writes_the_breakdown(tmp_path, capsys):
     report = json.loads((tmp_path / "o.json").read_text())
     assert report["errors"]["class_1"]["duplicate"] == 1 and report["errors"]["class_2"]["objects"] == 1
     assert "background" in capsys.readouterr().out
+    assert report["errors"]["class_2"]["called"] == {"class_1": 1}
+    assert main(["evaluate", "coco", "--gt", str(truth), "--results", str(results), "--out", str(tmp_path / "q.json"),
+                 "--errors", "--plots", str(tmp_path / "plots")]) == 0
+    confusion = tmp_path / "plots" / "coco_bbox_confusion.png"
+    assert confusion.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(["evaluate", "coco", "--gt", str(truth), "--results", str(results), "--out", str(tmp_path / "p.json")]) == 0
     assert "errors" not in json.loads((tmp_path / "p.json").read_text())
+
+
+def test_confusion_matches_a_brute_force_loop():
+    rng = np.random.default_rng(3)
+    names = {1: "a", 2: "b", 5: "c"}
+    truth_dict = {"images": [{"id": i} for i in range(6)], "annotations": [],
+                  "categories": [{"id": c, "name": n} for c, n in names.items()]}
+    for index in range(30):
+        x, y = rng.uniform(0, 60, 2)
+        truth_dict["annotations"].append({"id": index + 1, "image_id": int(index % 6), "category_id": int(rng.choice([1, 2, 5])),
+                                          "bbox": [x, y, 20, 20], "area": 400, "iscrowd": int(index == 7)})
+    results = []
+    for ann in truth_dict["annotations"] * 2:
+        x, y, w, h = ann["bbox"]
+        results.append({"image_id": ann["image_id"], "category_id": int(rng.choice([1, 2, 5, 9])), "score": float(rng.random()),
+                        "bbox": [x + rng.normal(0, 4), y + rng.normal(0, 4), w, h]})
+    truth = CocoGroundTruth.from_dict(truth_dict)
+    errors = detection_errors(truth, CocoDetections.from_list(results, truth))
+
+    def iou(a, b):
+        w = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+        h = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+        return w * h / (a[2] * a[3] + b[2] * b[3] - w * h)
+
+    expected = {name: {} for name in names.values()}
+    for ann in truth_dict["annotations"]:
+        if ann["iscrowd"]:
+            continue
+        hits = [r for r in results if r["image_id"] == ann["image_id"] and r["category_id"] in names
+                and iou(r["bbox"], ann["bbox"]) >= 0.5]
+        called = names[max(hits, key=lambda r: r["score"])["category_id"]] if hits else "none"
+        row = expected[names[ann["category_id"]]]
+        row[called] = row.get(called, 0) + 1
+    report = errors.to_dict()
+    assert {name: report[name]["called"] for name in report} == {name: row for name, row in expected.items() if row}
+    np.testing.assert_array_equal(errors.confusion.sum(axis=1), errors.objects)
