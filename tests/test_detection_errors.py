@@ -33,6 +33,13 @@ DETECTIONS = [(0.9, 1, [0, 0, 10, 10], "correct"),
               (0.2, 3, [60, 60, 10, 10], "background")]    # beyond the top 6
 
 
+def _iou(a, b) -> float:
+    """Brute-force IoU of two ``[x, y, w, h]`` boxes."""
+    w = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    h = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    return w * h / (a[2] * a[3] + b[2] * b[3] - w * h)
+
+
 def test_breakdown_of_hand_made_detections():
     truth = CocoGroundTruth.from_dict(_truth())
     results = [{"image_id": image, "category_id": 1, "bbox": box, "score": score} for score, image, box, _ in DETECTIONS]
@@ -72,14 +79,9 @@ def test_recall_matches_a_brute_force_count():
     truth = CocoGroundTruth.from_dict(truth_dict)
     errors = detection_errors(truth, CocoDetections.from_list(results, truth))
 
-    def iou(a, b):
-        w = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
-        h = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
-        return w * h / (a[2] * a[3] + b[2] * b[3] - w * h)
-
     taken = set()
     for result in sorted(results, key=lambda r: -r["score"]):
-        free = [(iou(result["bbox"], a["bbox"]), a["id"]) for a in truth_dict["annotations"]
+        free = [(_iou(result["bbox"], a["bbox"]), a["id"]) for a in truth_dict["annotations"]
                 if a["image_id"] == result["image_id"] and a["id"] not in taken]
         best = max(free, default=(0.0, None))
         if best[0] >= 0.5:
@@ -124,17 +126,12 @@ def test_confusion_matches_a_brute_force_loop():
     truth = CocoGroundTruth.from_dict(truth_dict)
     errors = detection_errors(truth, CocoDetections.from_list(results, truth))
 
-    def iou(a, b):
-        w = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
-        h = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
-        return w * h / (a[2] * a[3] + b[2] * b[3] - w * h)
-
     expected = {name: {} for name in names.values()}
     for ann in truth_dict["annotations"]:
         if ann["iscrowd"]:
             continue
         hits = [r for r in results if r["image_id"] == ann["image_id"] and r["category_id"] in names
-                and iou(r["bbox"], ann["bbox"]) >= 0.5]
+                and _iou(r["bbox"], ann["bbox"]) >= 0.5]
         called = names[max(hits, key=lambda r: r["score"])["category_id"]] if hits else "none"
         row = expected[names[ann["category_id"]]]
         row[called] = row.get(called, 0) + 1
