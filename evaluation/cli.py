@@ -104,7 +104,7 @@ def _run_coco(args: argparse.Namespace) -> int:
     if args.plots is not None:
         paths = detection_plots.plot_coco(evaluation, args.plots)
         if args.errors:
-            paths.append(detection_plots.plot_confusion(errors, Path(args.plots) / f"coco_{args.iou_type}_confusion.png",
+            paths.append(detection_plots.plot_confusion(errors, args.plots / f"coco_{args.iou_type}_confusion.png",
                                                         "What each object is called"))
         for path in paths:
             print(f"wrote {path}")

@@ -88,7 +88,7 @@ def detection_errors(ground_truth: CocoGroundTruth, detections: CocoDetections) 
     """
     if detections.boxes is None:
         raise ValueError(f"{detections.source}: the error breakdown needs boxes (bbox), the results carry masks only")
-    names, objects, recalls, tops = [], [], [], []
+    kept, objects, recalls, tops = [], [], [], []
     for k, category_id in enumerate(ground_truth.category_ids.tolist()):
         own = (ground_truth.category_index == k)
         count = int(np.sum(own & ~ground_truth.is_crowd))
@@ -97,14 +97,13 @@ def detection_errors(ground_truth: CocoGroundTruth, detections: CocoDetections) 
         rows = np.flatnonzero(detections.category_ids == category_id)
         rows = rows[np.argsort(-detections.scores[rows], kind="stable")]
         kinds, found = _classify(ground_truth, detections, rows, k)
-        names.append(ground_truth.category_names[k])
+        kept.append(k)
         objects.append(count)
         recalls.append(found / count)
         tops.append(np.bincount(kinds[:count], minlength=len(ERROR_KINDS)))
-    rows = [ground_truth.category_names.index(name) for name in names]
-    return DetectionErrors(tuple(names), np.asarray(objects, dtype=np.int64), np.asarray(recalls, dtype=np.float64),
+    return DetectionErrors(tuple(ground_truth.category_names[k] for k in kept), np.asarray(objects, dtype=np.int64), np.asarray(recalls, dtype=np.float64),
                            np.asarray(tops, dtype=np.int64).reshape(-1, len(ERROR_KINDS)),
-                           (*ground_truth.category_names, NO_DETECTION), _confusion(ground_truth, detections)[rows])
+                           (*ground_truth.category_names, NO_DETECTION), _confusion(ground_truth, detections)[kept])
 
 
 def _confusion(ground_truth: CocoGroundTruth, detections: CocoDetections) -> np.ndarray:

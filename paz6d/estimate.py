@@ -526,10 +526,10 @@ def viewpoint_range(args: argparse.Namespace) -> ViewpointRange | None:
     return None if viewpoints.is_everything else viewpoints
 
 
-def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
+def check_arguments(args: argparse.Namespace) -> tuple[dict[int, tuple[Path, str]], ViewpointRange | None]:
     """Checks every flag, the run directories (method, files, object), the detector and the output paths
-    before any image is read; returns ``{obj_id: (run_dir, method)}``. Bad input raises ``ValueError``
-    naming the flag or file."""
+    before any image is read; returns ``({obj_id: (run_dir, method)}, viewpoint_range(args))``. Bad input
+    raises ``ValueError`` naming the flag or file."""
     check_plain_name(args.split, "--split")
     if not 0.0 <= args.min_visible <= 1.0:
         raise ValueError(f"--min-visible: expected a visible fraction in [0, 1], got {args.min_visible}")
@@ -568,7 +568,7 @@ def check_arguments(args: argparse.Namespace) -> dict[int, tuple[Path, str]]:
                          "--run is a KeypointNet run")
     if args.detector is not None:
         check_detector(args.detector, runs)
-    return runs
+    return runs, viewpoints
 
 
 def estimate(args: argparse.Namespace) -> dict:
@@ -579,8 +579,7 @@ def estimate(args: argparse.Namespace) -> dict:
     """
     from paz6d.backend.tensorflow_guard import import_tensorflow
 
-    runs = check_arguments(args)
-    viewpoints = viewpoint_range(args)
+    runs, viewpoints = check_arguments(args)
     import_tensorflow()
     objects = sorted(runs)
     if args.detector is None:
