@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One entry point for the two quick-start commands:
 #   bash run.sh demo   -> set up everything, then run the end-to-end demo
-#   bash run.sh test   -> set up everything, then run the test suite
+#   bash run.sh test   -> set up everything, then run the linter (ruff) and the test suite
 #   bash run.sh setup  -> only set up (Debian packages, .venv, the package and its test extras)
 # Idempotent: the apt step is skipped when the packages are present and the pip step when
 # pyproject.toml has not changed since the last install.
@@ -53,6 +53,8 @@ case "$cmd" in
     test)
         # Default suite: everything but tests marked slow. pytest exits 5 when it collects no
         # tests; that is only acceptable while the project has no test files at all.
+        # The linter first ([tool.ruff] in pyproject.toml): any finding fails the run.
+        .venv/bin/ruff check .
         set +e
         .venv/bin/python -m pytest -q -m "not slow" "$@"
         rc=$?
