@@ -233,3 +233,70 @@ def test_bad_arguments_and_corrupt_pointer(tmp_path):
     (tmp_path / "checkpoint.json").write_text("{not json")
     with pytest.raises(ValueError, match="checkpoint.json"):
         _trainer(tmp_path, 5).fit()
+
+
+def _tree(folder):
+    """Every path under ``folder`` with its bytes (folders as None), for before/after comparisons."""
+    return {str(path.relative_to(folder)): (path.read_bytes() if path.is_file() else None)
+            for path in sorted(folder.rglob("*"))}
+
+
+def test_pruning_never_deletes_stale_checkpoints_of_an_earlier_run(tmp_path):
+    run = tmp_path / "run"
+    _trainer(run, 10).fit()
+    (run / "checkpoint.json").unlink()  # "delete checkpoint.json to start over", stale folders left behind
+    for old, new in (("step_00000005", "step_00000090"), ("step_00000010", "step_00000091")):
+        (run / "checkpoints" / old).rename(run / "checkpoints" / new)
+    stale = _tree(run / "checkpoints")
+    summary = _trainer(run, 20).fit()  # a fresh run: checkpoints 5, 10, 15, 20, keeps its last two
+    assert (summary.start_step, summary.final_step) == (0, 20)
+    pointer = json.loads((run / "checkpoint.json").read_text())
+    assert pointer == {"step": 20, "path": "checkpoints/step_00000020", "kept": [15, 20]}
+    names = sorted(path.name for path in (run / "checkpoints").iterdir())
+    assert names == ["step_00000015", "step_00000020", "step_00000090", "step_00000091"]
+    assert {key: value for key, value in _tree(run / "checkpoints").items() if "0009" in key} == stale
+    assert _trainer(run, 25).fit().start_step == 20  # the next resume finds its checkpoint
+
+
+def test_checkpoints_kept_across_a_resume_are_pruned_by_step(tmp_path):
+    _trainer(tmp_path, 10).fit()
+    assert json.loads((tmp_path / "checkpoint.json").read_text())["kept"] == [5, 10]
+    _trainer(tmp_path, 20).fit()  # the resumed run owns 5 and 10 too, and prunes them
+    assert sorted(path.name for path in (tmp_path / "checkpoints").iterdir()) == ["step_00000015", "step_00000020"]
+
+
+@pytest.mark.parametrize("folder", ["checkpoints", "tensorboard", "samples"])
+def test_symlinked_run_folders_are_refused_before_anything_is_written(tmp_path, folder):
+    outside = tmp_path / "outside"
+    for name in ("step_00000001", "step_00000002", "step_00000003"):
+        (outside / name).mkdir(parents=True)
+        (outside / name / "model.weights.h5").write_bytes(b"the user's own")
+    before = _tree(outside)
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / folder).symlink_to(outside, target_is_directory=True)
+    with pytest.raises(ValueError, match=f"{folder}: a symbolic link"):
+        _trainer(run, 10).fit()
+    assert _tree(outside) == before
+    assert sorted(path.name for path in run.iterdir()) == [folder]
+
+
+@pytest.mark.parametrize("pointer, expected", [
+    ({"step": 5, "path": "../outside"}, "expected a relative path inside"),
+    ({"step": 5, "path": "/tmp"}, "expected a relative path inside"),
+    ({"step": 5, "path": 7}, "expected a relative path inside"),
+    ({"step": -1, "path": "checkpoints/step_00000005"}, '"step" must be a non-negative integer'),
+    ({"step": True, "path": "checkpoints/step_00000005"}, '"step" must be a non-negative integer'),
+    ({"step": 5, "path": "checkpoints/step_00000005", "kept": [9]}, '"kept" must be a list'),
+    ([5], "corrupt checkpoint pointer"),
+])
+def test_checkpoint_pointer_outside_the_run_or_malformed_is_refused(tmp_path, pointer, expected):
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "model.weights.h5").write_bytes(b"not ours")
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "checkpoint.json").write_text(json.dumps(pointer))
+    with pytest.raises(ValueError, match="checkpoint.json") as error:
+        _trainer(run, 10).fit()
+    assert expected in str(error.value)

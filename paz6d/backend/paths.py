@@ -69,6 +69,28 @@ def check_plain_name(value: str, name: str) -> str:
     return value
 
 
+def path_inside(root: str | Path, value: object, where: str) -> Path:
+    """``root / value`` for a relative path ``value`` read from a data set or run directory (a file
+    name in an annotation, an image-set id, a checkpoint pointer's ``"path"``), refused unless it
+    stays inside ``root``: no absolute path, no ``..`` that climbs out, no empty name or NUL.
+    The check is on the path as written (symbolic links that the data set's owner made are followed
+    as usual).
+
+    Args:
+        root: the data set or run directory the path is relative to.
+        value: the path as read from the file (must be a ``str``).
+        where: the file, record and field it was read from, for the message
+            (``"a.json: images[3].file_name"``).
+
+    Raises:
+        ValueError: ``"<where>: expected a relative path inside <root>, got '../x'"``.
+    """
+    if (not isinstance(value, str) or not value.strip() or "\0" in value or os.path.isabs(value)
+            or os.path.normpath(value).split(os.sep)[0] == ".."):
+        raise ValueError(f"{where}: expected a relative path inside {root}, got {value!r:.80}")
+    return Path(root) / value
+
+
 def check_output_folder(path: str | Path, name: str) -> Path:
     """``path`` when it may become (or is) an output folder: refused when something other than a
     folder stands there (a file, device, FIFO, or a symbolic link) or in place of one of its

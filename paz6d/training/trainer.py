@@ -5,7 +5,9 @@ everything it needs to continue in ``run_dir``::
 
     run_dir/
       checkpoints/step_00001000/   model.weights.h5, optimizer.npz, state.json (one folder per checkpoint)
-      checkpoint.json              {"step": 1000, "path": "checkpoints/step_00001000"} (latest, atomic)
+      checkpoint.json              {"step": 1000, "path": "checkpoints/step_00001000", "kept": [800, 1000]}
+                                   (latest, atomic; "kept": the steps of the checkpoints this run wrote
+                                   and keeps, the only ones it ever deletes)
       log.csv                      step, wall time, data/step seconds, every metric
       tensorboard/                 the same scalars as TensorBoard events (``tensorboard=True``)
       samples/step_00001000.png    whatever ``sample_callback`` draws
@@ -45,11 +47,14 @@ from typing import Any
 import numpy as np
 
 from paz6d.backend.files import write_csv_atomically, write_json_atomically
+from paz6d.backend.paths import path_inside
 from paz6d.backend.tensorflow_guard import import_tensorflow
 from paz6d.training.distribution import is_chief, split_batch
 
 CHECKPOINT_POINTER = "checkpoint.json"
 LOG_FILE = "log.csv"
+#: Folders of ``run_dir`` the trainer writes into; none may be a symbolic link.
+RUN_FOLDERS = ("checkpoints", "tensorboard", "samples")
 _FIXED_COLUMNS = ["step", "wall_seconds", "data_seconds", "step_seconds"]
 
 
@@ -115,7 +120,9 @@ class Trainer:
         sample_callback: ``sample_callback(model, step, png_path)`` draws a PNG (e.g. reconstructions).
         train_step: optional ``train_step(batch) -> dict of scalars`` replacing the built-in gradient
             step (it must update ``model``/``optimizer`` itself).
-        keep_checkpoints: how many checkpoint folders to keep (oldest deleted first).
+        keep_checkpoints: how many checkpoint folders to keep (oldest deleted first). Only folders that
+            this run wrote (listed in ``checkpoint.json``'s ``"kept"``) are ever deleted, by step
+            number: stale ``step_*`` folders of an earlier run stay.
         tensorboard: also write TensorBoard scalars to ``run_dir/tensorboard``.
         progress: show a tqdm bar.
         compile_step: wrap the built-in step in ``tf.function``.
@@ -185,24 +192,53 @@ class Trainer:
         self.prefetch_workers = int(prefetch_workers)
         self.strategy = strategy
         self.writes_files = is_chief(strategy)
+        self._kept_steps: list[int] | None = None  # steps of this run's checkpoints on disk, oldest first
 
     # ----------------------------------------------------------------------------------- checkpoints
     @property
     def checkpoint_dir(self) -> Path:
         return self.run_dir / "checkpoints"
 
-    def latest_checkpoint(self) -> tuple[int, Path] | None:
-        """``(step, folder)`` of the newest complete checkpoint in ``run_dir``, or None."""
+    def check_run_folders(self) -> None:
+        """Refuses a ``run_dir`` whose ``checkpoints/``, ``tensorboard/`` or ``samples/`` is a symbolic
+        link or not a folder: the trainer writes and deletes there, and must not do so elsewhere.
+
+        Raises:
+            ValueError: naming the folder.
+        """
+        for name in RUN_FOLDERS:
+            path = self.run_dir / name
+            if path.is_symlink():
+                raise ValueError(f"{path}: a symbolic link; the trainer writes (and prunes) only inside its run "
+                                 "directory; replace the link by a folder or give a new --out")
+            if path.exists() and not path.is_dir():
+                raise ValueError(f"{path}: expected a folder of the run, found a file")
+
+    def _read_pointer(self) -> tuple[int, Path, list[int]] | None:
+        """``(step, folder, kept steps)`` from ``checkpoint.json``, or None when there is none."""
         pointer = self.run_dir / CHECKPOINT_POINTER
         if not pointer.exists():
             return None
         try:
             data = json.loads(pointer.read_text())
-            step, folder = int(data["step"]), self.run_dir / data["path"]
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
+            step, kept = data["step"], data.get("kept", [data["step"]])
+            if type(step) is not int or step < 0:
+                raise ValueError(f'"step" must be a non-negative integer, got {step!r:.40}')
+            if not isinstance(kept, list) or not all(type(item) is int and 0 <= item <= step for item in kept):
+                raise ValueError(f'"kept" must be a list of steps up to "step", got {kept!r:.60}')
+            folder = path_inside(self.run_dir, data["path"], f'{pointer}: "path"')
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError, RecursionError) as error:
             raise ValueError(f"{pointer}: corrupt checkpoint pointer ({error}); delete it to start over") from error
-        if not (folder / "model.weights.h5").exists():
-            raise ValueError(f"{pointer}: points to {folder}, which has no model.weights.h5")
+        return step, folder, [item for item in kept if item != step] + [step]
+
+    def latest_checkpoint(self) -> tuple[int, Path] | None:
+        """``(step, folder)`` of the newest complete checkpoint in ``run_dir``, or None."""
+        read = self._read_pointer()
+        if read is None:
+            return None
+        step, folder, _ = read
+        if not (folder / "model.weights.h5").is_file():
+            raise ValueError(f"{self.run_dir / CHECKPOINT_POINTER}: points to {folder}, which has no model.weights.h5")
         return step, folder
 
     def _ensure_optimizer_built(self) -> None:
@@ -217,9 +253,15 @@ class Trainer:
         self._ensure_optimizer_built()
         if not self.writes_files:
             return self.checkpoint_dir / f"step_{step:08d}"
+        self.check_run_folders()
+        if self._kept_steps is None:
+            read = self._read_pointer()
+            self._kept_steps = [] if read is None else read[2]
         self.checkpoint_dir.mkdir(parents=True, exist_ok=True)
         name = f"step_{step:08d}"
         final = self.checkpoint_dir / name
+        if final.is_symlink() or (final.exists() and not final.is_dir()):
+            raise ValueError(f"{final}: not a checkpoint folder (a symbolic link or a file); refusing to replace it")
         temporary = self.checkpoint_dir / (name + ".tmp")
         shutil.rmtree(temporary, ignore_errors=True)
         temporary.mkdir()
@@ -230,15 +272,22 @@ class Trainer:
         (temporary / "state.json").write_text(json.dumps({"step": step, "metrics": dict(metrics or {})}))
         shutil.rmtree(final, ignore_errors=True)
         os.replace(temporary, final)
-        write_json_atomically(self.run_dir / CHECKPOINT_POINTER, {"step": step, "path": f"checkpoints/{name}"}, indent=2)
-        folders = sorted(p for p in self.checkpoint_dir.glob("step_*") if not p.name.endswith(".tmp"))
-        for old in folders[:-self.keep_checkpoints]:
-            shutil.rmtree(old, ignore_errors=True)
+        kept = [item for item in self._kept_steps if item != step] + [step]
+        write_json_atomically(self.run_dir / CHECKPOINT_POINTER,
+                              {"step": step, "path": f"checkpoints/{name}", "kept": kept[-self.keep_checkpoints:]},
+                              indent=2)
+        self._kept_steps = kept[-self.keep_checkpoints:]
+        for old in kept[:-self.keep_checkpoints]:  # this run's own, no longer referenced
+            folder = self.checkpoint_dir / f"step_{old:08d}"
+            if folder.is_dir() and not folder.is_symlink():
+                shutil.rmtree(folder, ignore_errors=True)
         return final
 
     def restore(self) -> int:
         """Loads the latest checkpoint into model/optimizer; returns its step (0 when there is none)."""
         latest = self.latest_checkpoint()
+        read = self._read_pointer()
+        self._kept_steps = [] if read is None else read[2]
         if latest is None:
             return 0
         step, folder = latest
@@ -322,6 +371,7 @@ class Trainer:
         from tqdm.auto import tqdm
 
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.check_run_folders()
         start_step = self.restore()
         self._ensure_optimizer_built()  # not inside the first (distributed) step
         rows = self._prepare_log(start_step)
