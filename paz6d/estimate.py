@@ -33,7 +33,7 @@ import numpy as np
 
 from paz6d.backend.checks import check_depth
 from paz6d.backend.files import write_json_atomically
-from paz6d.backend.paths import check_output_file, check_outputs_apart, check_plain_name
+from paz6d.backend.paths import check_outputs, check_outputs_apart, check_plain_name
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.keypointnet.config import CROP_JITTERS, check_crops
@@ -554,15 +554,12 @@ def check_arguments(args: argparse.Namespace) -> tuple[dict[int, tuple[Path, str
                              "so every detection needs a pose)")
     viewpoints = viewpoint_range(args)
     detections = detections_path(args)
-    check_outputs_apart({"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}, {})
-    check_output_file(args.out, "--out")
-    if args.targets_out is not None:
-        check_output_file(args.targets_out, "--targets-out")
-    if detections is not None:
-        check_output_file(detections, "--detections-out")
+    outputs = {"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}
+    check_outputs(outputs, {"--dataset": args.dataset, "--detector": args.detector})
     if not args.dataset.is_dir():
         raise ValueError(f"--dataset: {args.dataset} is not a directory")
     runs = resolve_runs(args.run, args.object_id, args.method)
+    check_outputs_apart(outputs, {f"--run {obj_id}": run_dir for obj_id, (run_dir, _) in runs.items()})
     if viewpoints is not None and all(method != "aae" for _, method in runs.values()):
         raise ValueError("--elevation-degrees/--inplane-degrees: only AAE runs answer from a codebook of views; every "
                          "--run is a KeypointNet run")
