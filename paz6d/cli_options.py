@@ -45,7 +45,6 @@ import typing
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Literal, Union
 
-from paz6d.backend.paths import check_output_folder
 
 _SCALAR_TYPES = (int, float, str, Path)
 
@@ -186,19 +185,32 @@ def config_from_args(config_class: type, args: argparse.Namespace, exclude: Iter
         return config_class(**values)
 
 
-def run_training(config_class: type, args: argparse.Namespace, train: Callable[[Any], dict],
-                 check_out: bool = True) -> int:
-    """The ``run`` of a ``paz6d train <method>`` command: the run's settings from the flags (every field
-    but ``overrides``), ``--out`` checked (``check_out``), ``train(settings)`` and its summary printed as
-    JSON; returns the exit status 0.
+def config_inputs(settings: Any) -> dict[str, Path]:
+    """``{flag: path}`` of the ``Path`` settings other than ``out``: the files and folders a command reads."""
+    return {flag_name(field.name): getattr(settings, field.name) for field in dataclasses.fields(settings)
+            if field.name != "out" and isinstance(getattr(settings, field.name), Path)}
+
+
+def prepare_training_output(settings: Any, method: str) -> Path:
+    """``settings.out`` checked by the one output rule and claimed for ``method``
+    (:func:`paz6d.run_dirs.prepare_run_output`, with the settings' other paths as the inputs)."""
+    from paz6d.run_dirs import prepare_run_output  # here: it imports every method's run_dir module
+
+    return prepare_run_output(settings.out, method, config_inputs(settings))
+
+
+def run_training(config_class: type, args: argparse.Namespace, train: Callable[[Any], dict]) -> int:
+    """The ``run`` of a ``paz6d train <method>`` command (the method is ``args.model``): the run's
+    settings from the flags (every field but ``overrides``), ``--out`` checked and claimed
+    (:func:`prepare_training_output`), ``train(settings)`` and its summary printed as JSON; returns
+    the exit status 0.
 
     Raises:
         ValueError: bad settings or a failed run, naming the flag (:func:`flags_in_errors`).
     """
     job = config_from_args(config_class, args, exclude=("overrides",))
     with flags_in_errors(config_class):
-        if check_out:
-            check_output_folder(job.out, "out")
+        prepare_training_output(job, args.model)
         summary = train(job)
     print(json.dumps(summary, indent=2))
     return 0

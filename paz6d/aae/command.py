@@ -11,8 +11,7 @@ import json
 from pathlib import Path
 
 from paz6d.aae.config import AAETraining
-from paz6d.backend.paths import check_output_folder
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, prepare_training_output
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -41,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
 
     job = config_from_args(AAETraining, args)
     with flags_in_errors(AAETraining):
-        check_output_folder(job.out, "out")
+        prepare_training_output(job, "aae")
         mesh, object_id, object_class, scale = job.mesh, 1, None, job.mesh_scale
         split = job.split or "train"
         if job.format == "bop":

@@ -109,12 +109,52 @@ def check_output_folder(path: str | Path, name: str) -> Path:
     return path
 
 
+def dataset_layout(folder: str | Path) -> str | None:
+    """The kind of data set whose files lie at the top of ``folder`` or that ``folder`` is part of
+    (a BOP split or scene folder) (``"BOP"``, ``"COCO"``,
+    ``"PASCAL VOC"``, ``"YCB-Video"``, ``"FAT/NDDS"``, ``"Open Images"``, ``"FER-2013"``), or ``None``.
+    Looks at a few names only (two folder levels at most), so it is cheap on a large data set."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return None
+
+    def has(*names: str) -> bool:
+        return any(True for name in names for _ in folder.glob(name))
+
+    if has(".paz6d-generate", "camera*.json", "models/models_info.json", "models_eval", "scene_gt.json",
+           "scene_camera.json", "*/scene_gt.json", "*/scene_camera.json", "*/*/scene_gt.json",
+           "*/*/scene_camera.json"):
+        return "BOP"
+    if has("annotations/instances_*.json", "annotations/person_keypoints_*.json"):
+        return "COCO"
+    if (folder / "Annotations").is_dir() and has("JPEGImages", "ImageSets"):
+        return "PASCAL VOC"
+    if has("VOC20*/Annotations", "image_sets/classes.txt"):
+        return "PASCAL VOC" if has("VOC20*/Annotations") else "YCB-Video"
+    if has("_object_settings.json", "mixed/*/_object_settings.json", "single/*/*/_object_settings.json"):
+        return "FAT/NDDS"
+    if has("*-annotations-bbox.csv", "annotations/*-annotations-bbox.csv", "*class-descriptions*.csv"):
+        return "Open Images"
+    if has("fer2013.csv", "fer2013new.csv"):
+        return "FER-2013"
+    return None
+
+
+def _inside(path: str, folder: str) -> bool:
+    """True when the real path ``path`` is ``folder`` or lies below it (both from ``os.path.realpath``)."""
+    return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)
+
+
 def check_outputs_apart(outputs: dict[str, str | Path | None], inputs: dict[str, str | Path | None]) -> None:
     """Refuses an output path that is also an input or another output (``{flag: path}``; ``None``
-    entries are ignored), so a mistyped flag cannot overwrite what the command reads or writes.
+    entries are ignored), so a mistyped flag cannot overwrite what the command reads or writes. An
+    input that is a folder (a data set, a run directory, an image folder) covers the files in it: an
+    output may create a new file there but not replace an existing one. Paths are compared after
+    resolving symbolic links.
 
     Raises:
-        ValueError: ``"--out: x.json is also --results; ..."``.
+        ValueError: ``"--out: x.json is also --results; ..."`` or ``"--out: D/scene_gt.json is a file
+        of --dataset D, which this command reads; ..."``.
     """
     seen: dict[str, str] = {}
     for name, path in {**inputs, **outputs}.items():
@@ -125,3 +165,44 @@ def check_outputs_apart(outputs: dict[str, str | Path | None], inputs: dict[str,
             raise ValueError(f"{name}: {path} is also {seen[key]}; give each output its own path, apart from "
                              "the inputs")
         seen.setdefault(key, name)
+    folders = {name: os.path.realpath(path) for name, path in inputs.items()
+               if path is not None and os.path.isdir(path)}
+    for name, path in outputs.items():
+        if path is None or not os.path.lexists(path) or os.path.isdir(path):
+            continue
+        key = os.path.realpath(path)
+        for input_name, folder in folders.items():
+            if _inside(key, folder):
+                raise ValueError(f"{name}: {path} is a file of {input_name} {inputs[input_name]}, which this "
+                                 "command reads; give a new path (outside it or a new name)")
+
+
+def check_outputs(files: dict[str, str | Path | None], inputs: dict[str, str | Path | None],
+                  folders: dict[str, str | Path | None] | None = None) -> None:
+    """The output rule of every command, checked before any work starts, creating nothing:
+
+    * each output file (``files``, ``{flag: path}``) is new or an existing regular file
+      (:func:`check_output_file`: never a symbolic link, folder, device or FIFO);
+    * each output folder (``folders``) is new or an existing folder (:func:`check_output_folder`:
+      never a symbolic link), and is not a data set (:func:`dataset_layout`);
+    * no output is an input of the call (``inputs``: files and folders the command reads), a file or
+      folder inside an input folder, or another output (:func:`check_outputs_apart`).
+
+    Whether an existing output folder belongs to another method is the run directories' business
+    (:func:`paz6d.run_dirs.check_run_output`). ``None`` paths are ignored.
+
+    Raises:
+        ValueError: naming the flag, the path and what is wrong.
+    """
+    folders = folders or {}
+    for name, path in folders.items():
+        if path is None:
+            continue
+        check_output_folder(path, name)
+        kind = dataset_layout(path)
+        if kind is not None:
+            raise ValueError(f"{name}: {path} holds a {kind} data set; refusing to write into it; give a new folder")
+    for name, path in files.items():
+        if path is not None:
+            check_output_file(path, name)
+    check_outputs_apart({**files, **folders}, inputs)

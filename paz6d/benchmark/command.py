@@ -10,10 +10,10 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
-from paz6d.backend.paths import check_output_folder
 from paz6d.benchmark.lmo import DEFAULT_LMO, METHODS, Benchmark, run_benchmark
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.fields import BOX_FIELDS
+from paz6d.run_dirs import prepare_run_output
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     """Runs (or resumes) the benchmark."""
     options = config_from_args(LmoOptions, args)
     with flags_in_errors(LmoOptions):
-        check_output_folder(options.out, "out")
+        prepare_run_output(options.out, "benchmark lmo", {"--lmo": options.lmo})
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
                         progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
                         aae_lr_drop_steps=options.aae_lr_drop_steps, aae_crop_box=options.aae_crop_box,

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from paz6d.backend.paths import check_output_folder
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, prepare_training_output
 from paz6d.faces.emotion_config import EmotionTraining
 
 
@@ -25,6 +24,6 @@ def run(args: argparse.Namespace) -> int:
 
     job = config_from_args(EmotionTraining, args)
     with flags_in_errors(EmotionTraining):
-        check_output_folder(job.out, "out")
+        prepare_training_output(job, "emotion")
         train_emotion(job)
     return 0

@@ -17,4 +17,4 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of ``paz6d train ssd``."""
     from paz6d.ssd.train import train_ssd  # here: it loads OpenCV and TensorFlow
 
-    return run_training(SSDTraining, args, train_ssd, check_out=False)
+    return run_training(SSDTraining, args, train_ssd)

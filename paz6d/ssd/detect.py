@@ -29,7 +29,8 @@ from pathlib import Path
 
 from paz6d.backend.files import write_json_atomically
 from paz6d.backend.image import load_image
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
+from paz6d.backend.paths import check_outputs
+from paz6d.cli_options import add_config_arguments, config_from_args, config_inputs, flags_in_errors, option
 from paz6d.datasets.bop.coco_ground_truth import bop_split_to_coco
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -127,9 +128,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def detect(job: Detection) -> dict:
-    """Runs the detector and writes ``job.out`` (and ``job.ground_truth``); returns a summary."""
+    """Runs the detector and writes ``job.out`` (and ``job.ground_truth``); returns a summary.
+
+    Raises:
+        ValueError: an output that is an input (an image, a file of the data set or run directory) or
+            the other output, or a symbolic link (:func:`paz6d.backend.paths.check_outputs`), before
+            anything is read.
+    """
     from paz6d.ssd.pipeline import DetectSingleShot
 
+    check_outputs({"--out": job.out, "--ground-truth": job.ground_truth}, config_inputs(job))
     detector = DetectSingleShot(job.run_dir, score_threshold=job.score_threshold, max_detections=job.max_detections,
                                 flip=job.flip)
     if job.dataset is not None:
