@@ -30,7 +30,8 @@ COMMANDS = {
     "detect": ("paz6d.ssd.detect", "run a trained SSD over a BOP split or an image folder -> COCO detections JSON"),
     "estimate": ("paz6d.estimate", "run trained pose models on a BOP data set (ground-truth boxes or --detector) -> BOP results CSV"),
     "demo": ("paz6d.demo.command", "end-to-end demo: generate data, train, estimate poses, evaluate"),
-    "run": ("paz6d.video.command", "a pipeline (detector, 6D poses, faces) over a video, image folder or camera -> annotated video + JSON lines"),
+    "run": ("paz6d.video.command", "a pipeline (detector, 6D poses, faces) over a video, image folder or camera "
+                                   "-> annotated video + JSON lines"),
     "benchmark": ({"lmo": ("paz6d.benchmark.command", "synthetic training only, scored on the real LM-O frames "
                                                       "(detector + one pose model per object; resumable)")},
                   "real-data benchmarks"),
