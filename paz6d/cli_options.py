@@ -185,10 +185,11 @@ def config_from_args(config_class: type, args: argparse.Namespace, exclude: Iter
         return config_class(**values)
 
 
-def config_inputs(settings: Any) -> dict[str, Path]:
-    """``{flag: path}`` of the ``Path`` settings other than ``out``: the files and folders a command reads."""
+def config_inputs(settings: Any, outputs: tuple[str, ...] = ("out",)) -> dict[str, Path]:
+    """``{flag: path}`` of the ``Path`` settings other than the ``outputs`` fields: the files and folders
+    a command reads."""
     return {flag_name(field.name): getattr(settings, field.name) for field in dataclasses.fields(settings)
-            if field.name != "out" and isinstance(getattr(settings, field.name), Path)}
+            if field.name not in outputs and isinstance(getattr(settings, field.name), Path)}
 
 
 def prepare_training_output(settings: Any, method: str) -> Path:

@@ -953,9 +953,11 @@ def train_cases() -> list[Case]:
         found.append(Case(f"train-{name}-mesh-garbage", replace_flag(base, "--mesh", "{case}/bad.ply"),
                           case_file("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 2\nend_header\n1 2\n"),
                           ("bad.ply",)))
+        other = "keypointnet" if name == "aae" else "aae"
         found.append(Case(f"train-{name}-out-foreign-run", replace_flag(base, "--out", "{case}/run"),
-                          lambda world, folder, other=("keypointnet" if name == "aae" else "aae"):
-                          shutil.copytree(getattr(world, f"{other}_run"), folder / "run"), ("config.json",)))
+                          lambda world, folder, other=other:
+                          shutil.copytree(getattr(world, f"{other}_run"), folder / "run"),
+                          ("--out", "output folder of " + other)))
     found.append(Case("train-aae-dataset-no-scene-gt", TRAIN_AAE_DATASET,
                       bop_file("test/000000/scene_gt.json", None), ("scene_gt.json",)))
     found.append(Case("train-aae-dataset-no-models", TRAIN_AAE_DATASET, bop_file("models", None), ("models",)))
@@ -1070,10 +1072,120 @@ def dataset_format_cases() -> list[Case]:
     return found
 
 
+DETECT = ("detect", "--run-dir", "{case}/ssd", "--images", "{case}/images", "--out", "{out}/detections.json",
+          "--no-progress")
+DETECT_BOP = replace_flag(replace_flag(DETECT, "--images"), "--dataset", "{case}/bop")
+TRAIN_STN = ("train", "stn", "--out", "{out}", "--no-progress")
+TRAIN_HRNET = ("train", "hrnet", "--out", "{out}", "--mesh", "{world}/obj_000001.ply", "--no-progress")
+TRAIN_PROBABILISTIC = ("train", "probabilistic-keypoints", "--out", "{out}", "--mesh", "{world}/obj_000001.ply",
+                       "--no-progress")
+TRAIN_SEGMENTATION = ("train", "segmentation", "--dataset", "{world}/bop", "--out", "{out}", "--no-progress")
+#: Files that make a folder another command's output: ``{name: {relative path: content}}`` (see :func:`put`).
+FOREIGN_RUNS = {
+    "emotion": {"classes.json": ["angry", "happy"], "model.keras": b"a trained model", "metrics.json": {}},
+    "ssd": {"detector.json": {"architecture": "light"}, "model.keras": b"a trained model"},
+    "benchmark lmo": {".paz6d-run.json": {"method": "benchmark lmo"}, "stages/detector.json": {}},
+}
+
+
+def files_setup(files: dict[str, Any], copy_dataset: bool = False) -> Callable[[World, Path], None]:
+    """Setup: ``<case>/<relative>`` holds each content of ``files`` (see :func:`put`), after a copy of
+    the world's data set with ``copy_dataset``."""
+
+    def setup(world: World, folder: Path) -> None:
+        if copy_dataset:
+            copy_bop(world, folder)
+        for relative, content in files.items():
+            put(folder / relative, content)
+
+    return setup
+
+
+def _symlink(target: str, name: str) -> Callable[[World, Path], None]:
+    """Setup: ``<case>/<name>`` is a symbolic link to ``target`` (``{world}`` and ``{case}`` filled in)."""
+
+    def setup(world: World, folder: Path) -> None:
+        (folder / name).symlink_to(target.format(world=world.root, case=folder))
+
+    return setup
+
+
+def output_rule_cases() -> list[Case]:
+    """The one output rule: no command writes over a file it reads (a data set's, a run directory's,
+    an image), over another output of the call, into a data set or another method's run folder, or
+    through a symbolic link; all refused before any work (the runner checks that nothing changed)."""
+    images = {"images/a.png": (np.ones((8, 8, 3), np.uint8) * 255).tobytes(), **{
+        f"ssd/{name}": content for name, content in FOREIGN_RUNS["ssd"].items()}}
+    detect_files = files_setup(images)
+    detect_bop = files_setup({f"ssd/{name}": content for name, content in FOREIGN_RUNS["ssd"].items()},
+                             copy_dataset=True)
+    scene_gt = "{case}/bop/test/000000/scene_gt.json"
+    found = [
+        Case("detect-out-is-an-input-image", replace_flag(DETECT, "--out", "{case}/images/a.png"), detect_files,
+             ("--out", "a.png", "a file of --images")),
+        Case("detect-out-is-the-model", replace_flag(DETECT, "--out", "{case}/ssd/model.keras"), detect_files,
+             ("--out", "model.keras", "a file of --run-dir")),
+        Case("detect-ground-truth-is-scene-gt", DETECT_BOP + ("--ground-truth", scene_gt), detect_bop,
+             ("--ground-truth", "scene_gt.json", "a file of --dataset")),
+        Case("detect-out-is-scene-gt", replace_flag(DETECT_BOP, "--out", scene_gt), detect_bop,
+             ("--out", "a file of --dataset")),
+        Case("detect-ground-truth-is-out", DETECT_BOP + ("--ground-truth", "{out}/detections.json"), detect_bop,
+             ("--ground-truth", "is also --out")),
+        Case("detect-out-symlink", replace_flag(DETECT, "--out", "{case}/link.json"),
+             lambda world, folder: (detect_files(world, folder), _symlink("{world}/results.csv", "link.json")(
+                 world, folder)), ("--out", "symbolic link")),
+        Case("estimate-out-is-scene-gt", replace_flag(ESTIMATE, "--out", "{world}/bop/test/000000/scene_gt.json"),
+             None, ("--out", "a file of --dataset")),
+        Case("estimate-out-is-scene-camera",
+             replace_flag(ESTIMATE, "--out", "{world}/bop/test/000000/scene_camera.json"), None,
+             ("--out", "scene_camera.json", "a file of --dataset")),
+        Case("estimate-targets-out-is-run-config", ESTIMATE + ("--targets-out", "{world}/runs/aae/config.json"), None,
+             ("--targets-out", "a file of --run 1")),
+        Case("estimate-detections-out-is-scene-gt",
+             ESTIMATE + ("--detector", "{case}/ssd", "--detections-out", "{world}/bop/test/000000/scene_gt.json"),
+             detect_files, ("--detections-out", "a file of --dataset")),
+        Case("estimate-out-is-detector-model", replace_flag(ESTIMATE + ("--detector", "{case}/ssd"), "--out",
+                                                            "{case}/ssd/model.keras"),
+             detect_files, ("--out", "a file of --detector")),
+    ]
+    trainers = {"ssd": replace_flag(TRAIN_SSD, "--dataset", "{world}/bop"), "stn": TRAIN_STN, "aae": TRAIN_AAE,
+                "keypointnet": TRAIN_KEYPOINTNET, "emotion": TRAIN_EMOTION, "hrnet": TRAIN_HRNET,
+                "probabilistic-keypoints": TRAIN_PROBABILISTIC, "segmentation": TRAIN_SEGMENTATION}
+    for method, base in trainers.items():
+        other = "ssd" if method == "emotion" else "emotion"
+        found.append(Case(f"train-{method}-out-{other}-run", replace_flag(base, "--out", "{case}/run"),
+                          files_setup({f"run/{name}": content for name, content in FOREIGN_RUNS[other].items()}),
+                          ("--out", f"output folder of {other}, not {method}")))
+        found.append(Case(f"train-{method}-out-benchmark", replace_flag(base, "--out", "{case}/run"),
+                          files_setup({f"run/{name}": content
+                                       for name, content in FOREIGN_RUNS["benchmark lmo"].items()}),
+                          ("--out", "output folder of benchmark lmo")))
+        found.append(Case(f"train-{method}-out-symlink", replace_flag(base, "--out", "{case}/link"),
+                          _symlink("{world}/runs/aae", "link"), ("--out", "symbolic link")))
+        found.append(Case(f"train-{method}-out-dataset", replace_flag(base, "--out", "{world}/bop"), None,
+                          ("--out", "BOP data set")))
+        found.append(Case(f"train-{method}-out-dataset-scene", replace_flag(base, "--out", "{world}/bop/test/000000"),
+                          None, ("--out", "BOP data set")))
+    found += [
+        Case("train-ssd-out-is-dataset", (*TRAIN_SSD[:3], "{case}/bop", "--out", "{case}/bop", "--no-progress"),
+             copy_bop, ("--out", "BOP data set")),
+        Case("train-emotion-out-is-data", replace_flag(TRAIN_EMOTION, "--out", "{world}/fer.csv"), None,
+             ("--out", "fer.csv")),
+        Case("benchmark-lmo-out-is-lmo", BENCHMARK_LMO + ("--lmo", "{case}/bop", "--out", "{case}/bop"), copy_bop,
+             ("--out", "BOP data set")),
+        Case("benchmark-lmo-out-ssd-run", replace_flag(BENCHMARK_LMO, "--out", "{case}/run"),
+             files_setup({f"run/{name}": content for name, content in FOREIGN_RUNS["ssd"].items()}),
+             ("--out", "output folder of ssd, not benchmark lmo")),
+        Case("benchmark-lmo-out-symlink", replace_flag(BENCHMARK_LMO, "--out", "{case}/link"),
+             _symlink("{world}/runs", "link"), ("--out", "symbolic link")),
+    ]
+    return found
+
+
 def all_cases() -> list[Case]:
     """The table: every case, names unique."""
     found = generate_cases() + evaluate_bop_cases() + evaluate_coco_cases() + evaluate_voc_cases() + \
-        estimate_cases() + train_cases()
+        estimate_cases() + train_cases() + output_rule_cases()
     names = [case.name for case in found]
     duplicated = {name for name in names if names.count(name) > 1}
     if duplicated:

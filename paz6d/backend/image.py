@@ -14,6 +14,8 @@ Example:
 
 from __future__ import annotations
 
+import io
+import struct
 from pathlib import Path
 
 import cv2
@@ -26,6 +28,8 @@ COLOR_SPACES = ("RGB", "BGR", "HSV", "LAB", "GRAY")
 INTERPOLATIONS = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC,
                   "area": cv2.INTER_AREA, "lanczos": cv2.INTER_LANCZOS4}
 _WRITABLE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".webp")
+#: Largest image side :func:`load_image` decodes (pixels); a header claiming more is refused before decoding.
+MAX_IMAGE_SIDE = 16384
 
 
 def as_image(value, name: str = "image", channels: int | None = 3) -> np.ndarray:
@@ -44,17 +48,83 @@ def _generator(seed) -> np.random.Generator:
     return np.random.default_rng(seed)
 
 
+_JPEG_FRAMES = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def _header_size(path: Path) -> tuple[int, int] | None:
+    """``(width, height)`` from a PNG ``IHDR`` or JPEG ``SOF`` header; ``None`` for other files and for
+    a JPEG without a frame header. ``OSError`` when the file cannot be read."""
+    with path.open("rb") as handle:
+        start = handle.read(24)
+        if start[:8] == b"\x89PNG\r\n\x1a\n" and start[12:16] == b"IHDR":
+            width, height = struct.unpack(">II", start[16:24])
+            return int(width), int(height)
+        if start[:2] != b"\xff\xd8":
+            return None
+        handle.seek(2)
+        while True:
+            marker = handle.read(2)
+            while len(marker) == 2 and marker[1] == 0xFF:  # fill bytes
+                marker = marker[1:] + handle.read(1)
+            if len(marker) < 2 or marker[0] != 0xFF:
+                return None
+            if marker[1] in (0xD8, 0x01) or 0xD0 <= marker[1] <= 0xD7:
+                continue
+            length_bytes = handle.read(2)
+            if len(length_bytes) < 2:
+                return None
+            length = struct.unpack(">H", length_bytes)[0]
+            if marker[1] in _JPEG_FRAMES:
+                frame = handle.read(5)
+                if len(frame) < 5:
+                    return None
+                height, width = struct.unpack(">HH", frame[1:5])
+                return int(width), int(height)
+            handle.seek(length - 2, io.SEEK_CUR)
+
+
+def image_size_from_header(path: str | Path) -> tuple[int, int]:
+    """``(width, height)`` of an image from its PNG ``IHDR`` or JPEG ``SOF`` header (other formats:
+    decoded with OpenCV). Raises ``ValueError`` naming the file when it cannot be read."""
+    path = Path(path)
+    try:
+        size = _header_size(path)
+    except FileNotFoundError:
+        raise ValueError(f"{path}: image file not found") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path}: expected an image file, found a folder") from None
+    except OSError as error:
+        raise ValueError(f"{path}: cannot read the image ({error.strerror or error})") from None
+    if size is not None:
+        return size
+    with path.open("rb") as handle:
+        if handle.read(2) == b"\xff\xd8":
+            raise ValueError(f"{path}: JPEG file without a frame header (SOF marker); cannot read the image size")
+    image = load_image(path)
+    return image.shape[1], image.shape[0]
+
+
 def load_image(path: str | Path, grayscale: bool = False) -> np.ndarray:
     """Reads an image file as ``uint8`` RGB ``(H, W, 3)`` (or ``(H, W)`` with ``grayscale``).
 
     16-bit files are scaled to 8 bits and an alpha channel is dropped (OpenCV ``IMREAD_COLOR``).
 
     Raises:
-        ValueError: the file is missing or cannot be decoded as an image.
+        ValueError: the file is missing, cannot be decoded as an image, or its PNG/JPEG header claims a
+            side above :data:`MAX_IMAGE_SIDE` (refused before decoding).
     """
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: image file not found")
+    try:
+        size = _header_size(path)
+    except OSError as error:
+        raise ValueError(f"{path}: cannot read the image ({error.strerror or error})") from None
+    if size is not None:
+        width, height = size
+        if not (0 < width <= MAX_IMAGE_SIDE and 0 < height <= MAX_IMAGE_SIDE):
+            raise ValueError(f"{path}: the image header claims {width} x {height} pixels; expected sides of "
+                             f"1..{MAX_IMAGE_SIDE} px")
     data = np.fromfile(path, dtype=np.uint8)
     flag = cv2.IMREAD_GRAYSCALE if grayscale else cv2.IMREAD_COLOR
     decoded = cv2.imdecode(data, flag) if data.size else None

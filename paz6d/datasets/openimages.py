@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import read_input_text
-from paz6d.backend.image import load_image
+from paz6d.backend.image import image_size_from_header
 from paz6d.datasets.sample import Sample, SampleSequence
 
 BOX_COLUMNS = ("ImageID", "Source", "LabelName", "Confidence", "XMin", "XMax", "YMin", "YMax", "IsOccluded",
@@ -49,49 +49,6 @@ CLASS_FILES = ("oidv7-class-descriptions-boxable.csv", "oidv6-class-descriptions
                "class-descriptions-boxable.csv", "oidv7-class-descriptions.csv", "class-descriptions.csv")
 SPLITS = {"train": "train", "validation": "validation", "val": "validation", "test": "test"}
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
-_JPEG_FRAMES = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
-
-
-def image_size_from_header(path: str | Path) -> tuple[int, int]:
-    """``(width, height)`` of an image from its PNG ``IHDR`` or JPEG ``SOF`` header (other formats:
-    decoded with OpenCV). Raises ``ValueError`` naming the file when it cannot be read."""
-    path = Path(path)
-    try:
-        with path.open("rb") as handle:
-            start = handle.read(24)
-            if start[:8] == b"\x89PNG\r\n\x1a\n" and start[12:16] == b"IHDR":
-                width, height = struct.unpack(">II", start[16:24])
-                return int(width), int(height)
-            if start[:2] == b"\xff\xd8":
-                handle.seek(2)
-                while True:
-                    marker = handle.read(2)
-                    while len(marker) == 2 and marker[1] == 0xFF:  # fill bytes
-                        marker = marker[1:] + handle.read(1)
-                    if len(marker) < 2 or marker[0] != 0xFF:
-                        break
-                    if marker[1] in (0xD8, 0x01) or 0xD0 <= marker[1] <= 0xD7:
-                        continue
-                    length_bytes = handle.read(2)
-                    if len(length_bytes) < 2:
-                        break
-                    length = struct.unpack(">H", length_bytes)[0]
-                    if marker[1] in _JPEG_FRAMES:
-                        frame = handle.read(5)
-                        if len(frame) < 5:
-                            break
-                        height, width = struct.unpack(">HH", frame[1:5])
-                        return int(width), int(height)
-                    handle.seek(length - 2, io.SEEK_CUR)
-                raise ValueError(f"{path}: JPEG file without a frame header (SOF marker); cannot read the image size")
-    except FileNotFoundError:
-        raise ValueError(f"{path}: image file not found") from None
-    except IsADirectoryError:
-        raise ValueError(f"{path}: expected an image file, found a folder") from None
-    image = load_image(path)
-    return image.shape[1], image.shape[0]
-
-
 def _first_existing(candidates: list[Path]) -> Path | None:
     return next((path for path in candidates if path.is_file()), None)
 

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import read_input_bytes, read_input_text
+from paz6d.backend.paths import path_inside
 from paz6d.datasets.sample import Sample, SampleSequence
 
 #: The 20 PASCAL VOC classes, in the devkit's order (class id ``i`` is ``VOC_CLASSES[i]``).
@@ -61,6 +62,8 @@ def split_ids(root: str | Path, split: str) -> list[str]:
         available = sorted(p.stem for p in (Path(root) / IMAGE_SETS).glob("*.txt"))
         raise ValueError(f"split: {path} not found; the image sets of {root} are {available}")
     ids = [line.split()[0] for line in read_input_text(path, "VOC image-set file").splitlines() if line.strip()]
+    for number, image_id in enumerate(ids, start=1):
+        path_inside(Path(root) / ANNOTATIONS, f"{image_id}.xml", f"{path}: image id #{number}")
     if not ids:
         raise ValueError(f"{path}: expected one image id per line, found none")
     return ids
@@ -184,7 +187,8 @@ def load(root: str | Path, split: str | None = None, drop_difficult: bool = Fals
         parsed = read_annotation(paths[position], class_names, voc_coordinates)
         keep = ~parsed["difficult"] if drop_difficult else np.ones(len(parsed["names"]), dtype=bool)
         names = [name for name, kept in zip(parsed["names"], keep) if kept]
-        return Sample(image=image_folder / parsed["filename"], boxes=parsed["boxes"][keep],
+        image = path_inside(image_folder, parsed["filename"], f"{paths[position]}, field <filename>")
+        return Sample(image=image, boxes=parsed["boxes"][keep],
                       class_ids=np.array([index[name] for name in names], dtype=np.int64).reshape(-1),
                       class_names=names,
                       extras={"difficult": parsed["difficult"][keep], "truncated": parsed["truncated"][keep],

@@ -137,7 +137,7 @@ def detect(job: Detection) -> dict:
     """
     from paz6d.ssd.pipeline import DetectSingleShot
 
-    check_outputs({"--out": job.out, "--ground-truth": job.ground_truth}, config_inputs(job))
+    check_outputs({"--out": job.out, "--ground-truth": job.ground_truth}, config_inputs(job, ("out", "ground_truth")))
     detector = DetectSingleShot(job.run_dir, score_threshold=job.score_threshold, max_detections=job.max_detections,
                                 flip=job.flip)
     if job.dataset is not None:
