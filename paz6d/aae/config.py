@@ -163,9 +163,8 @@ class AAEConfig:
 
 #: Sized for a 2-core CPU (the demo): 64x64 crops, batch normalisation (several times faster convergence),
 #: latent 128, 1,000 views x 72 in-plane = 72,000-entry codebook, 5,000 steps (~10 minutes); small crop
-#: shifts (the demo uses ground-truth boxes: measured, shifts of +-8 % doubled the rotation error at this
-#: training length). Convolutions in bfloat16 on CPUs that compute it natively (steps 1.29 times faster,
-#: benchmarks/aae_precision.py).
+#: shifts (the demo uses ground-truth boxes; docs/experiments/2026-11-23-aae-demo-quick-config.md). Convolutions
+#: in bfloat16 on CPUs that compute it natively (speed: benchmarks/aae_precision.py, docs/aae.md).
 QUICK = AAEConfig(latent_size=128, batch_norm=True, in_plane=72, steps=5000, precision="auto",
                   augmentation=Augmentation(shift=0.03, scale=(0.95, 1.05)))
 #: The paper's setting: 128x128 crops, latent 128, 30k iterations of 64, 2,562 x 36 = 92,232 codebook views.

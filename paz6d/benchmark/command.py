@@ -39,7 +39,7 @@ class LmoOptions:
                                             "visib (visible part, as at test time) (default: the sizes' own, "
                                             "docs/real_photos.md)", choices=tuple(sorted(BOX_FIELDS)))
     jobs: int = option(2, "pose models trained side by side, each in its own process with its share of the CPU "
-                          "cores (2 on 2 cores: 1.2x faster than 1, one after the other; docs/real_photos.md)")
+                          "cores (measured in docs/real_photos.md)")
     progress: bool = option(True, "progress bars")
 
 

@@ -5,7 +5,7 @@ From the 8 LM-O meshes (``<lmo>/models``) only:
 1. ``backgrounds``: photographic collages of scikit-image's bundled sample photos
    (:mod:`paz6d.synthesis.photo_backgrounds`);
 2. ``synthetic``: ``paz6d generate`` of floating multi-object scenes over those collages at LM-O's camera,
-   distances and viewpoints (the settings that transferred best to the real frames, ``docs/ssd.md`` q1);
+   distances and viewpoints (the settings of ``docs/ssd.md``'s commands);
 3. ``detector``: ``paz6d train ssd`` (quick network) -> ``DIR/detector/``;
 4. ``pose/obj_XXXXXX``: one pose model per object (AAE by default, KeypointNet with ``method="keypointnet"``
    or ``"keypointnet_robust"``, and per object with ``object_methods``) -> ``DIR/pose/obj_XXXXXX/``
@@ -13,7 +13,7 @@ From the 8 LM-O meshes (``<lmo>/models``) only:
    (real inter-object occlusion) besides its own rendered views;
 5. ``estimate_gt`` / ``estimate_detections``: ``paz6d estimate`` on the real RGB frames with the ground-truth
    visible boxes and with the detector's boxes (which reads no ground truth; the detector also sees each frame's
-   mirror image, ``paz6d estimate --flip``: real AP 0.252 -> 0.270; poses for each class's best detection, whose
+   mirror image, ``paz6d estimate --flip``, ``docs/ssd.md``; poses for each class's best detection, whose
    AAE searches around its box, ``--poses-per-class 1 --box-search``); in every condition the AAEs answer only
    with the training scenes' viewpoints widened by 15 degrees (:func:`viewpoints`); ``estimate_synthetic``: on
    held-out synthetic images of the training scenes' kind (``validation``, another seed), ground-truth visible
@@ -120,16 +120,13 @@ class BenchmarkSettings:
         check_crop_box(self.aae_crop_box)
 
 
-# The quick benchmark keeps the detector at 320 px to stay within 45 minutes; 448 px (the SSD quick config's
-# input since the eighth session) and 512 px detect the real frames better at 1.8-2x the training time.
-# The AAEs train their last steps at a tenth of the rate, at no extra time (docs/real_photos.md): mean AR with
-# ground-truth visible boxes on the real frames 0.274 -> 0.317 for the full AAEs (the last 500 of 5,000 steps),
-# 0.223 -> 0.250 for the quick ones (the last 200 of 1,000; held-out synthetic images 0.462 -> 0.543).
+# The quick benchmark keeps the detector at 320 px to stay within its time budget; the AAEs train their last
+# steps at a tenth of the rate, at no extra time. What each choice measured: docs/real_photos.md ("Experiments")
+# and docs/ssd.md ("Measured").
 QUICK = BenchmarkSettings(images=1500, backgrounds=200, detector_steps=1500, aae_steps=1000, aae_in_plane=36,
                           keypointnet_steps=1000, keypointnet_views=2000, detector_input_size=320,
                           aae_lr_drop_steps=200)
-# The full detector sees the frames at their own width: 640 px for 1,500 steps detects the real frames better
-# than 512 px for 3,000 (AP 0.252 against 0.240) at about 0.8 times the training time (docs/ssd.md).
+# The full detector sees the frames at their own width, 640 px (docs/ssd.md, "Measured").
 FULL = BenchmarkSettings(images=2500, backgrounds=300, detector_steps=1500, aae_steps=5000, aae_in_plane=72,
                          keypointnet_steps=5000, keypointnet_views=4000, detector_input_size=640,
                          aae_lr_drop_steps=500)
@@ -239,7 +236,7 @@ def _stage_backgrounds(job: Benchmark) -> dict:
 
 
 def generation_config(job: Benchmark):
-    """The ``paz6d generate`` settings of the synthetic training set (``docs/ssd.md``, q1)."""
+    """The ``paz6d generate`` settings of the synthetic training set (``docs/ssd.md``, "Commands")."""
     from data_gen.config import GenerationConfig
 
     return GenerationConfig(meshes=tuple(job.mesh(obj_id) for obj_id in job.objects), out=job.out / "synthetic",

@@ -24,8 +24,8 @@ CONFIGS: dict[str, dict] = {
              "validation_views": 200, "lift_views": 1000, "steps": 60000, "pairs": 16, "learning_rate": 1e-3,
              "ema_momentum": 0.999, "checkpoint_every": 2000, "sample_every": 2000, "lifting": "triangulate"},
     # Discovery that converges in the CPU budget (measured in docs/keypointnet.md): the quick network, a
-    # curriculum on the pair angle and bootstrapping from the network's own lifted keypoints; 14,000 steps
-    # (about 25 minutes on 2 cores) beat 10,000 and 5,000 (ADD 53 vs 40 vs 32.5 %, PnP weighted since 14,000).
+    # curriculum on the pair angle and bootstrapping from the network's own lifted keypoints, 14,000 steps
+    # (the step counts compared: docs/experiments/2026-11-23-keypointnet-discovery-mode.md).
     "discovery": {"num_keypoints": 10, "input_size": 128, "filters": 48, "downsample": 4, "context_stride": 8,
                   "dilations": (1, 2, 4, 1, 2, 4), "precision": "auto", "views": 4000, "validation_views": 100,
                   "lift_views": 300, "steps": 14000, "pairs": 8, "learning_rate": 5e-3, "ema_momentum": 0.998,

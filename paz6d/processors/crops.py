@@ -62,7 +62,7 @@ class BoxVariants(Processor):
     Args:
         shifts: shifts as fractions of the box's width (x) and height (y).
         scales: side factors about the box centre.
-        The defaults (75 variants) are the grid measured in ``docs/real_photos.md``.
+        The defaults (75 variants) are the grid measured in ``docs/experiments/2026-12-05-lmo-box-search.md``.
     Raises:
         ValueError: an empty or non-finite list, a scale that is not positive.
     """

@@ -10,8 +10,8 @@ from paz6d.cli_options import option
 from paz6d.training.presets import apply_positive_integers, preset_settings
 
 CONFIGS: dict[str, dict] = {
-    # CPU budget: generation + training within 30 minutes on 2 cores (docs/ssd.md): 448 px trains in 23 min
-    # (320 px: 13 min, 512 px: ~27 min, too close to the budget); held-out synthetic AP 0.493 / 0.600 / 0.611.
+    # CPU budget: generation + training within 30 minutes on 2 cores; the input size's trade-off is measured in
+    # docs/experiments/2026-12-02-ssd-input-resolution.md.
     "quick": {"architecture": "light", "input_size": 448, "width": 1.0, "batch_size": 16, "steps": 1500,
               "learning_rate": 3e-3, "warmup_steps": 100, "weight_decay": 1e-4, "expand_ratio": 2.0,
               "expand_probability": 0.3, "iou_threshold": 0.5, "checkpoint_every": 250, "sample_every": 250},

@@ -229,7 +229,7 @@ class DetectSingleShot(SequentialProcessor):
 
     With ``flip=True`` the network also sees the input's left-right mirror image: ``predict`` is
     :class:`PredictImageAndMirror` and ``decode`` averages both (:class:`AverageWithMirror`). That costs a
-    second network pass and raised the real LM-O AP from 0.252 to 0.270 (``docs/ssd.md``).
+    second network pass (what it gains on real LM-O frames: ``docs/ssd.md``).
 
     Args:
         run_dir: SSD run directory (:mod:`paz6d.ssd.run_dir`).

@@ -100,9 +100,8 @@ def draw_polygon_occluders(crop: np.ndarray, generator: np.random.Generator, pro
     Args:
         size: polygon diameter range as fractions of ``object_side`` (pixels).
 
-    Measured on the AAE demo (3,000 steps): larger, more central, textured occluders (up to 0.8 of the
-    object, 3 of them) raised the ADD AUC (0.83 -> 0.84) but also the median rotation error
-    (4.9 -> 6.5 deg); ADD(-S) recall at 0.1 d fell from 71 % to 64 % (validation set: 59 % -> 57 %).
+    Larger, more central occluders were measured on the AAE demo and lowered its ADD(-S) recall
+    (docs/experiments/2026-11-23-aae-demo-quick-config.md).
     """
     if generator.random() >= probability:
         return
