@@ -14,7 +14,7 @@ from paz6d.run_dirs import is_run_dir
 from paz6d.probabilistic_keypoints.model import (CholeskyFromMaps, ProbabilisticKeypointsError,
                                                  build_probabilistic_keypointnet, covariance_from_cholesky,
                                                  gaussian_nll, gaussian_nll_terms, inverse_softplus, load_model,
-                                                 save_model, tf)
+                                                 save_model)
 
 LOG_2PI = math.log(2 * math.pi)
 

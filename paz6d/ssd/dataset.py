@@ -85,18 +85,18 @@ def _load_generated(dataset: str | Path, split: str | None = None,
     if not files:
         raise ValueError(f"dataset: no {COCO_FILE} in {dataset / split}/<scene>/ (is it a `paz6d generate` output?)")
     contents = [(path, load_json(path)) for path in files]
-    names = sorted({category["name"] for _, coco in contents for category in coco.get("categories", [])})
+    names = sorted({category["name"] for _, document in contents for category in document.get("categories", [])})
     if class_names is None:
         class_names = tuple(names)
     index = {name: position + 1 for position, name in enumerate(class_names)}
     samples = []
-    for path, coco in contents:
+    for path, document in contents:
         try:
-            category_names = {category["id"]: category["name"] for category in coco["categories"]}
+            category_names = {category["id"]: category["name"] for category in document["categories"]}
             annotations: dict[int, list] = {}
-            for annotation in coco["annotations"]:
+            for annotation in document["annotations"]:
                 annotations.setdefault(annotation["image_id"], []).append(annotation)
-            for image in coco["images"]:
+            for image in document["images"]:
                 rows = [a for a in annotations.get(image["id"], []) if not a.get("iscrowd", 0) and not a.get("ignore")]
                 unknown = sorted({category_names[a["category_id"]] for a in rows} - set(index))
                 if unknown:
