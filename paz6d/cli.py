@@ -29,6 +29,8 @@ COMMANDS = {
     "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
     "detect": ("paz6d.ssd.detect", "run a trained SSD over a BOP split or an image folder -> COCO detections JSON"),
     "estimate": ("paz6d.estimate", "run trained pose models on a BOP data set (ground-truth boxes or --detector) -> BOP results CSV"),
+    "calibrate": ("paz6d.calibrate", "camera intrinsics and lens distortion from images of a chessboard or ChArUco "
+                                     "board -> camera.json"),
     "demo": ("paz6d.demo.command", "end-to-end demo: generate data, train, estimate poses, evaluate"),
     "run": ("paz6d.video.command", "a pipeline (detector, 6D poses, faces) over a video, image folder or camera "
                                    "-> annotated video + JSON lines"),
