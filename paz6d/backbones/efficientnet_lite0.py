@@ -111,7 +111,8 @@ def _torch_prefixes() -> dict[str, str]:
             names[f"block{index}_expand_conv"] = torch + "_expand_conv"
             names[f"block{index}_expand_bn"] = torch + "_bn0"
         names.update({f"block{index}_dwconv": torch + "_depthwise_conv", f"block{index}_dw_bn": torch + "_bn1",
-                      f"block{index}_project_conv": torch + "_project_conv", f"block{index}_project_bn": torch + "_bn2"})
+                      f"block{index}_project_conv": torch + "_project_conv",
+                      f"block{index}_project_bn": torch + "_bn2"})
     return names
 
 
