@@ -25,30 +25,16 @@ import numpy as np
 from paz6d.aae.codebook import Codebook
 from paz6d.aae.model import load_model
 from paz6d.backend.checks import integer_field, number_field
-from paz6d.backend.files import load_json_object, load_npz, save_npz_atomically, write_json_atomically
+from paz6d.backend.files import load_json_object, load_npz, save_npz_atomically
+from paz6d.run_dir import RunDir
 
-CONFIG_FILE = "config.json"
 OBJECT_FILE = "object.npz"
-MODEL_FILE = "model.keras"
 CODEBOOK_FILE = "codebook.npz"
-SUMMARY_FILE = "summary.json"
 VIEWS_FILE = "views.npz"
 PAIRS_FILE = "pairs.npz"
-#: Files without which a run directory cannot estimate poses.
-REQUIRED_FILES = (CONFIG_FILE, OBJECT_FILE, MODEL_FILE, CODEBOOK_FILE)
 CONFIG_KEYS = ("config", "mesh", "mesh_scale", "seed")
 MODEL_CONFIG_KEYS = ("crop_size", "padding")
 OBJECT_KEYS = ("hull_points", "surface_points", "diameter", "vertices")
-#: Files that mark a directory as an AAE run (see :func:`paz6d.run_dirs.method_of`).
-MARKER_FILES = (CONFIG_FILE, CODEBOOK_FILE)
-
-
-
-def _directory(run_dir: str | Path) -> Path:
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise ValueError(f"run_dir: {run_dir} is not a directory")
-    return run_dir
 
 
 def _required(path: Path) -> Path:
@@ -57,19 +43,88 @@ def _required(path: Path) -> Path:
     return path
 
 
+class AAERunDir(RunDir):
+    """A ``paz6d train aae`` run directory (files in the module docstring); its training summary is
+    ``summary.json`` and its ``config.json`` names the mesh in ``mesh``."""
+
+    KIND = "an AAE"
+    MARKER_FILES = (RunDir.CONFIG_FILE, CODEBOOK_FILE)
+    REQUIRED_FILES = (RunDir.CONFIG_FILE, OBJECT_FILE, RunDir.MODEL_FILE, CODEBOOK_FILE)
+    METRICS_FILE = "summary.json"
+    MESH_FIELDS = ("mesh", "mesh_scale")
+
+    @classmethod
+    def check_files(cls, run_dir: str | Path) -> Path:
+        """``run_dir`` as a Path, checked to be a directory holding every one of :attr:`REQUIRED_FILES`."""
+        run_dir = Path(run_dir)
+        if not run_dir.is_dir():
+            raise ValueError(f"run_dir: {run_dir} is not a directory")
+        for name in cls.REQUIRED_FILES:
+            _required(run_dir / name)
+        return run_dir
+
+    @classmethod
+    def write_config(cls, run_dir: str | Path, config: dict[str, Any], mesh: str | Path, mesh_scale: float,
+                     seed: int, dataset: str | Path | None, crop_box: str = "obj") -> Path:
+        """Writes ``config.json`` (creating ``run_dir``).
+
+        Args:
+            config: the model/training settings (``AAEConfig.to_dict()``), with ``crop_size`` and ``padding``.
+            mesh: the object's mesh; mesh_scale: mesh units to metres; seed: the run's seed;
+            dataset: the BOP data set whose crops were training inputs, or None.
+            crop_box: the box the data set's input crops were cut around (``"obj"`` or ``"visib"``).
+        """
+        missing = [key for key in MODEL_CONFIG_KEYS if key not in config]
+        if missing:
+            raise ValueError(f"config: missing key(s) {missing} the pipeline needs")
+        return super().write_config(run_dir, {
+            "config": dict(config), "mesh": str(Path(mesh).resolve()), "mesh_scale": mesh_scale, "seed": int(seed),
+            "dataset": None if dataset is None else str(Path(dataset).resolve()), "crop_box": crop_box})
+
+    @classmethod
+    def read_config(cls, run_dir: str | Path) -> dict[str, Any]:
+        """The whole ``config.json`` (see :meth:`write_config`), checked for the keys readers use."""
+        run_dir = Path(run_dir)
+        if not run_dir.is_dir():
+            raise ValueError(f"run_dir: {run_dir} is not a directory")
+        path = _required(cls.config_path(run_dir))
+        data = load_json_object(path)
+        missing = [key for key in CONFIG_KEYS if key not in data]
+        if not missing and isinstance(data["config"], dict):
+            missing = [f"config.{key}" for key in MODEL_CONFIG_KEYS if key not in data["config"]]
+        elif not missing:
+            missing = ["config (an object)"]
+        if missing:
+            raise ValueError(f"{path}: missing key(s) {missing} of an AAE run configuration")
+        integer_field(data["config"], "crop_size", f"{path}: config", minimum=1)
+        number_field(data["config"], "padding", f"{path}: config", positive=True)
+        number_field(data, "mesh_scale", str(path), positive=True)
+        return data
+
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> Path:
+        """Checks that ``run_dir`` has every file a pipeline needs and readable configuration and geometry.
+
+        Returns:
+            ``run_dir`` as a Path.
+        """
+        run_dir = cls.check_files(run_dir)
+        cls.read_config(run_dir)
+        read_object(run_dir)
+        return run_dir
+
+
+# the module's functions, as its callers use them
+KIND, MARKER_FILES, REQUIRED_FILES = AAERunDir.KIND, AAERunDir.MARKER_FILES, AAERunDir.REQUIRED_FILES
+CONFIG_FILE, MODEL_FILE, SUMMARY_FILE = AAERunDir.CONFIG_FILE, AAERunDir.MODEL_FILE, AAERunDir.METRICS_FILE
+config_path, model_path = AAERunDir.config_path, AAERunDir.model_path
+read_config, write_config, validate = AAERunDir.read_config, AAERunDir.write_config, AAERunDir.validate
+write_summary = AAERunDir.write_metrics
+
+
 def object_path(run_dir: str | Path) -> Path:
     """Where the object geometry is (or will be) saved."""
     return Path(run_dir) / OBJECT_FILE
-
-
-def config_path(run_dir: str | Path) -> Path:
-    """Where the run configuration is (or will be) saved."""
-    return Path(run_dir) / CONFIG_FILE
-
-
-def model_path(run_dir: str | Path) -> Path:
-    """Where the autoencoder is (or will be) saved."""
-    return Path(run_dir) / MODEL_FILE
 
 
 def codebook_path(run_dir: str | Path) -> Path:
@@ -85,43 +140,6 @@ def views_path(run_dir: str | Path) -> Path:
 def pairs_path(run_dir: str | Path) -> Path:
     """The training cache of data set crop pairs."""
     return Path(run_dir) / PAIRS_FILE
-
-
-def write_config(run_dir: str | Path, config: dict[str, Any], mesh: str | Path, mesh_scale: float, seed: int,
-                 dataset: str | Path | None, crop_box: str = "obj") -> Path:
-    """Writes ``config.json`` (creating ``run_dir``).
-
-    Args:
-        config: the model/training settings (``AAEConfig.to_dict()``), with ``crop_size`` and ``padding``.
-        mesh: the object's mesh; mesh_scale: mesh units to metres; seed: the run's seed;
-        dataset: the BOP data set whose crops were training inputs, or None.
-        crop_box: the box the data set's input crops were cut around (``"obj"`` or ``"visib"``).
-    """
-    missing = [key for key in MODEL_CONFIG_KEYS if key not in config]
-    if missing:
-        raise ValueError(f"config: missing key(s) {missing} the pipeline needs")
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    return write_json_atomically(run_dir / CONFIG_FILE, {
-        "config": dict(config), "mesh": str(Path(mesh).resolve()), "mesh_scale": mesh_scale, "seed": int(seed),
-        "dataset": None if dataset is None else str(Path(dataset).resolve()), "crop_box": crop_box}, indent=2)
-
-
-def read_config(run_dir: str | Path) -> dict[str, Any]:
-    """The whole ``config.json`` (see :func:`write_config`), checked for the keys readers use."""
-    path = _required(_directory(run_dir) / CONFIG_FILE)
-    data = load_json_object(path)
-    missing = [key for key in CONFIG_KEYS if key not in data]
-    if not missing and isinstance(data["config"], dict):
-        missing = [f"config.{key}" for key in MODEL_CONFIG_KEYS if key not in data["config"]]
-    elif not missing:
-        missing = ["config (an object)"]
-    if missing:
-        raise ValueError(f"{path}: missing key(s) {missing} of an AAE run configuration")
-    integer_field(data["config"], "crop_size", f"{path}: config", minimum=1)
-    number_field(data["config"], "padding", f"{path}: config", positive=True)
-    number_field(data, "mesh_scale", str(path), positive=True)
-    return data
 
 
 def write_object(run_dir: str | Path, hull_points, surface_points, diameter: float, vertices) -> Path:
@@ -154,22 +172,3 @@ def read_codebook(run_dir: str | Path) -> Codebook:
 def read_model(run_dir: str | Path):
     """The trained autoencoder (imports TensorFlow)."""
     return load_model(_required(model_path(run_dir)))
-
-
-def write_summary(run_dir: str | Path, summary: dict[str, Any]) -> Path:
-    """Writes ``summary.json``."""
-    return write_json_atomically(Path(run_dir) / SUMMARY_FILE, summary, indent=2)
-
-
-def validate(run_dir: str | Path) -> Path:
-    """Checks that ``run_dir`` has every file a pipeline needs and readable configuration and geometry.
-
-    Returns:
-        ``run_dir`` as a Path.
-    """
-    run_dir = _directory(run_dir)
-    for name in REQUIRED_FILES:
-        _required(run_dir / name)
-    read_config(run_dir)
-    read_object(run_dir)
-    return run_dir

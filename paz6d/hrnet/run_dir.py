@@ -28,12 +28,10 @@ from typing import Any
 import numpy as np
 
 from paz6d.backend.checks import as_array
-from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
+from paz6d.backend.files import load_run_json, write_json_atomically
+from paz6d.run_dir import RunDir
 
 DESCRIPTION_FILE = "hrnet.json"
-MODEL_FILE = "model.keras"
-CONFIG_FILE = "config.json"
-METRICS_FILE = "metrics.json"
 EVALUATION_FILE = "evaluation.json"
 KEYPOINTS_PLOT = "keypoints.png"
 PCK_PLOT = "pck.png"
@@ -41,23 +39,38 @@ HELD_OUT_CROPS_FILE = "crops_test.npz"
 DOMAINS = ("log", "value")
 #: Fields of ``hrnet.json``.
 DESCRIPTION_KEYS = ("input_size", "margin", "stride", "num_keypoints", "domain", "sigma", "points_model")
-#: Files that mark a directory as an HRNet run (see :func:`paz6d.run_dirs.method_of`).
-MARKER_FILES = (DESCRIPTION_FILE,)
-#: Files without which a run directory cannot predict keypoints.
-REQUIRED_FILES = (DESCRIPTION_FILE, MODEL_FILE)
-#: How messages name these run directories.
-KIND = "an HRNet"
+#: Fields of ``config.json``.
+CONFIG_KEYS = ("mesh_path", "seed", "config", "settings")
 
 
+class HRNetRunDir(RunDir):
+    """A ``paz6d train hrnet`` run directory (files in the module docstring)."""
 
-def model_path(run_dir: str | Path) -> Path:
-    """Where the network is (or will be) saved."""
-    return Path(run_dir) / MODEL_FILE
+    KIND = "an HRNet"
+    MARKER_FILES = (DESCRIPTION_FILE,)
+    REQUIRED_FILES = (DESCRIPTION_FILE, RunDir.MODEL_FILE)
+
+    @classmethod
+    def read_config(cls, run_dir: str | Path) -> dict[str, Any] | None:
+        """The run's ``config.json`` (a JSON object), ``None`` when the run has none yet."""
+        data = super().read_config(run_dir)
+        for key in CONFIG_KEYS if data is not None else ():
+            if key not in data:
+                raise ValueError(f"{cls.config_path(run_dir)}: missing field {key!r} (not an HRNet run configuration)")
+        return data
+
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> dict[str, Any]:
+        """Checks that ``run_dir`` is a directory with ``hrnet.json`` and ``model.keras``; returns the description."""
+        return read_description(cls.check_files(run_dir))
 
 
-def views_path(run_dir: str | Path, name: str) -> Path:
-    """The rendered-views cache ``views_<name>.npz`` (``train``, ``val``)."""
-    return Path(run_dir) / f"views_{name}.npz"
+# the module's functions, as its callers use them
+KIND, MARKER_FILES, REQUIRED_FILES = HRNetRunDir.KIND, HRNetRunDir.MARKER_FILES, HRNetRunDir.REQUIRED_FILES
+CONFIG_FILE, MODEL_FILE, METRICS_FILE = HRNetRunDir.CONFIG_FILE, HRNetRunDir.MODEL_FILE, HRNetRunDir.METRICS_FILE
+model_path, views_path = HRNetRunDir.model_path, HRNetRunDir.views_path
+read_config, write_config, validate = HRNetRunDir.read_config, HRNetRunDir.write_config, HRNetRunDir.validate
+read_metrics, write_metrics = HRNetRunDir.read_metrics, HRNetRunDir.write_metrics
 
 
 def held_out_crops_path(run_dir: str | Path) -> Path:
@@ -119,35 +132,6 @@ def read_description(run_dir: str | Path) -> dict[str, Any]:
     return {**data, "points_model": points}
 
 
-def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
-    """Writes the run's ``config.json`` (creating ``run_dir``)."""
-    Path(run_dir).mkdir(parents=True, exist_ok=True)
-    return write_json_atomically(Path(run_dir) / CONFIG_FILE, config, indent=2)
-
-
-def read_config(run_dir: str | Path) -> dict[str, Any] | None:
-    """The run's ``config.json`` (a JSON object), ``None`` when the run has none yet."""
-    path = Path(run_dir) / CONFIG_FILE
-    if not path.exists():
-        return None
-    data = load_json_object(path)
-    for key in ("mesh_path", "seed", "config", "settings"):
-        if key not in data:
-            raise ValueError(f"{path}: missing field {key!r} (not an HRNet run configuration)")
-    return data
-
-
-def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
-    """Writes the training summary ``metrics.json``."""
-    return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
-
-
-def read_metrics(run_dir: str | Path) -> dict[str, Any] | None:
-    """The training summary ``metrics.json`` (a JSON object), ``None`` when there is none yet."""
-    path = Path(run_dir) / METRICS_FILE
-    return load_json_object(path) if path.exists() else None
-
-
 def write_evaluation(run_dir: str | Path, evaluation: dict[str, Any]) -> Path:
     """Writes ``evaluation.json`` (PCK on held-out renders)."""
     return write_json_atomically(Path(run_dir) / EVALUATION_FILE, evaluation, indent=2)
@@ -171,8 +155,3 @@ def read_model(run_dir: str | Path, description: dict[str, Any] | None = None):
                          f"maps of {heatmaps[1]} cells, but {Path(run_dir) / DESCRIPTION_FILE} describes "
                          f"{description['input_size']}-pixel crops and {expected[1]} maps of {expected[0]} cells")
     return model
-
-
-def validate(run_dir: str | Path) -> dict[str, Any]:
-    """Checks that ``run_dir`` is a directory with ``hrnet.json`` and ``model.keras``; returns the description."""
-    return read_description(check_run_files(run_dir, REQUIRED_FILES, KIND))

@@ -18,28 +18,44 @@ Every reader raises ``ValueError`` naming the file and what is missing or malfor
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from paz6d.backend.checks import as_array, integer_field, number_field
-from paz6d.backend.files import check_run_files, load_run_json, write_json_atomically
+from paz6d.backend.checks import as_array, number_field
+from paz6d.backend.files import load_run_json, write_json_atomically
+from paz6d.run_dir import CropRunDir, RunDir
 
-CONFIG_FILE = "config.json"
-MODEL_FILE = "model.keras"
 KEYPOINTS_FILE = "keypoints.json"
 OBJECT_FILE = "object.json"
-METRICS_FILE = "metrics.json"
 EVALUATION_FILE = "evaluation.json"
-#: Keys of ``config.json`` that the pipeline reads.
-PIPELINE_CONFIG_KEYS = ("input_size", "margin", "downsample")
-#: Files without which a run directory cannot estimate poses.
-REQUIRED_FILES = (CONFIG_FILE, MODEL_FILE, KEYPOINTS_FILE)
-#: Files that mark a directory as a KeypointNet run (see :func:`paz6d.run_dirs.method_of`).
-MARKER_FILES = (CONFIG_FILE, KEYPOINTS_FILE)
-#: How messages name these run directories.
-KIND = "a KeypointNet"
 
+
+class KeypointNetRunDir(CropRunDir):
+    """A ``paz6d train keypointnet`` run directory (files in the module docstring)."""
+
+    KIND = "a KeypointNet"
+    MARKER_FILES = (RunDir.CONFIG_FILE, KEYPOINTS_FILE)
+    REQUIRED_FILES = (RunDir.CONFIG_FILE, RunDir.MODEL_FILE, KEYPOINTS_FILE)
+
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> Path:
+        """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable
+        configuration and keypoints; returns it as a Path."""
+        run_dir = cls.check_files(run_dir)
+        cls.read_config(run_dir)
+        read_keypoints(run_dir)
+        return run_dir
+
+
+# the module's functions, as its callers use them
+KIND, MARKER_FILES, REQUIRED_FILES = (KeypointNetRunDir.KIND, KeypointNetRunDir.MARKER_FILES,
+                                      KeypointNetRunDir.REQUIRED_FILES)
+CONFIG_FILE, MODEL_FILE, METRICS_FILE = RunDir.CONFIG_FILE, RunDir.MODEL_FILE, RunDir.METRICS_FILE
+config_path, model_path, views_path = (KeypointNetRunDir.config_path, KeypointNetRunDir.model_path,
+                                       KeypointNetRunDir.views_path)
+read_config, write_config, validate = (KeypointNetRunDir.read_config, KeypointNetRunDir.write_config,
+                                       KeypointNetRunDir.validate)
+write_metrics = KeypointNetRunDir.write_metrics
 
 
 def _numeric_array(value, path: Path, name: str) -> np.ndarray:
@@ -47,40 +63,6 @@ def _numeric_array(value, path: Path, name: str) -> np.ndarray:
         return np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
         raise ValueError(f"{path}: {name}: expected a list of numeric rows") from None
-
-
-def model_path(run_dir: str | Path) -> Path:
-    """Where the network is (or will be) saved."""
-    return Path(run_dir) / MODEL_FILE
-
-
-def views_path(run_dir: str | Path, name: str) -> Path:
-    """The training cache ``views_<name>.npz`` (``name``: ``train``, ``val``, ``lift``)."""
-    return Path(run_dir) / f"views_{name}.npz"
-
-
-def config_path(run_dir: str | Path) -> Path:
-    """The run's ``config.json``."""
-    return Path(run_dir) / CONFIG_FILE
-
-
-def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
-    """Writes ``config.json`` (creating ``run_dir``); ``config`` must hold the pipeline's keys."""
-    missing = [key for key in PIPELINE_CONFIG_KEYS if key not in config]
-    if missing:
-        raise ValueError(f"config: missing key(s) {missing} the pipeline needs")
-    Path(run_dir).mkdir(parents=True, exist_ok=True)
-    return write_json_atomically(config_path(run_dir), config, indent=2)
-
-
-def read_config(run_dir: str | Path) -> dict[str, Any]:
-    """``config.json``, checked for ``input_size``, ``margin`` and ``downsample``."""
-    path = config_path(run_dir)
-    data = load_run_json(path, PIPELINE_CONFIG_KEYS, KIND)
-    for name in ("input_size", "downsample"):
-        integer_field(data, name, str(path), minimum=1)
-    number_field(data, "margin", str(path), positive=True)
-    return data
 
 
 def write_keypoints(run_dir: str | Path, points_model, usable, method: str, error=None, targets=None) -> Path:
@@ -139,20 +121,6 @@ def read_model(run_dir: str | Path):
     return load_keypointnet(model_path(run_dir))
 
 
-def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
-    """Writes the training summary ``metrics.json``."""
-    return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
-
-
 def evaluation_path(run_dir: str | Path) -> Path:
     """Where the demo writes its evaluation of the run."""
     return Path(run_dir) / EVALUATION_FILE
-
-
-def validate(run_dir: str | Path) -> Path:
-    """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable
-    configuration and keypoints; returns it as a Path."""
-    run_dir = check_run_files(run_dir, REQUIRED_FILES, KIND)
-    read_config(run_dir)
-    read_keypoints(run_dir)
-    return run_dir

@@ -25,54 +25,40 @@ from typing import Any
 
 import numpy as np
 
-from paz6d.backend.checks import as_array, integer_field, number_field
-from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
+from paz6d.backend.checks import as_array, number_field
+from paz6d.backend.files import load_run_json, write_json_atomically
+from paz6d.run_dir import CropRunDir, RunDir
 
-CONFIG_FILE = "config.json"
-MODEL_FILE = "model.keras"
 KEYPOINTS_FILE = "gaussian_keypoints.json"
-METRICS_FILE = "metrics.json"
 EVALUATION_FILE = "evaluation.json"
 CALIBRATION_PNG = "calibration.png"
 EXAMPLES_PNG = "occluded_examples.png"
-#: Keys of ``config.json`` that the pipeline reads.
-PIPELINE_CONFIG_KEYS = ("input_size", "margin", "downsample")
-#: Files that mark a directory as a probabilistic-keypoints run.
-MARKER_FILES = (CONFIG_FILE, KEYPOINTS_FILE)
-#: Files without which a run directory cannot estimate poses.
-REQUIRED_FILES = (CONFIG_FILE, MODEL_FILE, KEYPOINTS_FILE)
-#: How messages name these run directories.
-KIND = "a probabilistic-keypoints"
 
 
+class ProbabilisticKeypointsRunDir(CropRunDir):
+    """A ``paz6d train probabilistic-keypoints`` run directory (files in the module docstring)."""
 
-def path_of(run_dir: str | Path, name: str) -> Path:
-    """``run_dir / name`` for one of this module's file names."""
-    return Path(run_dir) / name
+    KIND = "a probabilistic-keypoints"
+    MARKER_FILES = (RunDir.CONFIG_FILE, KEYPOINTS_FILE)
+    REQUIRED_FILES = (RunDir.CONFIG_FILE, RunDir.MODEL_FILE, KEYPOINTS_FILE)
 
-
-def views_path(run_dir: str | Path, name: str) -> Path:
-    """The cache ``views_<name>.npz`` (``train``, ``val``, ``test``)."""
-    return Path(run_dir) / f"views_{name}.npz"
-
-
-def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
-    """Writes ``config.json`` (creating ``run_dir``); ``config`` must hold the pipeline's keys."""
-    missing = [key for key in PIPELINE_CONFIG_KEYS if key not in config]
-    if missing:
-        raise ValueError(f"config: missing key(s) {missing} the pipeline needs")
-    Path(run_dir).mkdir(parents=True, exist_ok=True)
-    return write_json_atomically(path_of(run_dir, CONFIG_FILE), config, indent=2)
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> Path:
+        """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable
+        configuration and keypoints; returns it as a Path."""
+        run_dir = cls.check_files(run_dir)
+        cls.read_config(run_dir)
+        read_keypoints(run_dir)
+        return run_dir
 
 
-def read_config(run_dir: str | Path) -> dict[str, Any]:
-    """``config.json``, checked for ``input_size``, ``margin`` and ``downsample``."""
-    path = path_of(run_dir, CONFIG_FILE)
-    data = load_run_json(path, PIPELINE_CONFIG_KEYS, KIND)
-    for name in ("input_size", "downsample"):
-        integer_field(data, name, str(path), minimum=1)
-    number_field(data, "margin", str(path), positive=True)
-    return data
+# the module's functions, as its callers use them
+_RUN_DIR = ProbabilisticKeypointsRunDir
+KIND, MARKER_FILES, REQUIRED_FILES = _RUN_DIR.KIND, _RUN_DIR.MARKER_FILES, _RUN_DIR.REQUIRED_FILES
+CONFIG_FILE, MODEL_FILE, METRICS_FILE = _RUN_DIR.CONFIG_FILE, _RUN_DIR.MODEL_FILE, _RUN_DIR.METRICS_FILE
+path_of, views_path = _RUN_DIR.path_of, _RUN_DIR.views_path
+read_config, write_config, validate = _RUN_DIR.read_config, _RUN_DIR.write_config, _RUN_DIR.validate
+read_metrics = _RUN_DIR.read_metrics
 
 
 def write_keypoints(run_dir: str | Path, points_model, covariance_scale: float = 1.0, targets=None,
@@ -107,24 +93,8 @@ def write_json(run_dir: str | Path, name: str, data: dict[str, Any]) -> Path:
     return write_json_atomically(path_of(run_dir, name), data, indent=2)
 
 
-def read_metrics(run_dir: str | Path) -> dict[str, Any] | None:
-    """``metrics.json`` of an earlier invocation, ``None`` when there is none (``ValueError`` naming the
-    file when it is not a JSON object)."""
-    path = path_of(run_dir, METRICS_FILE)
-    return load_json_object(path) if path.is_file() else None
-
-
 def read_model(run_dir: str | Path):
     """The trained network (imports TensorFlow)."""
     from paz6d.probabilistic_keypoints.model import load_model
 
     return load_model(path_of(run_dir, MODEL_FILE))
-
-
-def validate(run_dir: str | Path) -> Path:
-    """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable configuration
-    and keypoints; returns it as a Path."""
-    run_dir = check_run_files(run_dir, REQUIRED_FILES, KIND)
-    read_config(run_dir)
-    read_keypoints(run_dir)
-    return run_dir

@@ -17,25 +17,35 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
+from paz6d.backend.files import load_run_json, write_json_atomically
+from paz6d.run_dir import RunDir
 
 SEGMENTER_FILE = "segmenter.json"
-MODEL_FILE = "model.keras"
-CONFIG_FILE = "config.json"
-METRICS_FILE = "metrics.json"
 #: Fields of ``segmenter.json``.
 SEGMENTER_KEYS = ("input_size", "margin", "class_names", "threshold")
-#: Files that mark a directory as a mask-head run (see :func:`paz6d.run_dirs.method_of`).
-MARKER_FILES = (SEGMENTER_FILE,)
-#: Files without which a run directory cannot segment.
-REQUIRED_FILES = (SEGMENTER_FILE, MODEL_FILE)
-#: How messages name this method's run directories ("is DIR a segmentation run directory?").
-KIND = "a segmentation"
 
 
-def model_path(run_dir: str | Path) -> Path:
-    """Where the network is (or will be) saved."""
-    return Path(run_dir) / MODEL_FILE
+class SegmentationRunDir(RunDir):
+    """A ``paz6d train segmentation`` run directory (files in the module docstring)."""
+
+    KIND = "a segmentation"
+    MARKER_FILES = (SEGMENTER_FILE,)
+    REQUIRED_FILES = (SEGMENTER_FILE, RunDir.MODEL_FILE)
+    MESH_FIELDS = None
+
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> dict[str, Any]:
+        """Checks that ``run_dir`` is a directory with ``segmenter.json`` and ``model.keras``; returns the
+        segmenter description."""
+        return read_segmenter(cls.check_files(run_dir))
+
+
+# the module's functions, as its callers use them
+_RUN_DIR = SegmentationRunDir
+KIND, MARKER_FILES, REQUIRED_FILES = _RUN_DIR.KIND, _RUN_DIR.MARKER_FILES, _RUN_DIR.REQUIRED_FILES
+CONFIG_FILE, MODEL_FILE, METRICS_FILE = _RUN_DIR.CONFIG_FILE, _RUN_DIR.MODEL_FILE, _RUN_DIR.METRICS_FILE
+model_path, validate = _RUN_DIR.model_path, _RUN_DIR.validate
+read_config, write_config, write_metrics = _RUN_DIR.read_config, _RUN_DIR.write_config, _RUN_DIR.write_metrics
 
 
 def write_segmenter(run_dir: str | Path, input_size: int, margin: float, class_names, threshold: float = 0.5) -> Path:
@@ -64,28 +74,6 @@ def read_segmenter(run_dir: str | Path) -> dict[str, Any]:
     if not isinstance(names, list) or not names or not all(isinstance(name, str) for name in names):
         raise ValueError(f"{path}: class_names: expected a non-empty list of names, got {names!r}")
     return data
-
-
-def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
-    """Writes the training settings ``config.json``."""
-    return write_json_atomically(Path(run_dir) / CONFIG_FILE, config, indent=2)
-
-
-def read_config(run_dir: str | Path) -> dict[str, Any] | None:
-    """The training settings, ``None`` when the run has none yet."""
-    path = Path(run_dir) / CONFIG_FILE
-    return load_json_object(path) if path.is_file() else None
-
-
-def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
-    """Writes the training summary ``metrics.json``."""
-    return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
-
-
-def validate(run_dir: str | Path) -> dict[str, Any]:
-    """Checks that ``run_dir`` is a directory with ``segmenter.json`` and ``model.keras``; returns the
-    segmenter description."""
-    return read_segmenter(check_run_files(run_dir, REQUIRED_FILES, KIND))
 
 
 def read_model(run_dir: str | Path):

@@ -19,25 +19,35 @@ from pathlib import Path
 from typing import Any
 
 from paz6d.backend.boxes import SSD_VARIANCES
-from paz6d.backend.files import check_run_files, load_json, load_run_json, write_json_atomically
+from paz6d.backend.files import load_run_json, write_json_atomically
+from paz6d.run_dir import RunDir
 
 DETECTOR_FILE = "detector.json"
-MODEL_FILE = "model.keras"
-CONFIG_FILE = "config.json"
-METRICS_FILE = "metrics.json"
 #: Fields of ``detector.json``.
 DETECTOR_KEYS = ("architecture", "class_names", "priors", "variances")
-#: Files that mark a directory as an SSD run (see :func:`paz6d.run_dirs.method_of`).
-MARKER_FILES = (DETECTOR_FILE,)
-#: Files without which a run directory cannot detect.
-REQUIRED_FILES = (DETECTOR_FILE, MODEL_FILE)
-#: How messages name this method's run directories ("is DIR an SSD run directory?").
-KIND = "an SSD"
 
 
-def model_path(run_dir: str | Path) -> Path:
-    """Where the network is (or will be) saved."""
-    return Path(run_dir) / MODEL_FILE
+class SSDRunDir(RunDir):
+    """A ``paz6d train ssd`` run directory (files in the module docstring)."""
+
+    KIND = "an SSD"
+    MARKER_FILES = (DETECTOR_FILE,)
+    REQUIRED_FILES = (DETECTOR_FILE, RunDir.MODEL_FILE)
+    MESH_FIELDS = None
+
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> dict[str, Any]:
+        """Checks that ``run_dir`` is a directory with ``detector.json`` and ``model.keras``; returns the
+        detector description."""
+        return read_detector(cls.check_files(run_dir))
+
+
+# the module's functions, as its callers use them
+_RUN_DIR = SSDRunDir
+KIND, MARKER_FILES, REQUIRED_FILES = _RUN_DIR.KIND, _RUN_DIR.MARKER_FILES, _RUN_DIR.REQUIRED_FILES
+CONFIG_FILE, MODEL_FILE, METRICS_FILE = _RUN_DIR.CONFIG_FILE, _RUN_DIR.MODEL_FILE, _RUN_DIR.METRICS_FILE
+model_path, validate = _RUN_DIR.model_path, _RUN_DIR.validate
+read_config, write_config, write_metrics = _RUN_DIR.read_config, _RUN_DIR.write_config, _RUN_DIR.write_metrics
 
 
 def write_detector(run_dir: str | Path, architecture: str, class_names, priors: dict,
@@ -83,22 +93,6 @@ def read_detector(run_dir: str | Path) -> dict[str, Any]:
     return data
 
 
-def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
-    """Writes the training settings ``config.json``."""
-    return write_json_atomically(Path(run_dir) / CONFIG_FILE, config, indent=2)
-
-
-def read_config(run_dir: str | Path) -> dict[str, Any] | None:
-    """The training settings, ``None`` when the run has none yet."""
-    path = Path(run_dir) / CONFIG_FILE
-    return load_json(path) if path.is_file() else None
-
-
-def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
-    """Writes the training summary ``metrics.json``."""
-    return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
-
-
 def read_model(run_dir: str | Path):
     """``(model, detector)``: the trained network (Keras safe mode; imports TensorFlow) and
     ``detector.json``.
@@ -111,9 +105,3 @@ def read_model(run_dir: str | Path):
     detector = validate(run_dir)
     spec = PriorSpec.from_dict(detector["priors"])
     return load_ssd(model_path(run_dir), spec, len(detector["class_names"]) + 1), detector
-
-
-def validate(run_dir: str | Path) -> dict[str, Any]:
-    """Checks that ``run_dir`` is a directory with ``detector.json`` and ``model.keras``; returns the
-    detector description."""
-    return read_detector(check_run_files(run_dir, REQUIRED_FILES, KIND))

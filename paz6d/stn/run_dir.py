@@ -18,27 +18,37 @@ from pathlib import Path
 from typing import Any
 
 from paz6d.backend.checks import integer_field
-from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
+from paz6d.backend.files import load_run_json, write_json_atomically
+from paz6d.run_dir import RunDir
 
 CLASSIFIER_FILE = "classifier.json"
-MODEL_FILE = "model.keras"
-CONFIG_FILE = "config.json"
-METRICS_FILE = "metrics.json"
 CROPS_FILE = "crops.png"
 #: Fields of ``classifier.json``.
 CLASSIFIER_KEYS = ("canvas_size", "crop_size", "transformer", "class_names")
-#: Files that mark a directory as a spatial-transformer run.
-MARKER_FILES = (CLASSIFIER_FILE,)
-#: Files without which a run directory cannot classify.
-REQUIRED_FILES = (CLASSIFIER_FILE, MODEL_FILE)
-#: How messages name these run directories.
-KIND = "a spatial-transformer"
 
 
+class STNRunDir(RunDir):
+    """A ``paz6d train stn`` run directory (files in the module docstring)."""
 
-def model_path(run_dir: str | Path) -> Path:
-    """Where the network is (or will be) saved."""
-    return Path(run_dir) / MODEL_FILE
+    KIND = "a spatial-transformer"
+    MARKER_FILES = (CLASSIFIER_FILE,)
+    REQUIRED_FILES = (CLASSIFIER_FILE, RunDir.MODEL_FILE)
+    MESH_FIELDS = None
+
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> dict[str, Any]:
+        """Checks that ``run_dir`` is a directory with ``classifier.json`` and ``model.keras``; returns the
+        classifier description."""
+        return read_classifier(cls.check_files(run_dir))
+
+
+# the module's functions, as its callers use them
+_RUN_DIR = STNRunDir
+KIND, MARKER_FILES, REQUIRED_FILES = _RUN_DIR.KIND, _RUN_DIR.MARKER_FILES, _RUN_DIR.REQUIRED_FILES
+CONFIG_FILE, MODEL_FILE, METRICS_FILE = _RUN_DIR.CONFIG_FILE, _RUN_DIR.MODEL_FILE, _RUN_DIR.METRICS_FILE
+model_path, validate = _RUN_DIR.model_path, _RUN_DIR.validate
+read_config, write_config = _RUN_DIR.read_config, _RUN_DIR.write_config
+read_metrics, write_metrics = _RUN_DIR.read_metrics, _RUN_DIR.write_metrics
 
 
 def crops_path(run_dir: str | Path) -> Path:
@@ -72,40 +82,6 @@ def read_classifier(run_dir: str | Path) -> dict[str, Any]:
             or len(set(names)) != len(names)):
         raise ValueError(f"{path}: class_names: expected a list of at least 2 distinct names, got {names!r}")
     return data
-
-
-def write_config(run_dir: str | Path, config: dict[str, Any]) -> Path:
-    """Writes the training settings ``config.json``."""
-    Path(run_dir).mkdir(parents=True, exist_ok=True)
-    return write_json_atomically(Path(run_dir) / CONFIG_FILE, config, indent=2)
-
-
-def read_config(run_dir: str | Path) -> dict[str, Any] | None:
-    """The training settings, ``None`` when the run has none yet.
-
-    Raises:
-        ValueError: the file is not a JSON object (names the file).
-    """
-    path = Path(run_dir) / CONFIG_FILE
-    return load_json_object(path) if path.is_file() else None
-
-
-def write_metrics(run_dir: str | Path, metrics: dict[str, Any]) -> Path:
-    """Writes the training summary ``metrics.json``."""
-    return write_json_atomically(Path(run_dir) / METRICS_FILE, metrics, indent=2)
-
-
-def read_metrics(run_dir: str | Path) -> dict[str, Any] | None:
-    """The training summary of an earlier invocation, ``None`` when there is none (``ValueError`` naming
-    the file when it is not a JSON object)."""
-    path = Path(run_dir) / METRICS_FILE
-    return load_json_object(path) if path.is_file() else None
-
-
-def validate(run_dir: str | Path) -> dict[str, Any]:
-    """Checks that ``run_dir`` is a directory with ``classifier.json`` and ``model.keras``; returns the
-    classifier description."""
-    return read_classifier(check_run_files(run_dir, REQUIRED_FILES, KIND))
 
 
 def read_model(run_dir: str | Path):

@@ -1,0 +1,179 @@
+"""The run-directory base: what every method's run directory shares.
+
+A run directory is the folder that ``paz6d train <method>`` writes and that the method's pipeline
+reads. Each method describes its own in a :class:`RunDir` subclass in ``paz6d/<method>/run_dir.py``
+(its file names, the files that mark it, the files a pipeline needs, how messages name it, and the
+readers of its method-specific files); this base owns the parts they share::
+
+    RUN_DIR/config.json    the run's settings (a JSON object); most methods also record the training
+                           mesh there (``mesh_path`` and ``mesh_scale``, mesh units to metres)
+    RUN_DIR/metrics.json   the training summary (a JSON object)
+    RUN_DIR/model.keras    the network (loaded in Keras safe mode by the method)
+
+Every method is a set of class methods taking the run directory (a ``str`` or ``Path``), so a
+method's ``run_dir`` module can export them as plain functions (``read_config = AAERunDir.read_config``).
+Every reader raises ``ValueError`` naming the file and what is missing or malformed.
+
+Example:
+    >>> class TinyRunDir(RunDir):
+    ...     KIND = "a tiny"
+    ...     MARKER_FILES = ("tiny.json",)
+    ...     REQUIRED_FILES = ("tiny.json",)
+    >>> TinyRunDir.model_path("runs/tiny").name
+    'model.keras'
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from paz6d.backend.checks import integer_field, number_field
+from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
+
+
+class RunDir:
+    """One method's run directory: file names and the readers and writers every method shares.
+
+    Subclasses set :attr:`KIND`, :attr:`MARKER_FILES` and :attr:`REQUIRED_FILES`, and extend
+    :meth:`validate` (and :meth:`read_config` where ``config.json`` has fields a pipeline needs).
+    """
+
+    #: How messages name these run directories ("is DIR an AAE run directory?": ``"an AAE"``).
+    KIND: ClassVar[str] = "a paz6d"
+    #: Files that mark a directory as one of these run directories (see :func:`paz6d.methods.method_of`).
+    MARKER_FILES: ClassVar[tuple[str, ...]] = ()
+    #: Files without which the method's pipeline cannot run.
+    REQUIRED_FILES: ClassVar[tuple[str, ...]] = ()
+    CONFIG_FILE: ClassVar[str] = "config.json"
+    METRICS_FILE: ClassVar[str] = "metrics.json"
+    MODEL_FILE: ClassVar[str] = "model.keras"
+    #: The ``config.json`` fields recording the training mesh and its scale to metres (``None``: no mesh).
+    MESH_FIELDS: ClassVar[tuple[str, str] | None] = ("mesh_path", "mesh_scale")
+
+    # -- paths ----------------------------------------------------------------------------------
+    @classmethod
+    def path_of(cls, run_dir: str | Path, name: str) -> Path:
+        """``run_dir / name`` for one of the run directory's file names."""
+        return Path(run_dir) / name
+
+    @classmethod
+    def config_path(cls, run_dir: str | Path) -> Path:
+        """The run's ``config.json``."""
+        return Path(run_dir) / cls.CONFIG_FILE
+
+    @classmethod
+    def model_path(cls, run_dir: str | Path) -> Path:
+        """Where the network is (or will be) saved."""
+        return Path(run_dir) / cls.MODEL_FILE
+
+    @classmethod
+    def views_path(cls, run_dir: str | Path, name: str) -> Path:
+        """The training cache ``views_<name>.npz`` (``train``, ``val``, ...)."""
+        return Path(run_dir) / f"views_{name}.npz"
+
+    # -- recognition and checks -----------------------------------------------------------------
+    @classmethod
+    def is_run_dir(cls, run_dir: str | Path) -> bool:
+        """True when ``run_dir`` holds every one of :attr:`MARKER_FILES`."""
+        return bool(cls.MARKER_FILES) and all((Path(run_dir) / name).is_file() for name in cls.MARKER_FILES)
+
+    @classmethod
+    def check_files(cls, run_dir: str | Path) -> Path:
+        """``run_dir`` as a Path, checked to be a directory holding every one of :attr:`REQUIRED_FILES`.
+
+        Raises:
+            ValueError: not a directory, or the first missing file ("is DIR <KIND> run directory?").
+        """
+        return check_run_files(run_dir, cls.REQUIRED_FILES, cls.KIND)
+
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> Any:
+        """Checks that ``run_dir`` has every file the pipeline needs (subclasses also read them);
+        returns ``run_dir`` as a Path."""
+        return cls.check_files(run_dir)
+
+    # -- settings and metrics -------------------------------------------------------------------
+    @classmethod
+    def write_config(cls, run_dir: str | Path, config: dict[str, Any]) -> Path:
+        """Writes ``config.json`` (creating ``run_dir``)."""
+        Path(run_dir).mkdir(parents=True, exist_ok=True)
+        return write_json_atomically(cls.config_path(run_dir), config, indent=2)
+
+    @classmethod
+    def read_config(cls, run_dir: str | Path) -> dict[str, Any] | None:
+        """The run's settings, ``None`` when the run has none yet (``ValueError`` naming the file when it
+        is not a JSON object)."""
+        path = cls.config_path(run_dir)
+        return load_json_object(path) if path.is_file() else None
+
+    @classmethod
+    def write_metrics(cls, run_dir: str | Path, metrics: dict[str, Any]) -> Path:
+        """Writes the training summary ``metrics.json``."""
+        return write_json_atomically(Path(run_dir) / cls.METRICS_FILE, metrics, indent=2)
+
+    @classmethod
+    def read_metrics(cls, run_dir: str | Path) -> dict[str, Any] | None:
+        """The training summary of an earlier invocation, ``None`` when there is none (``ValueError``
+        naming the file when it is not a JSON object)."""
+        path = Path(run_dir) / cls.METRICS_FILE
+        return load_json_object(path) if path.is_file() else None
+
+    # -- the training mesh ----------------------------------------------------------------------
+    @classmethod
+    def training_mesh(cls, run_dir: str | Path) -> tuple[Path, float] | None:
+        """``(mesh file, scale to metres)`` the run was trained on, from :attr:`MESH_FIELDS` of its
+        ``config.json``; ``None`` when the method or the run records none (the file may be gone since)."""
+        if cls.MESH_FIELDS is None:
+            return None
+        config = cls.read_config(run_dir)
+        mesh_field, scale_field = cls.MESH_FIELDS
+        if not config or not config.get(mesh_field):
+            return None
+        return Path(config[mesh_field]), float(config.get(scale_field, 1.0))
+
+    @classmethod
+    def surface_points(cls, run_dir: str | Path, count: int = 2000, seed: int = 0) -> np.ndarray:
+        """``(count, 3)`` points (metres, model frame) sampled on the training mesh (for depth refinement).
+
+        Raises:
+            ValueError: the run records no mesh, or its file is gone (naming both).
+        """
+        from paz6d.backend.mesh import load_mesh, sample_points  # here: trimesh, only when a depth image is given
+
+        found = cls.training_mesh(run_dir)
+        if found is None or not found[0].is_file():
+            field = "mesh_path" if cls.MESH_FIELDS is None else cls.MESH_FIELDS[0]
+            raise ValueError(f"{cls.config_path(run_dir)}: {field} {None if found is None else str(found[0])!r} is "
+                             f"not a file; depth refinement samples the object's surface from the mesh the run was "
+                             f"trained on")
+        return sample_points(load_mesh(found[0], found[1]), count, seed)
+
+
+class CropRunDir(RunDir):
+    """A run directory whose ``config.json`` must hold the crop settings its pipeline reads:
+    ``input_size`` (crop side, pixels), ``margin`` (crop side / longer box side) and ``downsample``
+    (crop pixels per output cell)."""
+
+    #: Keys of ``config.json`` that the pipeline reads.
+    PIPELINE_CONFIG_KEYS: ClassVar[tuple[str, ...]] = ("input_size", "margin", "downsample")
+
+    @classmethod
+    def write_config(cls, run_dir: str | Path, config: dict[str, Any]) -> Path:
+        """Writes ``config.json`` (creating ``run_dir``); ``config`` must hold the pipeline's keys."""
+        missing = [key for key in cls.PIPELINE_CONFIG_KEYS if key not in config]
+        if missing:
+            raise ValueError(f"config: missing key(s) {missing} the pipeline needs")
+        return super().write_config(run_dir, config)
+
+    @classmethod
+    def read_config(cls, run_dir: str | Path) -> dict[str, Any]:
+        """``config.json``, checked for ``input_size``, ``margin`` and ``downsample``."""
+        path = cls.config_path(run_dir)
+        data = load_run_json(path, cls.PIPELINE_CONFIG_KEYS, cls.KIND)
+        for name in ("input_size", "downsample"):
+            integer_field(data, name, str(path), minimum=1)
+        number_field(data, "margin", str(path), positive=True)
+        return data
