@@ -47,7 +47,8 @@ def measure(config, entries: int, batch: int, repeats: int) -> dict:
     lookup_cdist = median_seconds(lambda: np.argmin(cdist(codes, codebook.codes, "cosine"), axis=1), repeats) / batch
     return {"crop": crop_size, "latent": latent_size, "entries": entries,
             "single_ms": 1000 * single, "batched_ms_per_crop": 1000 * batched, "encode_single_ms": 1000 * encode_single,
-            "lookup_single_us": 1e6 * lookup_single, "lookup_matrix_us_per_crop": 1e6 * lookup_matrix, "lookup_cdist_us_per_crop": 1e6 * lookup_cdist}
+            "lookup_single_us": 1e6 * lookup_single, "lookup_matrix_us_per_crop": 1e6 * lookup_matrix,
+            "lookup_cdist_us_per_crop": 1e6 * lookup_cdist}
 
 
 def main() -> None:
@@ -66,7 +67,8 @@ def main() -> None:
               f"lookup {r['lookup_single_us']:.0f} us), "
               f"batch of {args.batch} {r['batched_ms_per_crop']:.2f} ms/crop "
               f"({r['single_ms'] / r['batched_ms_per_crop']:.1f}x faster than single); "
-              f"lookup {r['lookup_matrix_us_per_crop']:.1f} us/crop vs cdist {r['lookup_cdist_us_per_crop']:.1f} us/crop "
+              f"lookup {r['lookup_matrix_us_per_crop']:.1f} us/crop vs cdist {r['lookup_cdist_us_per_crop']:.1f} "
+              f"us/crop "
               f"({r['lookup_cdist_us_per_crop'] / r['lookup_matrix_us_per_crop']:.1f}x)")
 
 

@@ -194,8 +194,10 @@ def benchmark_pose(data: Path, repeats: int, workers: int) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--coco-dir", type=Path, default=SHARED_DATA / "coco", help="the coco folder of the shared data")
-    parser.add_argument("--data", type=Path, default=SHARED_DATA / "bop_lmo", help="the bop_lmo folder of the shared data")
+    parser.add_argument("--coco-dir", type=Path, default=SHARED_DATA / "coco",
+                        help="the coco folder of the shared data")
+    parser.add_argument("--data", type=Path, default=SHARED_DATA / "bop_lmo",
+                        help="the bop_lmo folder of the shared data")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each side (best time is kept)")
     parser.add_argument("--workers", type=int, default=1, help="threads of paz6d's ADI (-1 = all cores)")
     args = parser.parse_args()

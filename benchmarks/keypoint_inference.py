@@ -93,7 +93,8 @@ def main() -> None:
               f"(target <= 30; unweighted PnP {r['unweighted_pnp_ms']:.1f}, 13 crops {r['crops_13_ms']:.1f}); "
               f"network compiled {r['network_compiled_ms']:.1f} ms vs eager "
               f"{r['network_eager_ms']:.1f} ms ({r['network_eager_ms'] / r['network_compiled_ms']:.1f}x) vs "
-              f"model.predict {r['network_predict_ms']:.1f} ms ({r['network_predict_ms'] / r['network_compiled_ms']:.1f}x); "
+              f"model.predict {r['network_predict_ms']:.1f} ms "
+              f"({r['network_predict_ms'] / r['network_compiled_ms']:.1f}x); "
               f"batch of {args.batch}: {r['batch_ms_per_crop']:.1f} ms/crop "
               f"({r['end_to_end_ms'] / r['batch_ms_per_crop']:.1f}x faster than one by one)")
 

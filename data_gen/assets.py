@@ -168,5 +168,6 @@ def load_assets(config: GenerationConfig) -> Assets:
     distractor_radii = np.array([np.linalg.norm(mesh.vertices, axis=1).max() for mesh in distractors])
     backgrounds = check_backgrounds(config.backgrounds) if config.backgrounds is not None else []
     return Assets(meshes, object_ids, centres, radii, diameters, [hull_points(mesh.vertices) for mesh in meshes],
-                  distractors, distractor_tinted, distractor_radii, [hull_points(mesh.vertices) for mesh in distractors], backgrounds,
+                  distractors, distractor_tinted, distractor_radii,
+                  [hull_points(mesh.vertices) for mesh in distractors], backgrounds,
                   _distance_range(config, radii, diameters), _load_symmetries(config.symmetries, object_ids))

@@ -450,7 +450,8 @@ def _vsd_errors(data: BopEvaluationData, results: PoseResults, pairs: Evaluation
                 estimate, gt = int(pairs.estimate[row]), int(pairs.gt[row])
                 obj_id = int(gt_obj_ids[gt])
                 if estimate not in est_depths:
-                    est_depths[estimate] = _render_depth_mm(renderer, data, obj_id, results.T_model2cam[estimate], image.K)
+                    est_depths[estimate] = _render_depth_mm(renderer, data, obj_id, results.T_model2cam[estimate],
+                                                            image.K)
                 if gt not in gt_depths:
                     gt_depths[gt] = _render_depth_mm(renderer, data, obj_id, image.T_model2cam[gt_keys[gt, 2]], image.K)
                 errors[row] = pose_errors.vsd_error(depth_test, est_depths[estimate], gt_depths[gt], image.K,

@@ -152,7 +152,8 @@ class CocoGroundTruth:
                                   max(len(category_ids) - 1, 0))
         known = np.zeros(len(image_row), dtype=bool)
         if len(image_ids) and len(category_ids):  # COCOeval only looks at listed images and categories
-            known = (image_ids[image_row] == columns["image_id"]) & (category_ids[category_row] == columns["category_id"])
+            known = ((image_ids[image_row] == columns["image_id"])
+                     & (category_ids[category_row] == columns["category_id"]))
         keep = np.flatnonzero(known)
         segmentations = list(map(dict.get, data["annotations"], itertools.repeat("segmentation")))
         return cls(source=source, image_ids=image_ids, image_heights=heights, image_widths=widths,

@@ -101,7 +101,8 @@ def detection_errors(ground_truth: CocoGroundTruth, detections: CocoDetections) 
         objects.append(count)
         recalls.append(found / count)
         tops.append(np.bincount(kinds[:count], minlength=len(ERROR_KINDS)))
-    return DetectionErrors(tuple(ground_truth.category_names[k] for k in kept), np.asarray(objects, dtype=np.int64), np.asarray(recalls, dtype=np.float64),
+    return DetectionErrors(tuple(ground_truth.category_names[k] for k in kept), np.asarray(objects, dtype=np.int64),
+                           np.asarray(recalls, dtype=np.float64),
                            np.asarray(tops, dtype=np.int64).reshape(-1, len(ERROR_KINDS)),
                            (*ground_truth.category_names, NO_DETECTION), _confusion(ground_truth, detections)[kept])
 

@@ -166,7 +166,8 @@ def _estimate_mean(A, b, e, px, py, pz, left, right, low, high, leaf_of, leaf_st
     query lies within ``reach = sqrt(max best) + (largest distance from a query to home's box)`` of
     home's box (triangle inequality), so home's list of nearest leaves is walked in order of
     distance until the next one is out of reach; should the list end first, a depth-first search
-    of the tree (nearer child first, pruned by box distance) visits the remaining candidates. A visited leaf is skipped when the queries' bounding box
+    of the tree (nearer child first, pruned by box distance) visits the remaining candidates. A visited leaf is skipped
+    when the queries' bounding box
     is at least ``max best`` from its box, or when no query is nearer to its box than to its best
     point so far; otherwise its points are scanned for all queries at once (the inner loops run
     over the queries and are vectorized). The minimum of the same float64 distances results
@@ -222,7 +223,8 @@ def _estimate_mean(A, b, e, px, py, pz, left, right, low, high, leaf_of, leaf_st
                 leaf = neighbours[home, step]
             else:
                 if step == listed:
-                    if listed == leaves or distances[home, listed - 1] > (np.sqrt(largest) + offset) * (1.0 + REACH_SLACK):
+                    reach = (np.sqrt(largest) + offset) * (1.0 + REACH_SLACK)
+                    if listed == leaves or distances[home, listed - 1] > reach:
                         break  # every leaf was listed, or the unlisted ones are out of reach
                     stack[0], stack_bounds[0], top = 0, 0.0, 1
                 leaf = -1
@@ -331,9 +333,12 @@ def min_max_distances(A, b, points):
         for s in range(symmetries):
             largest = 0.0
             for n in range(count):
-                x = A[e, s, 0, 0] * points[n, 0] + A[e, s, 0, 1] * points[n, 1] + A[e, s, 0, 2] * points[n, 2] + b[e, s, 0]
-                y = A[e, s, 1, 0] * points[n, 0] + A[e, s, 1, 1] * points[n, 1] + A[e, s, 1, 2] * points[n, 2] + b[e, s, 1]
-                z = A[e, s, 2, 0] * points[n, 0] + A[e, s, 2, 1] * points[n, 1] + A[e, s, 2, 2] * points[n, 2] + b[e, s, 2]
+                x = (A[e, s, 0, 0] * points[n, 0] + A[e, s, 0, 1] * points[n, 1] + A[e, s, 0, 2] * points[n, 2]
+                     + b[e, s, 0])
+                y = (A[e, s, 1, 0] * points[n, 0] + A[e, s, 1, 1] * points[n, 1] + A[e, s, 1, 2] * points[n, 2]
+                     + b[e, s, 1])
+                z = (A[e, s, 2, 0] * points[n, 0] + A[e, s, 2, 1] * points[n, 1] + A[e, s, 2, 2] * points[n, 2]
+                     + b[e, s, 2])
                 largest = max(largest, x * x + y * y + z * z)
                 if largest >= best:
                     break

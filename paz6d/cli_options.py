@@ -50,7 +50,8 @@ _SCALAR_TYPES = (int, float, str, Path)
 
 
 def option(default: Any = dataclasses.MISSING, help: str = "", *, metavar: str | tuple[str, ...] | None = None,
-           choices: Iterable | None = None, one_of: str | None = None, default_factory: Any = dataclasses.MISSING) -> Any:
+           choices: Iterable | None = None, one_of: str | None = None,
+           default_factory: Any = dataclasses.MISSING) -> Any:
     """A dataclass field with the metadata its flag needs (no ``default``: a required flag).
 
     Fields with the same ``one_of`` name are alternatives: exactly one of their flags must be given

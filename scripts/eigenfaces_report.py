@@ -128,7 +128,8 @@ def main() -> int:
     temporary = args.out / "eigenfaces_metrics.json.tmp"
     temporary.write_text(json.dumps(results, indent=2) + "\n")
     os.replace(temporary, args.out / "eigenfaces_metrics.json")
-    print(f"| components | mean of {args.splits} random splits | min | max | images 1-5 train | agreement with OpenCV |")
+    print(f"| components | mean of {args.splits} random splits | min | max | images 1-5 train "
+          f"| agreement with OpenCV |")
     print("|---:|---:|---:|---:|---:|---:|")
     for row in results["eigenfaces"] + [dict(results["fisherfaces"], components="Fisherfaces (39)")]:
         print(f"| {row['components']} | {row['random_mean']:.3f} | {row['random_min']:.3f} | {row['random_max']:.3f} | "

@@ -1040,15 +1040,19 @@ def dataset_format_cases() -> list[Case]:
     coco_file = {"images": [{"id": 1, "file_name": "a.jpg", "width": 8, "height": 6}],
                  "categories": [{"id": 1, "name": "thing"}],
                  "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [0, 0, 2, "x"]}]}
-    header = "ImageID,Source,LabelName,Confidence,XMin,XMax,YMin,YMax,IsOccluded,IsTruncated,IsGroupOf,IsDepiction,IsInside"
+    header = ("ImageID,Source,LabelName,Confidence,XMin,XMax,YMin,YMax,IsOccluded,IsTruncated,IsGroupOf,IsDepiction,"
+              "IsInside")
     ssd = {
         "no-format": ({"data/readme.txt": "nothing here"}, ("cannot tell the format",)),
         "voc-bad-xml": ({"data/a.xml": "<annotation><object>"}, ("a.xml", "malformed XML")),
-        "voc-bad-number": ({"data/a.xml": f"<annotation><object><name>dog</name>{box.format('x')}</object></annotation>"},
+        "voc-bad-number": ({"data/a.xml": f"<annotation><object><name>dog</name>{box.format('x')}</object>"
+                                          "</annotation>"},
                            ("a.xml", "<xmax>")),
-        "voc-unknown-class": ({"data/a.xml": f"<annotation><object><name>dragon</name>{box.format(4)}</object></annotation>"},
+        "voc-unknown-class": ({"data/a.xml": f"<annotation><object><name>dragon</name>{box.format(4)}</object>"
+                                             "</annotation>"},
                               ("a.xml", "dragon")),
-        "coco-bad-bbox": ({"data/annotations/instances_train2017.json": coco_file}, ("instances_train2017.json", "'bbox'")),
+        "coco-bad-bbox": ({"data/annotations/instances_train2017.json": coco_file},
+                          ("instances_train2017.json", "'bbox'")),
         "openimages-unknown-label": ({"data/train-annotations-bbox.csv": f"{header}\nab,x,/m/0zz,1,0,1,0,1,0,0,0,0,0\n",
                                       "data/class-descriptions-boxable.csv": "/m/01yrx,Cat\n"},
                                      ("train-annotations-bbox.csv", "LabelName")),

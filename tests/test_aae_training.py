@@ -295,7 +295,8 @@ def test_training_from_a_generated_data_set(toy_run, tmp_path):
 
     root, mesh, _ = toy_run
     data = tmp_path / "data"
-    generate(GenerationConfig(meshes=(mesh,), out=data, num_images=3, seed=5, mesh_scale=0.001, objects_per_image=(1, 1),
+    generate(GenerationConfig(meshes=(mesh,), out=data, num_images=3, seed=5, mesh_scale=0.001,
+                              objects_per_image=(1, 1),
                               crop_size=TOY.crop_size), workers=1, show_progress=False)
     summary = train_aae(mesh, tmp_path / "run", replace(TOY, steps=10), mesh_scale=0.001, workers=0, progress=False,
                         dataset=data, object_id=1)

@@ -44,7 +44,8 @@ def mocked(tmp_path, monkeypatch):
     monkeypatch.setattr(lmo, "_stage_synthetic", lambda job: (calls.append("synthetic"),
                                                                touch(job.out / "synthetic" / "camera.json"))[0] or {})
     monkeypatch.setattr(lmo, "_stage_validation", lambda job: (calls.append("validation"),
-                                                                 touch(job.out / "validation" / "camera.json"))[0] or {})
+                                                                 touch(job.out / "validation" / "camera.json"))[0]
+                        or {})
     monkeypatch.setattr(lmo, "_stage_detector", lambda job: (calls.append("detector"),
                                                               touch(job.out / "detector" / "model.keras"))[0] or {})
     monkeypatch.setattr(lmo, "_stage_pose", lambda job, obj_id: (calls.append(f"pose {obj_id}"),
@@ -91,7 +92,8 @@ def test_stages_run_in_order_once_and_a_rerun_skips_every_finished_one(mocked, t
     stored = json.loads((job.out / "report.json").read_text())
     assert stored == json.loads(json.dumps(report))
     assert stored["methods"]["aae"]["detections"]["mean_AR_MSSD_AR_MSPD"] == pytest.approx(0.3)
-    assert "| aae | detections | **all** | 4 | 0.200 | 0.400 | **0.300** | 0.100 |" in (job.out / "report.md").read_text()
+    assert ("| aae | detections | **all** | 4 | 0.200 | 0.400 | **0.300** | 0.100 |"
+            in (job.out / "report.md").read_text())
     calls.clear()
     run_benchmark(job)
     assert calls == []  # everything was complete
@@ -383,7 +385,8 @@ def test_every_real_stage_runs_on_the_shared_lmo_data_at_toy_size(tmp_path, shar
         assert 0 <= scores["mean_AR_MSSD_AR_MSPD"] <= 1
     assert (job.out / "detector" / "model.keras").is_file() and (job.pose_dir(5) / "codebook.npz").is_file()
     assert json.loads((job.pose_dir(8) / "config.json").read_text())["config"] == "robust"
-    assert len(list((job.out / "overlays" / "aae+keypointnet_robust@8_detections").glob("*.png"))) == 105  # one per real frame
+    assert len(list((job.out / "overlays" / "aae+keypointnet_robust@8_detections").glob("*.png"))) == 105  # one per
+                                                                                                           # real frame
     assert (job.out / "overlays" / "aae+keypointnet_robust@8_gt.png").is_file() and (job.out / "report.md").is_file()
 
 

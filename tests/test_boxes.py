@@ -163,7 +163,8 @@ def test_prior_boxes_on_a_rectangular_input_match_a_brute_force_loop():
                 cx, cy = (col + 0.5) * step_x, (row + 0.5) * step_y
                 shapes = [(low, low), (np.sqrt(low * high),) * 2]
                 for ratio in extra:
-                    shapes += [(low * np.sqrt(ratio), low / np.sqrt(ratio)), (low / np.sqrt(ratio), low * np.sqrt(ratio))]
+                    shapes += [(low * np.sqrt(ratio), low / np.sqrt(ratio)),
+                               (low / np.sqrt(ratio), low * np.sqrt(ratio))]
                 expected += [(cx / width, cy / height, w / width, h / height) for w, h in shapes]
     priors = boxes.prior_boxes((width, height), maps, steps, mins, maxs, ratios, clip_to_image=False)
     np.testing.assert_allclose(priors, expected, atol=1e-12)

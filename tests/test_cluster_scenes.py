@@ -66,7 +66,8 @@ def _config(shared_data, out, **overrides) -> GenerationConfig:
 
 
 def test_clustered_scenes_overlap_in_the_image_and_hide_more(shared_data, tmp_path):
-    plain, clustered = _config(shared_data, tmp_path / "plain"), _config(shared_data, tmp_path / "clustered", cluster=1.0)
+    plain, clustered = _config(shared_data, tmp_path / "plain"), _config(shared_data, tmp_path / "clustered",
+                                                                         cluster=1.0)
     assert _overlapping_pairs(clustered) >= 2 * max(_overlapping_pairs(plain), 5)
     visible = {}
     for name, config in (("plain", plain), ("clustered", clustered)):

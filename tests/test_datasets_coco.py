@@ -32,7 +32,8 @@ def _compare_with_pycocotools(samples, reference: COCO, indices, with_masks: boo
         assert sample.extras["image_id"] == image_id
         assert sample.extras["annotation_ids"] == [a["id"] for a in annotations]
         expected = np.array([a["bbox"] for a in annotations], dtype=np.float64).reshape(-1, 4)
-        np.testing.assert_array_equal(sample.boxes, np.concatenate([expected[:, :2], expected[:, :2] + expected[:, 2:]], 1))
+        np.testing.assert_array_equal(sample.boxes,
+                                      np.concatenate([expected[:, :2], expected[:, :2] + expected[:, 2:]], 1))
         assert sample.extras["category_ids"].tolist() == [a["category_id"] for a in annotations]
         assert [categories[i] for i in sample.class_ids] == [a["category_id"] for a in annotations]
         assert sample.class_names == [reference.cats[a["category_id"]]["name"] for a in annotations]
@@ -140,7 +141,8 @@ def _broken(tmp_path: Path, change) -> Path:
 @pytest.mark.parametrize("change, message", [
     (lambda d: d["annotations"][1].pop("bbox"), r"annotations\[1\] \(id 12\), field 'bbox': missing"),
     (lambda d: d["annotations"][2].update(bbox=[1, 2, "3", 4]), r"annotations\[2\] \(id 13\), field 'bbox': expected"),
-    (lambda d: d["annotations"][0].update(category_id=99), r"annotations\[0\] \(id 11\), field 'category_id': unknown category 99"),
+    (lambda d: d["annotations"][0].update(category_id=99),
+     r"annotations\[0\] \(id 11\), field 'category_id': unknown category 99"),
     (lambda d: d["annotations"][0].update(image_id=5), r"annotations\[0\] \(id 11\), field 'image_id': 5 is not an id"),
     (lambda d: d["annotations"][3].update(iscrowd=2), r"annotations\[3\] \(id 14\), field 'iscrowd': expected 0 or 1"),
     (lambda d: d["images"][1].pop("height"), r"images\[1\] \(id 3\), field 'height': missing"),

@@ -45,7 +45,8 @@ def test_vectorised_reader_equals_the_row_by_row_reader(tmp_path):
     fast = fer2013._read_kaggle_layout(FIXTURE / "fer2013.csv")  # CRLF file: fast path
     assert fast is not None
     quoted = tmp_path / "quoted.csv"  # quotes send it to the csv module
-    quoted.write_text("\n".join(line if i == 0 else line.replace(",", ',"', 1).replace(",", '",', 2).replace('",', ",", 1)
+    quoted.write_text("\n".join(line if i == 0 else line.replace(",", ',"', 1).replace(",", '",', 2).replace('",', ",",
+                                                                                                             1)
                                 for i, line in enumerate(text.splitlines())) + "\n")
     assert fer2013._read_kaggle_layout(quoted) is None
     slow = fer2013.load_fer2013_csv(quoted)

@@ -17,7 +17,8 @@ FIXTURE = Path(__file__).parent / "data" / "datasets" / "voc" / "VOC2007"
 
 def plain_parse(path: Path) -> list[tuple[str, list[float], bool, bool]]:
     root = ElementTree.parse(path).getroot()
-    return [(obj.find("name").text, [float(obj.find("bndbox").find(tag).text) for tag in ("xmin", "ymin", "xmax", "ymax")],
+    return [(obj.find("name").text,
+             [float(obj.find("bndbox").find(tag).text) for tag in ("xmin", "ymin", "xmax", "ymax")],
              obj.find("difficult").text == "1", obj.find("truncated").text == "1") for obj in root.iter("object")]
 
 
@@ -113,7 +114,8 @@ def test_missing_folders_and_splits_are_reported(tmp_path):
         voc.load(tmp_path / "nowhere")
     with pytest.raises(ValueError, match="holds no VOC XML"):
         voc.load(tmp_path)
-    with pytest.raises(ValueError, match=r"split: .*test\.txt not found; the image sets of .* are \['dog_train', 'train', 'val'\]"):
+    with pytest.raises(ValueError,
+                       match=r"split: .*test\.txt not found; the image sets of .* are \['dog_train', 'train', 'val'\]"):
         voc.load(FIXTURE, "test")
     _write(tmp_path, "<annotation/>")
     with pytest.raises(ValueError, match="bare folder of XML files"):

@@ -115,7 +115,8 @@ def test_demo_keypoints_option_runs_the_keypoint_demo_on_the_demo_mesh(tmp_path,
 
     monkeypatch.setattr(demo, "run_demo", fake_run_demo)
     monkeypatch.setattr(keypoint_demo, "run_keypoint_demo",
-                        lambda out_dir, mesh_path, **options: calls.setdefault("keypoints", (out_dir, mesh_path, options)))
+                        lambda out_dir, mesh_path,
+                        **options: calls.setdefault("keypoints", (out_dir, mesh_path, options)))
     monkeypatch.setattr(ood_check, "run_check", lambda out, mesh_path, models, count, mesh_scale, workers:
                         calls.setdefault("ood", (models, count)) and {"chart": str(out / "ood_check.png")})
     args = build_parser().parse_args(["demo", "--out", str(tmp_path), "--test-images", "7", "--keypoints",

@@ -42,7 +42,8 @@ def _iou(a, b) -> float:
 
 def test_breakdown_of_hand_made_detections():
     truth = CocoGroundTruth.from_dict(_truth())
-    results = [{"image_id": image, "category_id": 1, "bbox": box, "score": score} for score, image, box, _ in DETECTIONS]
+    results = [{"image_id": image, "category_id": 1, "bbox": box, "score": score} for score, image, box,
+               _ in DETECTIONS]
     errors = detection_errors(truth, CocoDetections.from_list(results, truth))
     assert errors.category_names == ("class_1", "class_2")
     np.testing.assert_array_equal(errors.objects, [6, 1])
@@ -105,7 +106,8 @@ def test_evaluate_coco_errors_flag_writes_the_breakdown(tmp_path, capsys):
                  "--errors", "--plots", str(tmp_path / "plots")]) == 0
     confusion = tmp_path / "plots" / "coco_bbox_confusion.png"
     assert confusion.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert main(["evaluate", "coco", "--gt", str(truth), "--results", str(results), "--out", str(tmp_path / "p.json")]) == 0
+    assert main(["evaluate", "coco", "--gt", str(truth), "--results", str(results), "--out",
+                 str(tmp_path / "p.json")]) == 0
     assert "errors" not in json.loads((tmp_path / "p.json").read_text())
 
 
@@ -116,12 +118,14 @@ def test_confusion_matches_a_brute_force_loop():
                   "categories": [{"id": c, "name": n} for c, n in names.items()]}
     for index in range(30):
         x, y = rng.uniform(0, 60, 2)
-        truth_dict["annotations"].append({"id": index + 1, "image_id": int(index % 6), "category_id": int(rng.choice([1, 2, 5])),
+        truth_dict["annotations"].append({"id": index + 1, "image_id": int(index % 6),
+                                          "category_id": int(rng.choice([1, 2, 5])),
                                           "bbox": [x, y, 20, 20], "area": 400, "iscrowd": int(index == 7)})
     results = []
     for ann in truth_dict["annotations"] * 2:
         x, y, w, h = ann["bbox"]
-        results.append({"image_id": ann["image_id"], "category_id": int(rng.choice([1, 2, 5, 9])), "score": float(rng.random()),
+        results.append({"image_id": ann["image_id"], "category_id": int(rng.choice([1, 2, 5, 9])),
+                        "score": float(rng.random()),
                         "bbox": [x + rng.normal(0, 4), y + rng.normal(0, 4), w, h]})
     truth = CocoGroundTruth.from_dict(truth_dict)
     errors = detection_errors(truth, CocoDetections.from_list(results, truth))

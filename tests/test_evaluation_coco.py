@@ -301,7 +301,8 @@ def test_cli_writes_json_table_and_plots(tmp_path, capsys, iou_type):
     reference = pycocotools_eval(gt, results, iou_type)
     np.testing.assert_allclose(report["stats"], reference.stats, rtol=0, atol=TOLERANCE)
     assert report["stat_names"] == list(coco.STAT_NAMES)
-    assert report["per_class_ap"]["class9"] is None and set(report["per_class_ap"]) == {f"class{c}" for c in (1, 3, 4, 7, 9)}
+    assert report["per_class_ap"]["class9"] is None and set(report["per_class_ap"]) == {f"class{c}" for c in (1, 3, 4,
+                                                                                                              7, 9)}
     printed = capsys.readouterr().out
     assert "AP50" in printed and "class3" in printed
     for name in (f"coco_{iou_type}_pr.png", f"coco_{iou_type}_ap_per_class.png"):

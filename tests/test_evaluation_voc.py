@@ -36,7 +36,8 @@ def test_test_case_1_matches_published_ap(shared_data, method, iou):
 def test_toyexample_cat_matches_published_ap(shared_data, method, iou, folder_name, box_format):
     folder = shared_data / "voc"
     expected = json.loads((folder / "expected_ap.json").read_text())["toyexample"]
-    result = voc.evaluate_directories(folder / "toyexample" / "gts_vocpascal_format", folder / "toyexample" / folder_name,
+    result = voc.evaluate_directories(folder / "toyexample" / "gts_vocpascal_format",
+                                      folder / "toyexample" / folder_name,
                                       float(iou), method, box_format=box_format)
     record = result.per_class["cat"]
     assert (record.ground_truth_count, record.detection_count) == (expected["n_gt"], expected["n_det"])
@@ -146,7 +147,8 @@ def write_random_case(rng, folder):
             truth["b" if cls == "a" else "a"].setdefault(name, [])
             for _ in range(rng.integers(0, 3)):
                 jitter = rng.integers(-6, 7, 4)
-                det_box = [box[0] + jitter[0], box[1] + jitter[1], box[2] + abs(jitter[2]) + 1, box[3] + abs(jitter[3]) + 1]
+                det_box = [box[0] + jitter[0], box[1] + jitter[1], box[2] + abs(jitter[2]) + 1,
+                           box[3] + abs(jitter[3]) + 1]
                 score = float(rng.choice([0.3, 0.5, 0.7, 0.9]))
                 det_lines.append(f"{cls} {score} {' '.join(f'{v:g}' for v in det_box)}")
                 found[cls].append((name, score, det_box))

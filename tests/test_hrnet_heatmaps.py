@@ -20,7 +20,8 @@ def test_quadratic_decoding_recovers_sub_pixel_gaussian_centres(u, v, sigma, str
     maps = _maps([[u, v], [v, u]], size, stride, sigma)
     if domain == "log":  # logits up to a constant: the Gaussian's exponent (its exp underflows far away)
         centres = cell_centres(size, stride)
-        heatmaps = np.stack([-(((centres[None, :] - a) ** 2 + (centres[:, None] - b) ** 2) / (2 * (sigma * stride) ** 2))
+        heatmaps = np.stack([-(((centres[None, :] - a) ** 2 + (centres[:, None] - b) ** 2)
+                               / (2 * (sigma * stride) ** 2))
                              for a, b in ([u, v], [v, u])], axis=-1)[None] - 3.0
     else:
         heatmaps = maps

@@ -162,4 +162,5 @@ def test_imports_inside_functions_only_defer_heavy_libraries():
             statements.setdefault(line, []).append(name)
         needless += [f"{path.relative_to(ROOT)}:{line} {', '.join(names)}" for line, names in statements.items()
                      if not any(loads_heavy_library(name, paths, set()) for name in names)]
-    assert not needless, "imports inside functions that defer nothing heavy (move them to the top):\n" + "\n".join(needless)
+    assert not needless, ("imports inside functions that defer nothing heavy (move them to the top):\n"
+                          + "\n".join(needless))

@@ -209,5 +209,6 @@ def test_orientation_flag_on_the_command_line(tmp_path, capsys):
     from paz6d.assets.demo_object import write_demo_object
 
     ply = write_demo_object(tmp_path / "mesh")
-    assert main(["train", "keypointnet", "--mesh", str(ply), "--out", str(tmp_path / "r"), "--orientation-network"]) == 2
+    assert main(["train", "keypointnet", "--mesh", str(ply), "--out", str(tmp_path / "r"),
+                 "--orientation-network"]) == 2
     assert "exactly one discrete symmetry" in capsys.readouterr().err

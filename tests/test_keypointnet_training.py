@@ -230,7 +230,8 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
         image = np.random.default_rng(0).integers(0, 256, (120, 160, 3), dtype=np.uint8)
         assert len(estimator.detect(image, (60, 40, 100, 80))) == 6
         # resuming continues from the last checkpoint up to the new total (and lifts keypoints again)
-        resumed = train_keypointnet(KeypointTraining(job.out, mesh_path, mesh_scale=1e-3, mode=mode, workers=0, steps=50,
+        resumed = train_keypointnet(KeypointTraining(job.out, mesh_path, mesh_scale=1e-3, mode=mode, workers=0,
+                                                     steps=50,
                                                      progress=False, overrides=TINY))
         assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
 
@@ -241,7 +242,8 @@ def test_the_robust_preset_trains_on_photos_and_mixed_lights(mesh_path, tmp_path
 
     collages = []
     real_collage = kv.photo_collage
-    monkeypatch.setattr(kv, "photo_collage", lambda *args, **kwargs: collages.append(1) or real_collage(*args, **kwargs))
+    monkeypatch.setattr(kv, "photo_collage", lambda *args,
+                        **kwargs: collages.append(1) or real_collage(*args, **kwargs))
     job = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, config="robust", seed=0, workers=0, steps=4,
                            progress=False, overrides=TINY)
     assert job.settings()["augmentation"] == CONFIGS["robust"]["augmentation"]
@@ -251,7 +253,8 @@ def test_the_robust_preset_trains_on_photos_and_mixed_lights(mesh_path, tmp_path
     assert config["settings"]["augmentation"] == {"photos": 0.5, "background_noise": 40.0}
     crops = 4 * 2 * TINY["pairs"]  # steps x the two views of each pair
     assert 0.25 * crops < len(collages) < 0.75 * crops  # about half of the training crops over photo collages
-    assert {key: value for key, value in CONFIGS["robust"].items() if key not in ("steps", "lighting", "augmentation")} \
+    assert {key: value for key,
+            value in CONFIGS["robust"].items() if key not in ("steps", "lighting", "augmentation")} \
         == {key: value for key, value in CONFIGS["quick"].items() if key != "steps"}  # the quick network
 
 

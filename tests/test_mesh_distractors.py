@@ -86,7 +86,8 @@ def test_config_checks_the_new_fields(lmo_mesh, tmp_path):
         with pytest.raises(ValueError, match=r"neutral_distractors: expected a share in \[0, 1\]"):
             _config(lmo_mesh, tmp_path, neutral_distractors=share)
     assert "object_colored_distractors" not in _config(lmo_mesh, tmp_path).fingerprint()
-    assert _config(lmo_mesh, tmp_path, object_colored_distractors=0.5).fingerprint()["object_colored_distractors"] == 0.5
+    assert _config(lmo_mesh, tmp_path,
+                   object_colored_distractors=0.5).fingerprint()["object_colored_distractors"] == 0.5
     for share in (-0.1, 1.5, float("nan")):
         with pytest.raises(ValueError, match=r"object_colored_distractors: expected a share in \[0, 1\]"):
             _config(lmo_mesh, tmp_path, object_colored_distractors=share)

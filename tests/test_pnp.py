@@ -134,7 +134,8 @@ def test_weighted_pnp_beats_unweighted_on_heteroscedastic_noise():
         weighted_errors.append(np.linalg.norm(weighted.translation - T[:3, 3]))
         assert weighted.count == 16 and len(weighted.inliers) == 16
     # measured: median 7.9 mm vs 16.5 mm translation error; weighted better in 33 of the 40 cases
-    assert np.median(weighted_errors) < 0.7 * np.median(plain_errors), (np.median(weighted_errors), np.median(plain_errors))
+    assert np.median(weighted_errors) < 0.7 * np.median(plain_errors), (np.median(weighted_errors),
+                                                                        np.median(plain_errors))
     assert np.mean(np.array(weighted_errors) < np.array(plain_errors)) >= 0.7
 
 

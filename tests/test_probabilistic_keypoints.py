@@ -37,7 +37,8 @@ def test_gaussian_nll_matches_hand_computed_values():
     expected = 0.5 * r @ np.linalg.solve(sigma, r) + 0.5 * math.log(np.linalg.det(sigma)) + LOG_2PI
     assert float(gaussian_nll([[[0.0, 0.0]]], [[L]], [[r]])) == pytest.approx(expected, rel=1e-5)
     # weights: only the second keypoint counts
-    terms = np.asarray(gaussian_nll_terms(np.zeros((1, 2, 2)), np.tile(np.eye(2), (1, 2, 1, 1)), [[[1.0, 0], [2.0, 0]]]))
+    terms = np.asarray(gaussian_nll_terms(np.zeros((1, 2, 2)), np.tile(np.eye(2), (1, 2, 1, 1)),
+                                          [[[1.0, 0], [2.0, 0]]]))
     weighted = gaussian_nll(np.zeros((1, 2, 2)), np.tile(np.eye(2), (1, 2, 1, 1)), [[[1.0, 0], [2.0, 0]]], [[0.0, 1.0]])
     assert float(weighted) == pytest.approx(terms[0, 1], rel=1e-6)
     np.testing.assert_allclose(covariance_from_cholesky(L), sigma)
@@ -197,7 +198,8 @@ def test_render_train_evaluate_and_estimate_end_to_end(tmp_path):
 
     mesh = write_demo_object(tmp_path / "mesh")
     out = tmp_path / "run"
-    overrides = {"views": 40, "validation_views": 16, "test_images": 8, "lift_images": 6, "filters": 8, "input_size": 64,
+    overrides = {"views": 40, "validation_views": 16, "test_images": 8, "lift_images": 6, "filters": 8,
+                 "input_size": 64,
                  "num_keypoints": 6, "dilations": (1, 2), "pairs": 2, "checkpoint_every": 10, "sample_every": 10,
                  "precision": "float32"}
     job = ProbabilisticTraining(mesh=mesh, mesh_scale=0.001, out=out, steps=20, workers=1, progress=False,

@@ -25,7 +25,8 @@ def _grey_sphere() -> trimesh.Trimesh:
 def test_roughness_makes_a_highlight_metal_darkens_the_diffuse_and_none_restores_the_mesh_own():
     sphere, T = _grey_sphere(), np.eye(4)
     T[2, 3] = 0.5
-    lighting = Lighting(ambient=(0.1, 0.1, 0.1), lights=(Light("directional", intensity=3.0, direction=(0.3, 0.3, 1.0)),))
+    lighting = Lighting(ambient=(0.1, 0.1, 0.1),
+                        lights=(Light("directional", intensity=3.0, direction=(0.3, 0.3, 1.0)),))
     with Renderer(128, 128) as renderer:
         def grey(materials):
             out = renderer.render(K, [(sphere, T)], lighting=lighting, materials=materials)

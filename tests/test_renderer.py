@@ -409,7 +409,8 @@ def test_edge_antialiasing_estimates_pixel_coverage(angle, gain):
     np.testing.assert_array_equal(soft.alpha[~near], 0)  # coverage spreads one pixel at most
     outside_ring = (soft.alpha > 0) & ~hard.masks[0]  # the pixels added outside the binary outline
     assert outside_ring.sum() > 50
-    np.testing.assert_array_equal(soft.rgb[outside_ring], np.broadcast_to(hard.rgb[interior][0], (outside_ring.sum(), 3)))
+    np.testing.assert_array_equal(soft.rgb[outside_ring],
+                                  np.broadcast_to(hard.rgb[interior][0], (outside_ring.sum(), 3)))
 
 
 def test_edge_antialiasing_of_an_axis_aligned_edge():

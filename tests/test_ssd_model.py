@@ -160,7 +160,8 @@ def test_an_any_size_light_model_runs_on_whole_images_with_priors_of_their_shape
         rows, cols = light_feature_maps(height, width)[0]
         assert (rows, cols) == (height // 8, width // 8)
         # first cell of the first map: centre (4, 4) pixels; sides stay the trained ones in pixels
-        np.testing.assert_allclose(priors[0] * [width, height, width, height], [4, 4, spec.min_sizes[0], spec.min_sizes[0]])
+        np.testing.assert_allclose(priors[0] * [width, height, width, height],
+                                   [4, 4, spec.min_sizes[0], spec.min_sizes[0]])
     loaded = load_ssd(save_ssd(model, tmp_path / "any.keras"), spec, 3)
     np.testing.assert_allclose(np.asarray(loaded(np.ones((1, 128, 192, 3), np.float32))),
                                np.asarray(model(np.ones((1, 128, 192, 3), np.float32))), atol=1e-5)

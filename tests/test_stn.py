@@ -92,7 +92,8 @@ def test_gradients_to_theta_and_image_match_finite_differences(image):
         for column in range(3):
             delta = np.zeros((1, 2, 3))
             delta[0, row, column] = step
-            numeric[row, column] = (objective(theta + delta, images) - objective(theta - delta, images)).numpy() / (2 * step)
+            numeric[row, column] = (objective(theta + delta, images) - objective(theta - delta,
+                                                                                 images)).numpy() / (2 * step)
     np.testing.assert_allclose(gradient[0], numeric, rtol=1e-4, atol=1e-6)
     # the sampler is linear in the image: its gradient is the sampler's adjoint applied to the weights
     probe = np.random.default_rng(2).random(image[:1].shape)

@@ -49,7 +49,8 @@ def _assets() -> _Assets:
     meshes[1].apply_translation((0.0, 0.0, 0.05))  # an origin away from the base, as scanned models have
     distractors = distractor_library(0.08)
     centres = np.array([0.5 * (m.vertices.min(0) + m.vertices.max(0)) for m in meshes])
-    return _Assets(meshes, centres, np.array([np.linalg.norm(m.vertices - c, axis=1).max() for m, c in zip(meshes, centres)]),
+    return _Assets(meshes, centres,
+                   np.array([np.linalg.norm(m.vertices - c, axis=1).max() for m, c in zip(meshes, centres)]),
                    [hull_points(np.asarray(m.vertices)) for m in meshes], distractors,
                    np.array([np.linalg.norm(d.vertices, axis=1).max() for d in distractors]),
                    [hull_points(np.asarray(d.vertices)) for d in distractors])

@@ -56,7 +56,8 @@ def codebook_angles(in_plane: int) -> np.ndarray:
 
 
 def codebook_rotations(view_rotations, in_plane: int) -> np.ndarray:
-    """``(V * in_plane, 3, 3)`` rotations ``R_z(angle_k) @ R_view_v`` ordered view-major (index ``v * in_plane + k``)."""
+    """``(V * in_plane, 3, 3)`` rotations ``R_z(angle_k) @ R_view_v`` ordered view-major (index
+    ``v * in_plane + k``)."""
     view_rotations = as_array(view_rotations, "view_rotations", (3, 3))
     planes = in_plane_rotation(codebook_angles(in_plane))
     return np.einsum("kij,vjl->vkil", planes, view_rotations).reshape(-1, 3, 3)

@@ -217,6 +217,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     summary = {"steps": training.final_step, "resumed_from_step": training.start_step,
                "final_metrics": training.metrics, "loader_samples_per_second_one_thread": loader_speed,
                "model_samples_per_second": training.model_samples_per_second,
-               "precision": config.precision, "codebook_size": len(codebook), "dataset_pairs": 0 if pairs is None else len(pairs), **timings}
+               "precision": config.precision, "codebook_size": len(codebook),
+               "dataset_pairs": 0 if pairs is None else len(pairs), **timings}
     run_files.write_summary(run_dir, summary)
     return summary

@@ -183,7 +183,8 @@ class Pose6D:
         """Exact equality of all fields (quaternions are stored canonical, so ``q`` equals ``-q``)."""
         if not isinstance(other, Pose6D):
             return NotImplemented
-        return (np.array_equal(self.quaternion, other.quaternion) and np.array_equal(self.translation, other.translation)
+        return (np.array_equal(self.quaternion, other.quaternion) and np.array_equal(self.translation,
+                                                                                     other.translation)
                 and self.class_name == other.class_name and self.score == other.score)
 
     def to_dict(self) -> dict[str, Any]:

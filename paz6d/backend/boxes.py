@@ -41,7 +41,8 @@ MAX_BOX_TO_IMAGE = 4.0
 
 def move_box(box, moves) -> np.ndarray:
     """Copies of an xyxy ``box`` ``(4,)`` (pixels) moved by ``moves`` ``(V, 3)`` rows of ``(dx, dy, scale)``: the
-    centre shifted by ``dx`` × its width and ``dy`` × its height, the sides scaled by ``scale`` about it -> ``(V, 4)``."""
+    centre shifted by ``dx`` × its width and ``dy`` × its height, the sides scaled by ``scale`` about it ->
+    ``(V, 4)``."""
     x_min, y_min, x_max, y_max = np.asarray(box, dtype=np.float64)
     width, height = x_max - x_min, y_max - y_min
     dx, dy, scale = np.asarray(moves, dtype=np.float64).T
@@ -265,7 +266,8 @@ def prior_boxes(image_size, feature_map_sizes: Sequence, steps: Sequence,
     lengths = {len(feature_map_sizes), len(steps), len(min_sizes), len(max_sizes), len(aspect_ratios)}
     if len(lengths) != 1:
         raise ValueError("feature_map_sizes/steps/min_sizes/max_sizes/aspect_ratios: expected one entry per "
-                         f"feature map, got lengths {[len(feature_map_sizes), len(steps), len(min_sizes), len(max_sizes), len(aspect_ratios)]}")
+                         f"feature map, got lengths "
+                         f"{[len(feature_map_sizes), len(steps), len(min_sizes), len(max_sizes), len(aspect_ratios)]}")
     width, height = _pair(image_size)
     if width <= 0 or height <= 0:
         raise ValueError(f"image_size: expected a positive size in pixels, got {image_size}")
@@ -274,7 +276,8 @@ def prior_boxes(image_size, feature_map_sizes: Sequence, steps: Sequence,
     for size, step, min_size, max_size, ratios in zip(feature_map_sizes, steps, min_sizes, max_sizes, aspect_ratios):
         rows, cols = (int(v) for v in _pair(size))
         grid_rows, grid_cols = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
-        centers = np.stack([grid_cols.ravel() + 0.5, grid_rows.ravel() + 0.5], axis=-1) * np.asarray(_pair(step)) / scale
+        centers = np.stack([grid_cols.ravel() + 0.5, grid_rows.ravel() + 0.5],
+                           axis=-1) * np.asarray(_pair(step)) / scale
         shapes = [(min_size, min_size), (np.sqrt(min_size * max_size),) * 2]
         for ratio in ratios:
             root = np.sqrt(ratio)

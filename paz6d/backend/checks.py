@@ -127,7 +127,8 @@ def as_camera_matrix(value, name: str = "K") -> np.ndarray:
     if matrix.ndim != 2:
         raise ValueError(f"{name}: expected shape (3, 3), got {matrix.shape}")
     if matrix[0, 0] <= 0 or matrix[1, 1] <= 0 or not np.allclose(matrix[2], [0, 0, 1]):
-        raise ValueError(f"{name}: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {matrix.tolist()}")
+        raise ValueError(f"{name}: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got "
+                         f"{matrix.tolist()}")
     return matrix
 
 

@@ -227,7 +227,8 @@ def crop(image, box) -> np.ndarray:
         raise ValueError(f"image: expected (H, W) or (H, W, C), got shape {image.shape}")
     rows, columns = pixel_slices_from_box(box, image.shape)
     if rows.stop <= rows.start or columns.stop <= columns.start:
-        raise ValueError(f"box: {np.asarray(box).tolist()} covers no pixel of a {image.shape[1]}x{image.shape[0]} image")
+        raise ValueError(f"box: {np.asarray(box).tolist()} covers no pixel of a "
+                         f"{image.shape[1]}x{image.shape[0]} image")
     return image[rows, columns].copy()
 
 

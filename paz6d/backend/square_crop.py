@@ -45,7 +45,8 @@ def square_window(box, margin: float = 1.25) -> tuple[int, int, int]:
     """
     x_min, y_min, x_max, y_max = as_array(box, "box", (4,)).reshape(4)
     if x_max <= x_min or y_max <= y_min:
-        raise ValueError(f"box: expected a non-empty (x_min, y_min, x_max, y_max) box, got {[x_min, y_min, x_max, y_max]}")
+        raise ValueError(f"box: expected a non-empty (x_min, y_min, x_max, y_max) box, got "
+                         f"{[x_min, y_min, x_max, y_max]}")
     if not np.isfinite(margin) or margin <= 0:
         raise ValueError(f"margin: expected a positive factor, got {margin}")
     side = max(1, int(round(margin * max(x_max - x_min, y_max - y_min))))

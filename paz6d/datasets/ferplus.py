@@ -149,7 +149,8 @@ def load(root_or_csv: str | Path, split: str | None = None, fer2013_csv: str | P
     differ = np.flatnonzero(usage != fer_usage)
     if len(differ):
         row = int(differ[0])
-        raise ValueError(f"{votes_path}, line {row + 2}, field Usage: {str(usage[row])!r} but line {row + 2} of {pixels_path} "
+        raise ValueError(f"{votes_path}, line {row + 2}, field Usage: {str(usage[row])!r} but line {row + 2} of "
+                         f"{pixels_path} "
                          f"says {str(fer_usage[row])!r}; are the files from the same FER-2013 release?")
     keep, targets = targets_from_votes(votes, label_mode, drop_single_votes)
     if usage_value is not None:

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import csv
 import io
-import struct
 from array import array
 from pathlib import Path
 
@@ -38,6 +37,7 @@ import numpy as np
 
 from paz6d.backend.files import read_input_text
 from paz6d.backend.image import image_size_from_header
+from paz6d.backend.paths import path_inside
 from paz6d.datasets.sample import Sample, SampleSequence
 
 BOX_COLUMNS = ("ImageID", "Source", "LabelName", "Confidence", "XMin", "XMax", "YMin", "YMax", "IsOccluded",
@@ -72,7 +72,8 @@ def find_files(root: str | Path, split: str) -> dict[str, Path | None]:
 def is_openimages_root(root: str | Path) -> bool:
     """Whether ``root`` holds an Open Images box CSV of some split."""
     root = Path(root)
-    return root.is_dir() and any(find_files(root, split)["boxes"] is not None for split in ("train", "validation", "test"))
+    return root.is_dir() and any(find_files(root, split)["boxes"] is not None for split in ("train", "validation",
+                                                                                            "test"))
 
 
 def _rows(path: Path, what: str) -> list[list[str]]:
@@ -98,7 +99,8 @@ def read_class_descriptions(path: str | Path) -> tuple[list[str], list[str]]:
             raise ValueError(f"{path}, line {line}: expected 'LabelName,DisplayName', got {','.join(row)!r}")
         labels.append(row[0].strip())
         names.append(row[1].strip())
-    duplicates = sorted({label for label in labels if labels.count(label) > 1}) if len(set(labels)) < len(labels) else []
+    duplicates = (sorted({label for label in labels if labels.count(label) > 1}) if len(set(labels)) < len(labels)
+                  else [])
     if duplicates:
         raise ValueError(f"{path}: field LabelName: {duplicates[:5]} listed more than once")
     return labels, names
@@ -169,7 +171,8 @@ def read_boxes(path: str | Path, label_index: dict[str, int]) -> dict:
             header = [cell.strip() for cell in next(reader, [])]
             missing = [column for column in BOX_COLUMNS if column not in header and column not in FLAG_COLUMNS]
             if not header or missing:
-                raise ValueError(f"{path}: header lacks {missing or list(BOX_COLUMNS)}; expected {','.join(BOX_COLUMNS)}")
+                raise ValueError(f"{path}: header lacks {missing or list(BOX_COLUMNS)}; expected "
+                                 f"{','.join(BOX_COLUMNS)}")
             at = {name: header.index(name) for name in header}
             numbers = [name for name in _NUMBERS if name in at]
             parts = {name: [] for name in numbers}
@@ -219,15 +222,20 @@ def read_boxes(path: str | Path, label_index: dict[str, int]) -> dict:
     columns = {name: np.concatenate(chunks) for name, chunks in parts.items()}
     count = len(rows_image)
     result = {"image_ids": image_ids, "sources": sources,
-              "image_codes": np.frombuffer(rows_image, dtype=np.int64), "class_ids": np.frombuffer(rows_class, dtype=np.int64),
+              "image_codes": np.frombuffer(rows_image, dtype=np.int64),
+              "class_ids": np.frombuffer(rows_class, dtype=np.int64),
               "source_codes": np.frombuffer(rows_source, dtype=np.int64), "confidence": columns["Confidence"],
-              "normalized": np.stack([columns[name] for name in ("XMin", "YMin", "XMax", "YMax")], axis=1).reshape(-1, 4)}
+              "normalized": np.stack([columns[name] for name in ("XMin", "YMin", "XMax", "YMax")], axis=1).reshape(-1,
+                                                                                                                   4)}
     for name in FLAG_COLUMNS:
         result[name] = columns[name].astype(np.int8) if name in columns else np.full(count, -1, dtype=np.int8)
     return result
 
 
-def _find_image(folder: Path, image_id: str) -> Path:
+def _find_image(folder: Path, image_id: str, where: str) -> Path:
+    """The image file of ``image_id`` in ``folder`` (``.jpg`` when none exists); ``ValueError`` naming
+    ``where`` for an id that would lead outside ``folder``."""
+    path_inside(folder, image_id + IMAGE_SUFFIXES[0], where)
     for suffix in IMAGE_SUFFIXES:
         if (folder / f"{image_id}{suffix}").is_file():
             return folder / f"{image_id}{suffix}"
@@ -254,7 +262,8 @@ def load(root: str | Path, split: str = "train", boxes_csv: str | Path | None = 
     classes_path = Path(classes_csv) if classes_csv is not None else found["classes"]
     if boxes_path is None:
         raise ValueError(f"root: no Open Images box CSV for split {split!r} in {root} (expected "
-                         f"{SPLITS.get(split, split)}-annotations-bbox.csv or oidv6-{SPLITS.get(split, split)}-annotations-bbox.csv)")
+                         f"{SPLITS.get(split, split)}-annotations-bbox.csv or "
+                         f"oidv6-{SPLITS.get(split, split)}-annotations-bbox.csv)")
     if classes_path is None:
         raise ValueError(f"root: no Open Images class-description CSV in {root} (expected one of {list(CLASS_FILES)})")
     image_folder = Path(images) if images is not None else found["images"]
@@ -269,7 +278,7 @@ def load(root: str | Path, split: str = "train", boxes_csv: str | Path | None = 
         image_id = order[position]
         rows = rows_by_image[starts[position]:starts[position + 1]]
         rows = rows[keep[rows]]
-        path = _find_image(image_folder, image_id)
+        path = _find_image(image_folder, image_id, f"{boxes_path}: ImageID {image_id!r:.60}")
         width, height = image_size_from_header(path)
         boxes = table["normalized"][rows] * np.array([width, height, width, height], dtype=np.float64)
         class_ids = table["class_ids"][rows]

@@ -176,7 +176,8 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
         for variant, from_box, crops in EVALUATIONS:
             metrics, poses = evaluate_keypoint_pose(run_dir, test, points, object_diameter, sampling.camera,
                                                     symmetric, depth_from_box=from_box, crops=crops)
-            curves[f"{mode}, {variant}"] = np.array([np.inf if value is None else value for value in metrics["errors_m"]])
+            curves[f"{mode}, {variant}"] = np.array([np.inf if value is None else value
+                                                     for value in metrics["errors_m"]])
             report["modes"][mode][variant] = {key: value for key, value in metrics.items() if key != "errors_m"}
             evaluations[variant] = metrics
             if variant == "pnp" and metrics["error"] is None:

@@ -84,7 +84,8 @@ class EmotionClassifier(Processor):
             raise ValueError(f"model_path: {path} is not a loadable Keras model ({error})") from error
         _, height, width, channels = self.model.input_shape
         if channels != 1:
-            raise ValueError(f"model_path: expected a grey-input model (N, H, W, 1), got input {self.model.input_shape}")
+            raise ValueError(f"model_path: expected a grey-input model (N, H, W, 1), got input "
+                             f"{self.model.input_shape}")
         self.input_size = (int(width), int(height))
         self.model_path = path
         self.class_names = _class_names_for(path, class_names, int(self.model.output_shape[-1]),

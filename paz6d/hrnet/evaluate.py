@@ -46,7 +46,8 @@ def score_keypoints(heatmaps, target, input_size: int, stride: int, domain: str,
         headline = curve[HEADLINE_ALPHA]
         scores[method] = {f"pck@{HEADLINE_ALPHA}": headline.pck,
                           "pck_curve": {str(alpha): result.pck for alpha, result in curve.items()},
-                          f"per_keypoint_pck@{HEADLINE_ALPHA}": [round(float(value), 4) for value in headline.per_keypoint],
+                          f"per_keypoint_pck@{HEADLINE_ALPHA}": [round(float(value),
+                                                                       4) for value in headline.per_keypoint],
                           "median_px": float(np.median(headline.distances)),
                           "mean_px": float(np.mean(headline.distances))}
         decoded[method] = uv

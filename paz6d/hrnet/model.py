@@ -51,7 +51,8 @@ def _check_arguments(num_keypoints: int, input_size: int, widths: Sequence[int],
                          f"for {len(widths)} branches, got {tuple(stage_modules)}")
     coarsest = STRIDE * 2 ** (len(widths) - 1)
     if input_size < coarsest or input_size % coarsest:
-        raise ValueError(f"input_size: expected a multiple of {coarsest} (the coarsest branch's stride), got {input_size}")
+        raise ValueError(f"input_size: expected a multiple of {coarsest} (the coarsest branch's stride), got "
+                         f"{input_size}")
     body_policy(compute_dtype)  # checks it
     if blocks < 1 or stem_width < 1 or stem_blocks < 0:
         raise ValueError(f"blocks/stem_width/stem_blocks: expected >= 1, >= 1, >= 0, got {blocks}, {stem_width}, "

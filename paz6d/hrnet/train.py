@@ -62,7 +62,8 @@ def _prepare_run_dir(job: HRNetTraining, settings: dict) -> dict:
     for key in FIXED_SETTINGS:
         if previous["settings"].get(key) != config["settings"][key]:
             raise ValueError(f"{path}: this run directory holds a different network ({key}="
-                             f"{previous['settings'].get(key)!r}, now {config['settings'][key]!r}); choose another --out")
+                             f"{previous['settings'].get(key)!r}, now {config['settings'][key]!r}); choose another "
+                             f"--out")
     if previous["settings"].get("steps") != settings["steps"]:
         previous["settings"]["steps"] = settings["steps"]  # extending (or shortening) a run is allowed
         run_files.write_config(job.out, previous)

@@ -281,7 +281,8 @@ class KeypointPose6D(SequentialProcessor):
         self.add(KeyedStep(ToKeypoints2D(self.class_name), ("points", "scores"), "keypoints", "to_keypoints2d",
                            per_sample=True))
         self.add(KeyedStep(KeypointPnP(self.points_model, ransac_threshold, self.input_size, min_keypoints,
-                                       weighted_pnp, self.class_name), ("keypoints", "windows", "cameras"), "poses", "solve_pnp",
+                                       weighted_pnp, self.class_name), ("keypoints", "windows", "cameras"), "poses",
+                           "solve_pnp",
                            per_sample=True, failures=(PnPError,)))
         if depth_from_box:
             self.add(KeyedStep(DepthFromBox(self.hull_points), ("poses", "boxes", "cameras"), "poses",

@@ -150,7 +150,8 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
             separation = kp.separation_loss(points, settings.get("separation_delta", SEPARATION_DELTA))
             silhouette = kp.silhouette_loss(outputs["probabilities"], batch["masks"])
             variance = kp.variance_loss(outputs["probabilities"], uv_unit, grid_unit)
-            separation_image = kp.separation_loss(uv_unit, settings.get("separation_delta_image", SEPARATION_DELTA_IMAGE))
+            separation_image = kp.separation_loss(uv_unit,
+                                                  settings.get("separation_delta_image", SEPARATION_DELTA_IMAGE))
             terms = {"consistency": consistency, "pose": pose, "separation": separation,
                      "separation_image": separation_image, "silhouette": silhouette, "variance": variance}
             weights = {**DISCOVERY_WEIGHTS, **settings.get("discovery_weights", {})}
@@ -380,9 +381,11 @@ class AnchorSource:
             return triangulate_keypoints(uv, K, T)[0]
         if method != "modes":
             raise ValueError(f"anchor_lifting: expected 'modes' or 'triangulate', got {method!r}")
-        depth = np.asarray(outputs["depth"], np.float64) * self.diameter * K[:, 0:1, 0] / int(self.settings["input_size"])
+        depth = np.asarray(outputs["depth"],
+                           np.float64) * self.diameter * K[:, 0:1, 0] / int(self.settings["input_size"])
         delta = float(self.settings.get("separation_delta", SEPARATION_DELTA)) * self.diameter
-        return spread_modes(per_view_points(uv, depth, K, T), float(self.settings.get("anchor_radius", 0.1)) * self.diameter,
+        return spread_modes(per_view_points(uv, depth, K, T),
+                            float(self.settings.get("anchor_radius", 0.1)) * self.diameter,
                             delta)
 
 
@@ -441,8 +444,10 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         return lambda: render_views(job.mesh, count, seed, sampling, job.mesh_scale, job.workers,
                                     progress=job.progress)
 
-    train_views = views if views is not None else cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
-    validation_views = cached_views(run_files.views_path(out, "val"), render(settings["validation_views"], job.seed + 10_000))
+    train_views = views if views is not None else cached_views(run_files.views_path(out, "train"),
+                                                               render(settings["views"], job.seed))
+    validation_views = cached_views(run_files.views_path(out, "val"),
+                                    render(settings["validation_views"], job.seed + 10_000))
     render_seconds = time.perf_counter() - started
 
     keypoints_model = None
@@ -499,9 +504,9 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
 
     if views is None:  # rendered views: lift from unseen whole images cropped as at inference
         lifting_crops = _cached_lifting_crops(
-            run_files.views_path(out, "lift"), lambda: render_test_images(job.mesh, settings["lift_views"], job.seed + 20_000,
-                                                               sampling, job.mesh_scale, job.workers,
-                                                               progress=job.progress),
+            run_files.views_path(out, "lift"),
+            lambda: render_test_images(job.mesh, settings["lift_views"], job.seed + 20_000, sampling,
+                                       job.mesh_scale, job.workers, progress=job.progress),
             sampling.camera.K, sampling.margin, settings["input_size"])
     else:  # crops cut from a data set's images: already made as at inference
         lifting_crops = fixed_crops(train_views, job.seed + 1, settings["lift_views"])

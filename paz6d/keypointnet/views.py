@@ -206,7 +206,8 @@ def _render_crops(state: _ViewRenderer, indices: list[int], seed: int, sampling:
     """Renders each view's crop window at about its resolution in the camera image, then resamples it
     to ``input_size`` with :func:`crop_square`, exactly as test crops are cut from whole images."""
     size = sampling.input_size
-    out = {"rgb": np.zeros((len(indices), size, size, 3), np.uint8), "alpha": np.zeros((len(indices), size, size), np.uint8),
+    out = {"rgb": np.zeros((len(indices), size, size, 3), np.uint8),
+           "alpha": np.zeros((len(indices), size, size), np.uint8),
            "masks": np.zeros((len(indices), size, size), bool), "K": np.zeros((len(indices), 3, 3)),
            "T_model2cam": np.zeros((len(indices), 4, 4))}
     for row, index in enumerate(indices):
@@ -438,7 +439,8 @@ def pair_partners(rotations: np.ndarray, first: np.ndarray, rng: np.random.Gener
 
 
 def training_batch(views: ViewSet, rng: np.random.Generator, pairs: int, downsample: int,
-                   augmentation: Augmentation = Augmentation(), max_angle: float | None = None) -> dict[str, np.ndarray]:
+                   augmentation: Augmentation = Augmentation(),
+                   max_angle: float | None = None) -> dict[str, np.ndarray]:
     """A batch of ``pairs`` view pairs ``(a, b)`` of the object, views A first then views B; with
     ``max_angle`` (degrees) the two views of a pair differ by at most that rotation
     (:func:`pair_partners`).

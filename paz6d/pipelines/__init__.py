@@ -23,7 +23,8 @@ from paz6d.segmentation.pipeline import DetectAndSegment, SegmentInstances
 from paz6d.ssd.pipeline import DetectSingleShot
 from paz6d.stn.pipeline import ClassifyDigit
 
-__all__ = ["DetectAndEstimatePose6D", "DetectEmotion", "DetectSingleShot", "EmotionClassifier", "HaarCascadeDetector", "HeadPose6D", "HRNetKeypoints2D", "HRNetPose6D",
+__all__ = ["DetectAndEstimatePose6D", "DetectEmotion", "DetectSingleShot", "EmotionClassifier", "HaarCascadeDetector",
+           "HeadPose6D", "HRNetKeypoints2D", "HRNetPose6D",
            "ImplicitPose6D",
            "KeypointPose6D", "available_cascades", "draw_axes", "yaw_pitch_roll_degrees"]
 __all__ += ["ClassifyDigit", "ProbabilisticKeypointPose6D"]

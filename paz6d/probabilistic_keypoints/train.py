@@ -6,7 +6,8 @@ Data comes from :mod:`paz6d.keypointnet.views` (rendered in its spawn workers, c
 backgrounds, colour jitter); each training crop is also covered, with probability ``train_occlusion``, by
 flat polygons (:class:`paz6d.synthesis.occluders.PolygonOccluders`), so the network sees keypoints it
 cannot see and can learn to be unsure about them. Loss: KeypointNet's supervised heatmap cross-entropy +
-coordinate loss + depth-code loss, plus ``nll_weight`` × the Gaussian NLL (:func:`~paz6d.probabilistic_keypoints.model.gaussian_nll`,
+coordinate loss + depth-code loss, plus ``nll_weight`` × the Gaussian NLL
+(:func:`~paz6d.probabilistic_keypoints.model.gaussian_nll`,
 crop pixels) of the projected farthest-point keypoints.
 
 After training, one scale factor of the covariances is fitted on held-out validation views (the
@@ -108,7 +109,8 @@ def _loss_function(settings: dict, keypoints_model: np.ndarray, object_diameter:
         loss = (SUPERVISED_WEIGHTS["heatmap"] * heatmap + SUPERVISED_WEIGHTS["coordinates"] * coordinates
                 + SUPERVISED_WEIGHTS["depth"] * depth + float(settings["nll_weight"]) * nll)
         pixel_error = tf.reduce_mean(tf.norm(outputs["uv"] - target_uv, axis=-1))
-        return {"loss": loss, "heatmap": heatmap, "coordinates": coordinates, "depth": depth, "nll": nll, "pixel_error": pixel_error}
+        return {"loss": loss, "heatmap": heatmap, "coordinates": coordinates, "depth": depth, "nll": nll,
+                "pixel_error": pixel_error}
 
     return loss_fn
 
@@ -204,15 +206,18 @@ def evaluate_run(model, points_model: np.ndarray, targets: np.ndarray, covarianc
         sigma = np.sqrt(np.linalg.eigvalsh(covariance_scale * covariances)[..., -1])
         report[name] = {
             "calibration_raw": raw.to_dict(), "calibration_scaled": scaled.to_dict(),
-            "keypoint_error_px": {"median": round(float(np.median(errors)), 3), "mean": round(float(np.mean(errors)), 3)},
+            "keypoint_error_px": {"median": round(float(np.median(errors)), 3),
+                                  "mean": round(float(np.mean(errors)), 3)},
             "largest_sigma_px_median": round(float(np.median(sigma)), 3),
             "error_sigma_spearman": round(_spearman(errors.ravel(), sigma.ravel()), 3),
             "pnp": score_poses(pnp_poses(points_model, means, covariances, crops["K"], False), crops["T_model2cam"],
                                vertices, object_diameter),
-            "weighted_pnp": score_poses(pnp_poses(points_model, means, covariance_scale * covariances, crops["K"], True),
+            "weighted_pnp": score_poses(pnp_poses(points_model, means, covariance_scale * covariances, crops["K"],
+                                                  True),
                                         crops["T_model2cam"], vertices, object_diameter)}
         if examples is not None and name == "occluded":
-            draw_gaussians(images[:EXAMPLE_COUNT], means[:EXAMPLE_COUNT], covariance_scale * covariances[:EXAMPLE_COUNT],
+            draw_gaussians(images[:EXAMPLE_COUNT], means[:EXAMPLE_COUNT],
+                           covariance_scale * covariances[:EXAMPLE_COUNT],
                            examples)
     if png is not None:
         plot_calibration(curves, png, "probabilistic keypoints: held-out test crops")
@@ -323,8 +328,10 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
         return batch
 
     sample_images = fixed_crops(validation_views, job.seed, 8)[0]
-    trainer = Trainer(model, optimizer, _loss_function(settings, keypoints_model, object_diameter), make_batch, out, settings["steps"],
-                      checkpoint_every=settings["checkpoint_every"], log_every=10, sample_every=settings["sample_every"],
+    trainer = Trainer(model, optimizer, _loss_function(settings, keypoints_model, object_diameter), make_batch, out,
+                      settings["steps"],
+                      checkpoint_every=settings["checkpoint_every"], log_every=10,
+                      sample_every=settings["sample_every"],
                       sample_callback=_sample_drawer(sample_images), progress=job.progress, prefetch=1)
     previous_metrics = run_files.read_metrics(out)
     training = trainer.fit()
@@ -358,7 +365,8 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
                "evaluation": {name: {"calibration_scaled": evaluation[name]["calibration_scaled"]["observed"],
                                      "calibration_raw": evaluation[name]["calibration_raw"]["observed"],
                                      "pnp_add_recall_0.1d": evaluation[name]["pnp"]["add_recall_0.1d"],
-                                     "weighted_pnp_add_recall_0.1d": evaluation[name]["weighted_pnp"]["add_recall_0.1d"]}
+                                     "weighted_pnp_add_recall_0.1d":
+                                         evaluation[name]["weighted_pnp"]["add_recall_0.1d"]}
                               for name in ("clean", "occluded")}}
     run_files.write_json(out, run_files.METRICS_FILE, summary)
     return summary

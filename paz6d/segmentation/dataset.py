@@ -81,7 +81,8 @@ def load_mask_set(root: str | Path, split: str = "train", min_visible_fraction: 
             if obj.info is None or "bbox_visib" not in obj.info:
                 raise ValueError(f"{where}, instance {number}: scene_gt_info.json lacks bbox_visib")
             if obj.mask_visib is None:
-                raise ValueError(f"{where}, instance {number}: mask_visib/{sample.im_id:06d}_{number:06d}.png not found")
+                raise ValueError(f"{where}, instance {number}: "
+                                 f"mask_visib/{sample.im_id:06d}_{number:06d}.png not found")
             x, y, w, h = (int(value) for value in obj.info["bbox_visib"])
             visible = float(obj.info.get("visib_fract", 1.0))
             if w < 2 or h < 2 or visible < min_visible_fraction:
@@ -93,7 +94,8 @@ def load_mask_set(root: str | Path, split: str = "train", min_visible_fraction: 
                                           np.ascontiguousarray(obj.mask_visib[y:y + h, x:x + w]), (x, y),
                                           sample.scene_id, sample.im_id, visible))
     if not instances:
-        raise ValueError(f"{Path(root) / split}: no instance with a visible box (visib_fract >= {min_visible_fraction})")
+        raise ValueError(f"{Path(root) / split}: no instance with a visible box "
+                         f"(visib_fract >= {min_visible_fraction})")
     return MaskSet(images, instances, names)
 
 

@@ -68,7 +68,8 @@ def write_coco_files(segment, root: str | Path, split: str, out: str | Path, pro
     images, annotations, results, ious, tiles, obj_ids = [], [], [], [], [], set()
     for sample in tqdm(dataset, total=len(dataset), desc=f"segmenting {split}", disable=not progress, unit="image"):
         if sample.image is None:
-            raise ValueError(f"{Path(root) / split / f'{sample.scene_id:06d}'}: image {sample.im_id}: rgb image not found")
+            raise ValueError(f"{Path(root) / split / f'{sample.scene_id:06d}'}: image {sample.im_id}: rgb image not "
+                             f"found")
         height, width = sample.image.shape[:2]
         image_id = coco_image_id(sample.scene_id, sample.im_id)
         images.append({"id": image_id, "width": width, "height": height, "file_name": f"{sample.scene_id:06d}/"

@@ -33,7 +33,8 @@ def _prepare_run_dir(job: SegmentationTraining, settings: dict, class_names: tup
               "class_names": list(class_names), "settings": _jsonable(settings)}
     previous = run_files.read_config(job.out)
     if previous is not None:
-        changed = [key for key in ("dataset", "split", "config", "seed", "class_names") if previous.get(key) != config[key]]
+        changed = [key for key in ("dataset", "split", "config", "seed",
+                                   "class_names") if previous.get(key) != config[key]]
         changed += [key for key in FIXED_SETTINGS
                     if previous.get("settings", {}).get(key) != config["settings"].get(key)]
         if changed:

@@ -180,7 +180,8 @@ def samples_to_detection_set(samples: SampleSequence, source: str,
     for sample in samples:
         unknown = sorted(set(sample.class_names) - set(index))
         if unknown:
-            raise ValueError(f"{source}: image {sample.image}: unknown class(es) {unknown}; the classes are {list(names)}")
+            raise ValueError(f"{source}: image {sample.image}: unknown class(es) {unknown}; the classes are "
+                             f"{list(names)}")
         boxes = np.asarray(sample.boxes, dtype=np.float64).reshape(-1, 4)
         ids = np.array([index[name] for name in sample.class_names], dtype=np.int64)
         keep = np.all(boxes[:, 2:] > boxes[:, :2], axis=1)
@@ -238,7 +239,8 @@ def prepare_sample(sample: AnnotatedImage, input_size: int, priors: np.ndarray, 
     return image, encode_targets(boxes, sample.class_ids, priors, num_classes, iou_threshold)
 
 
-def training_batch(data: DetectionSet, augmentation: Callable[[], Callable] | None, seed: int, step: int, batch_size: int, input_size: int,
+def training_batch(data: DetectionSet, augmentation: Callable[[], Callable] | None, seed: int, step: int,
+                   batch_size: int, input_size: int,
                    priors: np.ndarray, iou_threshold: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Batch ``step``: ``images (B, S, S, 3)`` uint8 and ``targets (B, P, 4 + C)`` float32.
 

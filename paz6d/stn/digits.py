@@ -3,7 +3,8 @@
 Each sample is a square grey canvas (values in [0, 1]) holding one 8×8 digit of ``load_digits``
 enlarged to a random side (``scale`` pixels, bilinear) at a random position, over ``clutter``
 fragments: random ``fragment_size``-pixel square windows of *other* digits enlarged the same way,
-placed anywhere (composited with ``max``), as in Jaderberg et al.'s cluttered MNIST (6×6 pieces). The 1,797 digits are split once into train and test digits
+placed anywhere (composited with ``max``), as in Jaderberg et al.'s cluttered MNIST (6×6 pieces). The 1,797 digits are
+split once into train and test digits
 (``test_fraction``, seeded), and a split's canvases draw both the digit and the clutter from that
 split only, so no test digit is ever seen in training.
 
@@ -53,7 +54,8 @@ class DigitCanvas:
         if int(self.clutter) < 0:
             raise ValueError(f"clutter: expected a non-negative number of fragments, got {self.clutter}")
         if not 1 <= int(self.fragment_size) <= low:
-            raise ValueError(f"fragment_size: expected 1 to the smallest digit side {low} pixels, got {self.fragment_size}")
+            raise ValueError(f"fragment_size: expected 1 to the smallest digit side {low} pixels, got "
+                             f"{self.fragment_size}")
         if not 0.0 < self.test_fraction < 1.0:
             raise ValueError(f"test_fraction: expected a fraction in (0, 1), got {self.test_fraction}")
 
@@ -131,7 +133,8 @@ class ClutteredDigits:
             row, column = rng.integers(0, side - piece + 1, 2)
             top, left = rng.integers(0, size - piece + 1, 2)
             window = canvas[top:top + piece, left:left + piece]
-            canvas[top:top + piece, left:left + piece] = np.maximum(window, enlarged[row:row + piece, column:column + piece])
+            canvas[top:top + piece, left:left + piece] = np.maximum(window,
+                                                                    enlarged[row:row + piece, column:column + piece])
         side = int(round(rng.uniform(*self.settings.scale)))
         patch = cv2.resize(self.images[digit], (side, side), interpolation=cv2.INTER_LINEAR)
         top, left = rng.integers(0, size - side + 1, 2)

@@ -166,7 +166,8 @@ class RandomImageNoise(RandomProcessor):
 
 
 class RandomFlipLeftRight(RandomProcessor):
-    """Mirrors the image left-right with ``probability`` (images with boxes: :class:`~paz6d.synthesis.box_augment.RandomFlip`)."""
+    """Mirrors the image left-right with ``probability`` (images with boxes:
+    :class:`~paz6d.synthesis.box_augment.RandomFlip`)."""
 
     def __init__(self, probability: float = 0.5, seed=None, name: str | None = None):
         super().__init__(seed, name)

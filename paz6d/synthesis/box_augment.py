@@ -100,7 +100,8 @@ class WhiteBalance(RandomProcessor):
     def __init__(self, strength: float = 0.25, probability: float = 0.5, seed=None, name: str | None = None):
         super().__init__(seed, name)
         if not (np.isfinite(strength) and strength >= 0):
-            raise ValueError(f"strength: expected a gain change >= 0 (0.25 = red/blue gains up to 1.25x), got {strength}")
+            raise ValueError(f"strength: expected a gain change >= 0 (0.25 = red/blue gains up to 1.25x), got "
+                             f"{strength}")
         self.strength, self.probability = float(strength), float(probability)
 
     def call(self, sample: AnnotatedImage) -> AnnotatedImage:

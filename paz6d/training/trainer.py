@@ -464,8 +464,10 @@ class Trainer:
         if step == self.steps and getattr(self.optimizer, "use_ema", False):
             self.optimizer.finalize_variable_values(self.model.trainable_variables)
         return TrainingSummary(start_step=start_step, final_step=step, metrics=last_metrics,
-                               loader_samples_per_second=samples / data_seconds if samples and data_seconds > 0 else None,
-                               model_samples_per_second=samples / step_seconds if samples and step_seconds > 0 else None)
+                               loader_samples_per_second=(samples / data_seconds if samples and data_seconds > 0
+                                                          else None),
+                               model_samples_per_second=(samples / step_seconds if samples and step_seconds > 0
+                                                         else None))
 
     def _draw_sample(self, step: int) -> None:
         if not self.writes_files:

@@ -96,7 +96,8 @@ def bop_split_to_coco(root: str | Path, split: str = "test", min_visible_fractio
     if not images:
         raise ValueError(f"{folder}: no image to convert (scenes {scene_ids}; require_images={require_images})")
     obj_ids |= _model_ids(root)
-    categories = [{"id": obj_id, "name": category_name(obj_id), "supercategory": "object"} for obj_id in sorted(obj_ids)]
+    categories = [{"id": obj_id, "name": category_name(obj_id),
+                   "supercategory": "object"} for obj_id in sorted(obj_ids)]
     return {"info": {"description": f"BOP {root.name} {split}: visible boxes, visib_fract >= {min_visible_fraction}"},
             "images": images, "annotations": annotations, "categories": categories}
 
