@@ -242,7 +242,8 @@ def generation_config(job: Benchmark):
     return GenerationConfig(meshes=tuple(job.mesh(obj_id) for obj_id in job.objects), out=job.out / "synthetic",
                             num_images=job.settings.images, seed=job.seed, mesh_scale=0.001,
                             intrinsics=LMO_INTRINSICS, rotation="view-sphere", elevation_degrees=(15.0, 80.0),
-                            inplane_degrees=30.0, objects_per_image=(min(4, len(job.objects)), min(8, len(job.objects))),
+                            inplane_degrees=30.0,
+                            objects_per_image=(min(4, len(job.objects)), min(8, len(job.objects))),
                             distance=(0.75, 1.35), distractors=8, occluder_probability=0.3,
                             backgrounds=job.out / "backgrounds", rgb_format="jpg")
 
