@@ -23,6 +23,10 @@ import math
 import re
 from pathlib import Path
 
+from paz6d.backend.files import write_json_atomically
+from paz6d.backend.paths import check_outputs
+from paz6d.ssd import run_dir as ssd_run_dir
+
 FACES = ("haar", "emotion", "head-pose")
 #: The files written in ``--out``.
 VIDEO_FILE, RECORDS_FILE, SUMMARY_FILE = "annotated.mp4", "frames.jsonl", "summary.json"
@@ -100,7 +104,6 @@ def check_runs(detector: Path, runs: dict[int, Path]) -> None:
         ValueError: naming the flag and the run directory.
     """
     from paz6d.run_dirs import method_of
-    from paz6d.ssd import run_dir as ssd_run_dir
 
     found = method_of(detector)
     if found != "ssd":
@@ -149,9 +152,7 @@ def build_pipeline(args: argparse.Namespace, runs: dict[int, Path], camera):
 def run(args: argparse.Namespace) -> int:
     from paz6d.backend.camera import Camera
     from paz6d.backend.camera_file import read_camera_json
-    from paz6d.backend.files import write_json_atomically
     from paz6d.backend.frames import device_index, open_frames
-    from paz6d.backend.paths import check_outputs
     from paz6d.run_dirs import prepare_run_output
     from paz6d.video.player import VideoPlayer
 
