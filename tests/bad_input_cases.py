@@ -1186,10 +1186,71 @@ def output_rule_cases() -> list[Case]:
     return found
 
 
+RUN = ("run", "--input", "{world}/bop/test/000000/rgb", "--faces", "haar", "--camera", "{world}/bop/camera.json",
+       "--out", "{out}", "--no-progress")
+RUN_DETECTOR = ("run", "--input", "{world}/bop/test/000000/rgb", "--detector", "{world}/runs/aae", "--run",
+                "1={world}/runs/aae", "--camera", "{world}/bop/camera.json", "--out", "{out}", "--no-progress")
+
+
+def _camera_file(change) -> Callable[[World, Path], None]:
+    """Setup: ``<case>/camera.json``, the world's camera changed by ``change`` (its dict -> new content)."""
+
+    def setup(world: World, folder: Path) -> None:
+        put(folder / "camera.json", change(json.loads((world.bop / "camera.json").read_text())))
+
+    return setup
+
+
+def run_cases() -> list[Case]:
+    """``paz6d run``: the frame source, the camera file, the pipeline flags and the output folder."""
+    found = _flag_cases("run-", RUN, {
+        "--input": [(("{case}/none.mp4",), "none.mp4"), (("97",), "device 97"),
+                    (("{world}/results.csv",), "results.csv")],
+        "--camera": [(("{case}/none.json",), "none.json"), (("{world}/results.csv",), "results.csv")],
+        "--out": [(("{world}/bop/test/000000/rgb",), "--out"), (("{world}/bop",), "BOP"),
+                  (("{world}/results.csv",), "results.csv")],
+        "--fps": [(("0",), ""), (("nan",), ""), (("x",), "")],
+        "--max-frames": [(("0",), ""), (("-2",), "")],
+        "--score-threshold": [(("2",), ""), (("nan",), "")],
+        "--faces": [(("smile",), ""), ((), "--detector or --faces")],
+        "--run": [(("1={world}/runs/aae",), "--run: pose models need --detector")],
+    })
+    found += _flag_cases("run-detector-", RUN_DETECTOR, {
+        "--detector": [(("{case}/none",), "none"), (("{world}/runs/aae",), "aae run directory, not an SSD")],
+        "--run": [(("1={case}/none",), "none"), (("x={world}/runs/aae",), "OBJ_ID=RUN_DIR"),
+                  (("0={world}/runs/aae",), "positive BOP object id")],
+        "--camera": [((), "--camera: --run needs")],
+    })
+    found += [
+        Case("run-video-corrupt", replace_flag(RUN, "--input", "{case}/clip.mp4"),
+             case_file("clip.mp4", b"\x00\x00\x00\x18ftypmp42" + b"garbage" * 64), ("clip.mp4", "cannot open")),
+        Case("run-video-empty", replace_flag(RUN, "--input", "{case}/clip.avi"), case_file("clip.avi", b""),
+             ("clip.avi",)),
+        Case("run-folder-empty", replace_flag(RUN, "--input", "{case}/frames"), case_file("frames", "<dir>"),
+             ("frames", "no image file")),
+        Case("run-folder-image-garbage", replace_flag(RUN, "--input", "{case}/frames"),
+             case_file("frames/000000.png", b"\x89PNG\r\n\x1a\nbroken"), ("000000.png",)),
+        Case("run-camera-size-mismatch", replace_flag(RUN, "--camera", "{case}/camera.json"),
+             _camera_file(lambda d: {**d, "width": 640, "height": 480}), ("expected 640x480",)),
+        Case("run-camera-no-fx", replace_flag(RUN, "--camera", "{case}/camera.json"),
+             _camera_file(lambda d: {k: v for k, v in d.items() if k != "fx"}), ("camera.json", "'fx'")),
+        Case("run-camera-dist-short", replace_flag(RUN, "--camera", "{case}/camera.json"),
+             _camera_file(lambda d: {**d, "dist": [0.1, 0.2]}), ("camera.json", "'dist'")),
+        Case("run-camera-dist-text", replace_flag(RUN, "--camera", "{case}/camera.json"),
+             _camera_file(lambda d: {**d, "dist": ["a", 0, 0, 0, 0]}), ("camera.json", "'dist'")),
+        Case("run-camera-garbage", replace_flag(RUN, "--camera", "{case}/camera.json"), case_file("camera.json", "{"),
+             ("camera.json",)),
+        Case("run-camera-list", replace_flag(RUN, "--camera", "{case}/camera.json"), case_file("camera.json", []),
+             ("camera.json",)),
+        Case("run-head-pose-without-camera", replace_flag(replace_flag(RUN, "--faces", "head-pose"), "--camera"),
+             None, ("--camera: --faces head-pose needs",)),
+    ]
+    return found
+
 def all_cases() -> list[Case]:
     """The table: every case, names unique."""
     found = generate_cases() + evaluate_bop_cases() + evaluate_coco_cases() + evaluate_voc_cases() + \
-        estimate_cases() + train_cases() + output_rule_cases()
+        estimate_cases() + train_cases() + output_rule_cases() + run_cases()
     names = [case.name for case in found]
     duplicated = {name for name in names if names.count(name) > 1}
     if duplicated:
