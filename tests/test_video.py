@@ -185,3 +185,27 @@ def test_paz6d_run_refuses_bad_input_in_one_line(clip, tmp_path, capsys, change,
     code, err = run_cli(capsys, "run", *argv, "--no-progress")
     assert code == 2 and expect in err and err.count("\n") == 1 and "Traceback" not in err
     assert not (tmp_path / "out").exists() and sorted(p.name for p in (clip / "frames").iterdir())[-1] == "0003.png"
+
+
+def test_detect_and_estimate_poses_through_the_player_with_its_own_drawing(clip, tmp_path):
+    from paz6d.detect_and_estimate import DetectAndEstimatePose6D
+
+    pose = Pose6D.from_rotation_vector([0.3, 0.2, 0.1], [0.0, 0.0, 0.5])
+    box = Box2D(50, 30, 110, 90, 0.9, "obj_000001")
+    cube = (np.array([[x, y, z] for x in (-0.03, 0.03) for y in (-0.03, 0.03) for z in (-0.03, 0.03)]),
+            np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
+                      [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]))
+    pipeline = DetectAndEstimatePose6D(lambda image: [box], {1: lambda image, box, camera=None: pose},
+                                       Camera(K, *SIZE), meshes={1: cube})
+    with open_frames(clip / "frames") as source:
+        summary = VideoPlayer(pipeline, source).run(tmp_path / "a.mkv", tmp_path / "frames.jsonl")
+    assert summary["frames"] == 4
+    records = list(read_records(tmp_path / "frames.jsonl"))
+    expected = Pose6D(pose.quaternion, pose.translation, "obj_000001", pose.score)
+    assert all(record.results == [{"box": box, "pose": expected}] for record in records)
+    with open_frames(tmp_path / "a.mkv") as source:
+        first = next(iter(source)).image
+    np.testing.assert_array_equal(first, pipeline.draw(astronaut_frames()[0], [(box, expected)]))
+    centre = np.rint(Camera(K, *SIZE).project(pose.translation[None])[0]).astype(int)  # the axes start there
+    assert not np.array_equal(first[centre[1] - 2:centre[1] + 3, centre[0] - 2:centre[0] + 3],
+                              astronaut_frames()[0][centre[1] - 2:centre[1] + 3, centre[0] - 2:centre[0] + 3])
