@@ -1247,10 +1247,85 @@ def run_cases() -> list[Case]:
     ]
     return found
 
+def fixture_text(name: str, relative: str, old: str, new: str) -> Callable[[World, Path], None]:
+    """Setup: a copy of the ``name`` fixture (``tests/data/datasets``) with ``old`` replaced by ``new``
+    in the text of ``relative``."""
+
+    def setup(world: World, folder: Path) -> None:
+        shutil.copytree(POSE_DATA / name, folder / name)
+        path = folder / name / relative
+        text = path.read_text()
+        if old not in text:
+            raise AssertionError(f"{path} lacks {old!r}")
+        path.write_text(text.replace(old, new))
+
+    return setup
+
+
+def _with_outside_file(setup: Callable[[World, Path], None]) -> Callable[[World, Path], None]:
+    """``setup``, plus ``<case>/outside.jpg`` and ``<case>/outside.xml``: files outside the data set
+    that a path escaping it would reach."""
+
+    def wrapped(world: World, folder: Path) -> None:
+        setup(world, folder)
+        shutil.copy(POSE_DATA / "voc" / "VOC2007" / "JPEGImages" / "000001.jpg", folder / "outside.jpg")
+        shutil.copy(POSE_DATA / "voc" / "VOC2007" / "Annotations" / "000001.xml", folder / "outside.xml")
+
+    return wrapped
+
+
+TRAIN_SSD_VOC = replace_flag(TRAIN_SSD, "--dataset", "{case}/voc/VOC2007") + ("--split", "train")
+TRAIN_SSD_COCO = replace_flag(TRAIN_SSD, "--dataset", "{case}/coco")
+TRAIN_SSD_OPENIMAGES = replace_flag(TRAIN_SSD, "--dataset", "{case}/openimages")
+COCO_FILE = "annotations/instances_tiny2017.json"
+
+
+def coco_edit(change: Callable[[dict], Any]) -> Callable[[World, Path], None]:
+    """Setup: the COCO fixture with its instances file changed in place by ``change(data)``."""
+
+    def edit(data: dict) -> dict:
+        change(data)
+        return data
+
+    return pose_copy("coco", COCO_FILE, edit)
+
+
+def dataset_path_cases() -> list[Case]:
+    """The path rule: a path read from a data set or run directory that leads outside it is refused,
+    naming the file and the field (the files it would reach exist, so nothing else stops it)."""
+    return [
+        Case("train-ssd-voc-filename-parent", TRAIN_SSD_VOC, _with_outside_file(fixture_text(
+            "voc", "VOC2007/Annotations/000001.xml", "<filename>000001.jpg", "<filename>../../../outside.jpg")),
+             ("000001.xml", "<filename>", "expected a relative path inside")),
+        Case("train-ssd-voc-filename-absolute", TRAIN_SSD_VOC, fixture_text(
+            "voc", "VOC2007/Annotations/000001.xml", "<filename>000001.jpg", "<filename>/etc/passwd"),
+             ("000001.xml", "<filename>", "/etc/passwd")),
+        Case("train-ssd-voc-image-set-id-parent", TRAIN_SSD_VOC, _with_outside_file(fixture_text(
+            "voc", "VOC2007/ImageSets/Main/train.txt", "000003", "../../../../outside")),
+             ("train.txt", "image id #2", "expected a relative path inside")),
+        Case("train-ssd-coco-file-name-parent", TRAIN_SSD_COCO, _with_outside_file(coco_edit(
+            lambda data: data["images"][0].update(file_name="../../outside.jpg"))),
+             ("instances_tiny2017.json", "images[0]", "'file_name'", "expected a relative path inside")),
+        Case("train-ssd-coco-file-name-absolute", TRAIN_SSD_COCO, coco_edit(
+            lambda data: data["images"][1].update(file_name="/etc/passwd")),
+             ("instances_tiny2017.json", "images[1]", "'file_name'")),
+        Case("train-ssd-coco-file-name-integer", TRAIN_SSD_COCO, coco_edit(
+            lambda data: data["images"][1].update(file_name=7)), ("images[1]", "'file_name'")),
+        Case("train-ssd-openimages-image-id-parent", TRAIN_SSD_OPENIMAGES, _with_outside_file(fixture_text(
+            "openimages", "validation-annotations-bbox.csv", "0a1b2c3d4e5f6071,", "../../outside,")),
+             ("validation-annotations-bbox.csv", "ImageID", "expected a relative path inside")),
+        Case("train-emotion-checkpoint-path-outside",
+             TRAIN_EMOTION + ("--val-fraction", "0.3", "--epochs", "1"),
+             files_setup({"out/checkpoint.json": {"step": 1, "path": "../outside"},
+                          "outside/model.weights.h5": b"not this run's"}),
+             ("checkpoint.json", '"path"', "expected a relative path inside")),
+    ]
+
+
 def all_cases() -> list[Case]:
     """The table: every case, names unique."""
     found = generate_cases() + evaluate_bop_cases() + evaluate_coco_cases() + evaluate_voc_cases() + \
-        estimate_cases() + train_cases() + output_rule_cases() + run_cases()
+        estimate_cases() + train_cases() + output_rule_cases() + dataset_path_cases() + run_cases()
     names = [case.name for case in found]
     duplicated = {name for name in names if names.count(name) > 1}
     if duplicated:

@@ -34,7 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend import rle
+from paz6d.backend.image import MAX_IMAGE_SIDE
 from paz6d.backend.files import load_json_object
+from paz6d.backend.paths import path_inside
 from paz6d.datasets.sample import Sample, SampleSequence
 
 _RLE_OFFSET = 48  # compressed RLE characters are chr(48 + 6-bit group)
@@ -57,6 +59,23 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
+def _is_integer(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _check_ids(records: list[dict], key: str, path: Path) -> None:
+    """Refuses an ``id`` that is no integer (a list, text, a boolean) or appears twice in ``key``."""
+    seen: dict[int, int] = {}
+    for number, record in enumerate(records):
+        value = record["id"]
+        if not _is_integer(value):
+            raise ValueError(f"{path}: {key}[{number}], field 'id': expected an integer, got {value!r:.40}")
+        if value in seen:
+            raise ValueError(f"{path}: {key}[{number}], field 'id': {value} is also the id of {key}[{seen[value]}]; "
+                             "ids must be unique")
+        seen[value] = number
+
+
 def _check_annotation(annotation, number: int, path: Path, images: dict, categories: dict) -> None:
     """Raises ``ValueError`` naming the file, the annotation and the field for a malformed record."""
     if not isinstance(annotation, dict):
@@ -65,6 +84,9 @@ def _check_annotation(annotation, number: int, path: Path, images: dict, categor
     for field in ("id", "image_id", "category_id", "bbox"):
         if field not in annotation:
             raise ValueError(f"{where}, field '{field}': missing")
+    for field in ("image_id", "category_id"):
+        if not _is_integer(annotation[field]):
+            raise ValueError(f"{where}, field '{field}': expected an integer id, got {annotation[field]!r:.40}")
     if annotation["image_id"] not in images:
         raise ValueError(f"{where}, field 'image_id': {annotation['image_id']!r} is not an id of 'images'")
     if annotation["category_id"] not in categories:
@@ -195,10 +217,14 @@ def load(root: str | Path, split: str | None = None, images: str | Path | None =
     image_records = _records(data, "images", path, ("id", "file_name", "width", "height"))
     category_records = _records(data, "categories", path, ("id", "name"))
     annotations = _records(data, "annotations", path, ())
+    _check_ids(image_records, "images", path)
+    _check_ids(category_records, "categories", path)
     for number, record in enumerate(image_records):
-        if not all(isinstance(record[key], int) and record[key] > 0 for key in ("width", "height")):
+        if not all(_is_integer(record[key]) and 0 < record[key] <= MAX_IMAGE_SIDE for key in ("width", "height")):
             raise ValueError(f"{path}: images[{number}] (id {record['id']!r}), field 'width'/'height': expected "
-                             f"positive integers, got {record['width']!r}, {record['height']!r}")
+                             f"integers in 1..{MAX_IMAGE_SIDE}, got {record['width']!r:.40}, {record['height']!r:.40}")
+        path_inside(image_folder, record["file_name"], f"{path}: images[{number}] (id {record['id']!r}), field "
+                                                       "'file_name'")
     categories = sorted(category_records, key=lambda record: record["id"])
     class_of = {record["id"]: position for position, record in enumerate(categories)}
     class_names = [str(record["name"]) for record in categories]

@@ -56,6 +56,7 @@ import numpy as np
 from paz6d.backend import quaternion
 from paz6d.backend.checks import required_field, short_repr
 from paz6d.backend.files import load_json_object
+from paz6d.backend.paths import path_inside
 from paz6d.datasets.sample import Sample, SampleSequence
 from paz6d.datasets.ycb_video import YCB_VIDEO_CLASSES, read_depth, read_label_image
 
@@ -83,11 +84,7 @@ def scene_folders(root: str | Path, split: str) -> list[Path]:
         ValueError: ``split`` leaves ``root``, does not exist, or holds no scene folder.
     """
     root = Path(root)
-    if not isinstance(split, str) or not split or Path(split).is_absolute() or ".." in Path(split).parts \
-            or "\0" in split:
-        raise ValueError(f"split: expected a folder under the FAT root (mixed, single, mixed/kitchen_0, ...), "
-                         f"got {split!r:.80}")
-    top = root / split
+    top = path_inside(root, split, "split")  # mixed, single, mixed/kitchen_0, ...
     if not top.is_dir():
         available = sorted(path.name for path in root.iterdir() if path.is_dir()) if root.is_dir() else []
         raise ValueError(f"split: {top} is not a folder (folders in {root}: {available})")

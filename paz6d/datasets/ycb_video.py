@@ -45,6 +45,7 @@ import scipy.io
 
 from paz6d.backend.files import read_input_text
 from paz6d.backend.image import mask_box
+from paz6d.backend.paths import path_inside
 from paz6d.datasets.sample import Sample, SampleSequence
 
 #: The 21 objects in YCB-Video's ``image_sets/classes.txt`` order (class index = position + 1).
@@ -108,6 +109,7 @@ def read_image_set(root: str | Path, split: str) -> list[str]:
         parts = name.split("/")
         if len(parts) != 2 or not all(part and not part.startswith(".") for part in parts):
             raise ValueError(f"{path}, line {number}: expected <video>/<frame> (such as 0048/000001), got {name!r:.80}")
+        path_inside(root / "data", name, f"{path}, line {number}")
         frames.append(name)
     if not frames:
         raise ValueError(f"{path}: no frames listed")
@@ -305,7 +307,7 @@ def load(root: str | Path, split: str = "train", masks: bool = True, depth: bool
 
 def model_folder(root: str | Path, class_name: str) -> Path:
     """``root/models/<class_name>`` (``ValueError`` naming it when missing)."""
-    folder = Path(root) / "models" / class_name
+    folder = path_inside(Path(root) / "models", class_name, f"class name {class_name!r:.40}")
     if not folder.is_dir():
         raise ValueError(f"{folder}: no model folder for class {class_name!r}")
     return folder
