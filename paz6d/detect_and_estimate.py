@@ -2,8 +2,8 @@
 
 A detector (``image -> list[Box2D]`` with class names, e.g. :class:`paz6d.ssd.pipeline.DetectSingleShot`)
 finds the objects; every box whose class has a pose model goes to that model
-(:class:`paz6d.aae.pipeline.ImplicitPose6D` or :class:`paz6d.keypointnet.pipeline.KeypointPose6D`, or any
-callable ``(image, box, camera=...) -> Pose6D``) with the image's camera::
+(the pipeline of a pose method of :mod:`paz6d.methods`, ``pipeline(image, box, *, camera=None, depth=None)
+-> Pose6D``, or any callable ``(image, box, camera=...) -> Pose6D``) with the image's camera::
 
     from paz6d.pipelines import DetectAndEstimatePose6D
     pipeline = DetectAndEstimatePose6D.from_run_dirs("runs/ssd", {5: "runs/aae_5", 8: "runs/kp_8"}, K)
@@ -35,7 +35,7 @@ from paz6d.backend.draw import draw_box, draw_model_outline, draw_pose_axes, dra
 from paz6d.backend.checks import check_depth
 from paz6d.backend.image import as_image
 from paz6d.backend.viewpoints import ViewpointRange
-from paz6d.keypointnet import run_dir as keypointnet_run_dir
+from paz6d.methods import method_of, methods
 from paz6d.processors.crops import BoxVariants
 
 _BOP_CLASS = re.compile(r"^obj_(\d+)$")
@@ -68,47 +68,41 @@ def bop_object_id(class_name: str) -> int | None:
 
 def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None = None, keypoint_crops: int = 1,
                         box_variants: BoxVariants | None = None, viewpoints: ViewpointRange | None = None):
-    """The pose pipeline of a run directory, its method found by :func:`paz6d.run_dirs.method_of`;
-    ``keypoint_crops`` is the ``crops`` option of a :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`,
-    ``box_variants`` (a :class:`~paz6d.processors.crops.BoxVariants`) and ``viewpoints`` (a
-    :class:`~paz6d.backend.viewpoints.ViewpointRange`) those of an :class:`~paz6d.aae.pipeline.ImplicitPose6D`.
+    """The pose pipeline of a run directory, its method found by :func:`paz6d.methods.method_of`. The
+    options go to the methods that take them (:attr:`paz6d.method.Method.options`): ``keypoint_crops``
+    (KeypointNet's crops per box), ``box_variants`` (a :class:`~paz6d.processors.crops.BoxVariants`) and
+    ``viewpoints`` (a :class:`~paz6d.backend.viewpoints.ViewpointRange`, the AAE's).
 
     Returns:
-        ``(method, estimator)``: ``"aae"`` with an :class:`~paz6d.aae.pipeline.ImplicitPose6D` or
-        ``"keypointnet"`` with a :class:`~paz6d.keypointnet.pipeline.KeypointPose6D`.
+        ``(method name, pipeline)``, the pipeline a ``pipeline(image, box, *, camera=None, depth=None) -> Pose6D``.
     Raises:
         ValueError: not a directory, not a pose run directory (an SSD one, say) or a corrupt one (naming the file).
     """
-    from paz6d.run_dirs import method_of
-
     method = method_of(run_dir)
-    if method == "aae":
-        from paz6d.aae.pipeline import ImplicitPose6D
+    if method.task != "pose":
+        names = " or ".join(pose.name for pose in methods("pose"))
+        raise ValueError(f"run_dir: {run_dir} is a {method.name} run directory, not a pose model ({names})")
+    return method.name, method.load(run_dir, camera=camera, class_name=class_name, keypoint_crops=keypoint_crops,
+                                    box_variants=box_variants, viewpoints=viewpoints)
 
-        return method, ImplicitPose6D(run_dir, camera, class_name=class_name, box_variants=box_variants,
-                                      viewpoints=viewpoints)
-    if method == "keypointnet":
-        from paz6d.keypointnet.pipeline import KeypointPose6D
 
-        return method, KeypointPose6D(run_dir, camera, crops=keypoint_crops, class_name=class_name)
-    raise ValueError(f"run_dir: {run_dir} is a {method} run directory, not a pose model (aae or keypointnet)")
+def load_detector(run_dir: str | Path, score_threshold: float = 0.3, flip: bool = False):
+    """The detector pipeline (``image -> [Box2D]`` with class names) of a run directory of a detection method
+    (:func:`paz6d.methods.method_of`); ``flip``: it also sees the mirror image.
+
+    Raises:
+        ValueError: not a directory, not a detector's run directory or a corrupt one (naming the file).
+    """
+    method = method_of(run_dir)
+    if method.task != "detection":
+        names = " or ".join(detector.name for detector in methods("detection"))
+        raise ValueError(f"detector: {run_dir} is a {method.name} run directory, not a detector ({names})")
+    return method.load(run_dir, score_threshold=score_threshold, flip=flip)
 
 
 def run_mesh(run_dir: str | Path) -> tuple[Path, float] | None:
-    """``(mesh file, scale to metres)`` a pose run directory was trained on, ``None`` when not recorded."""
-    from paz6d.run_dirs import method_of
-
-    method = method_of(run_dir)
-    if method == "aae":
-        from paz6d.aae import run_dir as files
-
-        config = files.read_config(run_dir)
-        return Path(config["mesh"]), float(config["mesh_scale"])
-    if method == "keypointnet":
-        config = keypointnet_run_dir.read_config(run_dir)
-        if config.get("mesh_path"):
-            return Path(config["mesh_path"]), float(config.get("mesh_scale", 1.0))
-    return None
+    """``(mesh file, scale to metres)`` a run directory was trained on, ``None`` when not recorded."""
+    return method_of(run_dir).run_dir.training_mesh(run_dir)
 
 
 # ------------------------------------------------------------------------------------------ steps
@@ -200,7 +194,7 @@ class EstimatePoses(Processor):
         self.estimators, self.strict = dict(estimators), bool(strict)
 
     def call(self, image, boxes, camera, depth=None) -> list[Pose6D | None]:
-        extra = {}
+        extra = {}  # depth only when given: a plain callable (image, box, camera=...) needs no depth argument
         if depth is not None:
             extra["depth"] = check_depth(depth, shape=image.shape[:2])
         poses = []
@@ -321,11 +315,11 @@ class DetectAndEstimatePose6D(SequentialProcessor):
                       verify: bool = False, flip: bool = False, box_variants: BoxVariants | None = None,
                       poses_per_class: int | None = None,
                       viewpoints: ViewpointRange | None = None) -> "DetectAndEstimatePose6D":
-        """Loads a ``DetectSingleShot`` run and one pose run directory per class (method found by itself).
+        """Loads a detector run (an SSD's) and one pose run directory per class (methods found by themselves).
 
         Args:
             detector_dir: SSD run directory (``paz6d train ssd``).
-            pose_dirs: class name or BOP object id -> AAE or KeypointNet run directory.
+            pose_dirs: class name or BOP object id -> run directory of a pose method (``paz6d.methods``).
             load_meshes: load each pose run's mesh (when its file still exists) for :meth:`draw`.
             flip: the detector also sees the mirror image (``DetectSingleShot``'s ``flip``).
             box_variants: the AAE runs choose among these copies of each detected box
@@ -333,8 +327,6 @@ class DetectAndEstimatePose6D(SequentialProcessor):
             poses_per_class: poses only for each class's best detections (see the class).
             viewpoints: the AAE runs answer only with views in this range (``ImplicitPose6D``'s ``viewpoints``).
         """
-        from paz6d.ssd.pipeline import DetectSingleShot
-
         estimators, meshes = {}, {}
         for key, run_dir in pose_dirs.items():
             name = class_name_of(key)
@@ -346,7 +338,7 @@ class DetectAndEstimatePose6D(SequentialProcessor):
 
                 mesh = load_mesh(found[0], found[1])
                 meshes[name] = (np.asarray(mesh.vertices), np.asarray(mesh.faces))
-        detector = DetectSingleShot(detector_dir, score_threshold=score_threshold, flip=flip)
+        detector = load_detector(detector_dir, score_threshold, flip)
         return cls(detector, estimators, camera, strict, meshes, verify, poses_per_class)
 
     def run(self, image, camera=None, depth=None) -> dict:
@@ -364,13 +356,10 @@ class DetectAndEstimatePose6D(SequentialProcessor):
         """
         return self.run(image, camera, depth)["results"]
 
-    def _model_points(self, class_name: str):
-        estimator = self.estimators.get(class_name)
-        for attribute in ("surface_points", "hull_points", "points_model"):
-            points = getattr(estimator, attribute, None)
-            if points is not None:
-                return np.asarray(points)
-        return None
+    def _model_points(self, class_name: str) -> np.ndarray | None:
+        """The ``model_points`` ``(N, 3)`` of a class's pose pipeline (``None`` for a callable without them)."""
+        points = getattr(self.estimators.get(class_name), "model_points", None)
+        return None if points is None else np.asarray(points)
 
     def draw(self, image, results, camera=None, axis_length: float | None = None) -> np.ndarray:
         """A copy of ``image`` with each result's box (class name, score), the model's outline under its

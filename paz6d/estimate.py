@@ -1,7 +1,7 @@
 """``paz6d estimate``: run trained pose models on a BOP data set and write one BOP results CSV.
 
-One or more pose run directories (``--run OBJ_ID=RUN_DIR``, repeatable; the method of each, AAE or
-KeypointNet, is found from its files) get every image of a split, either with each annotated
+One or more pose run directories (``--run OBJ_ID=RUN_DIR``, repeatable; the method of each, one of the pose
+methods of :mod:`paz6d.methods`, is found from its files) get every image of a split, either with each annotated
 instance's ground-truth 2D box (the setting of the AAE paper's evaluation) or, with ``--detector``, with
 the boxes a trained SSD finds (:class:`paz6d.detect_and_estimate.DetectAndEstimatePose6D`; no ground
 truth read). Estimates are written in the BOP'19 results format that ``paz6d evaluate bop`` scores, with
@@ -34,28 +34,26 @@ import numpy as np
 from paz6d.backend.checks import check_depth
 from paz6d.backend.files import write_json_atomically
 from paz6d.backend.paths import check_outputs, check_outputs_apart, check_plain_name
-from paz6d.aae.codebook import Codebook
-from paz6d.keypointnet import run_dir as keypointnet_run_dir
 from paz6d.keypointnet.config import CROP_JITTERS, check_crops
 from paz6d.backend.viewpoints import ViewpointRange
 from paz6d.processors.crops import BoxVariants
 from paz6d.datasets.bop import Target, write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION, read_targets
 from paz6d.datasets.bop.fields import BOX_FIELDS, box_field
-from paz6d.ssd import run_dir as ssd_run_dir
+from paz6d.methods import get, method_of, methods
 
-METHODS = ("aae", "keypoints", "keypointnet")
-#: ``--method`` value -> the method name of its run directories (:func:`paz6d.run_dirs.method_of`).
-RUN_METHODS = {"aae": "aae", "keypoints": "keypointnet", "keypointnet": "keypointnet"}
 _OBJECT_MESH = re.compile(r"^obj_(\d+)$")
 DEFAULT_SCORE_THRESHOLD = 0.1
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
+    pose_methods = methods("pose")
     parser.add_argument("--run", action="append", required=True, metavar="[OBJ_ID=]RUN_DIR",
-                        help="pose run directory of `paz6d train aae|keypointnet` for BOP object OBJ_ID; repeat for "
-                             "more objects. A bare RUN_DIR takes --object-id (or the obj_XXXXXX name of its mesh)")
-    parser.add_argument("--method", choices=METHODS, default=None,
+                        help=f"pose run directory of `paz6d train {'|'.join(method.name for method in pose_methods)}` "
+                             f"for BOP object OBJ_ID; repeat for more objects. A bare RUN_DIR takes --object-id (or "
+                             f"the obj_XXXXXX name of its mesh)")
+    parser.add_argument("--method", choices=sorted({name for method in pose_methods
+                                                    for name in (method.name, *method.aliases)}), default=None,
                         help="optional check: every --run must be of this method (found from the files anyway)")
     parser.add_argument("--dataset", type=Path, required=True, help="BOP data set folder")
     parser.add_argument("--split", default="test", help="split folder of --dataset")
@@ -119,22 +117,16 @@ def run_object_id(run_dir: Path, method: str) -> int | None:
     """The BOP object id a run directory was trained on, from its mesh's ``obj_XXXXXX`` file name
     (``None`` when the mesh is named otherwise, e.g. a mesh given with ``--mesh``).
 
-    Reads the run's files through its method's ``run_dir`` module, so a corrupt or incomplete run
+    Checks the run's files through its method's ``RunDir.validate``, so a corrupt or incomplete run
     directory fails here, naming the file, before any image is read.
     """
-    method = RUN_METHODS.get(method, method)
-    if method == "aae":
-        from paz6d.aae import run_dir as aae_run_dir
-
-        mesh = aae_run_dir.read_config(run_dir)["mesh"]
-        aae_run_dir.read_object(run_dir)
-        Codebook.load(aae_run_dir.codebook_path(run_dir))
-    elif method == "keypointnet":
-        mesh = keypointnet_run_dir.read_config(run_dir).get("mesh_path")
-        keypointnet_run_dir.read_keypoints(run_dir)
-    else:
-        raise ValueError(f"--run: {run_dir} is a {method} run directory, not a pose model (aae or keypointnet)")
-    match = _OBJECT_MESH.match(Path(str(mesh)).stem) if mesh else None
+    found = get(method)
+    if found.task != "pose":
+        names = " or ".join(pose.name for pose in methods("pose"))
+        raise ValueError(f"--run: {run_dir} is a {found.name} run directory, not a pose model ({names})")
+    found.run_dir.validate(run_dir)
+    mesh = found.run_dir.training_mesh(run_dir)
+    match = _OBJECT_MESH.match(mesh[0].stem) if mesh else None
     return int(match.group(1)) if match else None
 
 
@@ -165,8 +157,6 @@ def resolve_runs(values: list[str], object_id: int | None, method: str | None = 
         ValueError: a missing/corrupt/non-pose run directory, an object given twice, a bare run without an
             object id, or a run trained on another object (naming the flag and the file).
     """
-    from paz6d.run_dirs import method_of
-
     if object_id is not None and object_id < 1:
         raise ValueError(f"--object-id: expected a BOP object id (a positive integer), got {object_id}")
     runs: dict[int, tuple[Path, str]] = {}
@@ -174,12 +164,12 @@ def resolve_runs(values: list[str], object_id: int | None, method: str | None = 
         obj_id, run_dir = parse_run(value)
         if not run_dir.is_dir():
             raise ValueError(f"--run: {run_dir} is not a directory")
-        found = method_of(run_dir)
-        if found == "ssd":
-            raise ValueError(f"--run: {run_dir} is an SSD detector run directory; give it as --detector")
-        if method is not None and found != RUN_METHODS[method]:
-            wanted = "aae" if found == "aae" else "keypointnet"
-            raise ValueError(f"--method: {run_dir} is a {found} run directory; use --method {wanted} (or leave "
+        record = method_of(run_dir)
+        found = record.name
+        if record.task == "detection":
+            raise ValueError(f"--run: {run_dir} is {record.run_dir.KIND} detector run directory; give it as --detector")
+        if method is not None and record is not get(method):
+            raise ValueError(f"--method: {run_dir} is a {found} run directory; use --method {found} (or leave "
                              f"--method out: the method is found from the files)")
         trained_on = run_object_id(run_dir, found)
         if obj_id is None:
@@ -205,14 +195,13 @@ def check_detector(detector: Path, object_ids) -> tuple[str, ...]:
     Raises:
         ValueError: not a (valid) SSD run directory, or an object the detector was not trained on.
     """
-    from paz6d.run_dirs import method_of
-
     if not detector.is_dir():
         raise ValueError(f"--detector: {detector} is not a directory")
     found = method_of(detector)
-    if found != "ssd":
-        raise ValueError(f"--detector: {detector} is a {found} run directory, not an SSD detector (`paz6d train ssd`)")
-    class_names = tuple(ssd_run_dir.read_detector(detector)["class_names"])
+    if found.task != "detection":
+        trainers = " or ".join(f"`paz6d train {method.name}`" for method in methods("detection"))
+        raise ValueError(f"--detector: {detector} is a {found.name} run directory, not a detector ({trainers})")
+    class_names = found.run_dir.class_names(detector)
     missing = [obj_id for obj_id in sorted(object_ids) if f"obj_{obj_id:06d}" not in class_names]
     if missing:
         raise ValueError(f"--detector: {detector} does not detect objects {missing} (its classes: {list(class_names)})")
@@ -397,10 +386,9 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
     from paz6d.backend.camera import Camera
     from paz6d.backend.image import load_image
     from paz6d.datasets.bop.coco_ground_truth import coco_image_id
-    from paz6d.detect_and_estimate import DetectAndEstimatePose6D, MissingPoseModelWarning, bop_object_id
-    from paz6d.ssd.pipeline import DetectSingleShot
+    from paz6d.detect_and_estimate import DetectAndEstimatePose6D, MissingPoseModelWarning, bop_object_id, load_detector
 
-    detector = DetectSingleShot(detector_dir, score_threshold=score_threshold, flip=flip)
+    detector = load_detector(detector_dir, score_threshold, flip)
     estimators, unusable = _load_estimators(runs, keypoint_crops=keypoint_crops, viewpoints=viewpoints,
                                             box_variants=BoxVariants() if box_search else None)
     pipeline = DetectAndEstimatePose6D(detector, estimators, verify=verify, poses_per_class=poses_per_class)
@@ -502,7 +490,7 @@ def read_split_depth(dataset: Path, split: str, scene_id: int, im_id: int, shape
 def refinement_statistics(estimators) -> dict:
     """Counts and mean process time of the depth refinements the estimators' ``refine_with_depth`` steps ran."""
     steps = [estimator["refine_with_depth"].processor.statistics for estimator in estimators.values()
-             if "refine_with_depth" in estimator.names]  # KeypointPose6D adds it at its first depth image
+             if "refine_with_depth" in getattr(estimator, "names", ())]
     count = sum(step["refinements"] for step in steps)
     rejected: dict[str, int] = {}
     for step in steps:
@@ -560,9 +548,10 @@ def check_arguments(args: argparse.Namespace) -> tuple[dict[int, tuple[Path, str
         raise ValueError(f"--dataset: {args.dataset} is not a directory")
     runs = resolve_runs(args.run, args.object_id, args.method)
     check_outputs_apart(outputs, {f"--run {obj_id}": run_dir for obj_id, (run_dir, _) in runs.items()})
-    if viewpoints is not None and all(method != "aae" for _, method in runs.values()):
-        raise ValueError("--elevation-degrees/--inplane-degrees: only AAE runs answer from a codebook of views; every "
-                         "--run is a KeypointNet run")
+    if viewpoints is not None and not any("viewpoints" in get(method).options for _, method in runs.values()):
+        takers = " or ".join(method.label for method in methods("pose") if "viewpoints" in method.options)
+        raise ValueError(f"--elevation-degrees/--inplane-degrees: only {takers} runs answer from a codebook of views; "
+                         f"no --run is one")
     if args.detector is not None:
         check_detector(args.detector, runs)
     return runs, viewpoints

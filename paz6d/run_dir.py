@@ -95,6 +95,11 @@ class RunDir:
         returns ``run_dir`` as a Path."""
         return cls.check_files(run_dir)
 
+    @classmethod
+    def class_names(cls, run_dir: str | Path) -> tuple[str, ...] | None:
+        """The class names a detector run outputs, read from its files; ``None`` for other methods."""
+        return None
+
     # -- settings and metrics -------------------------------------------------------------------
     @classmethod
     def write_config(cls, run_dir: str | Path, config: dict[str, Any]) -> Path:

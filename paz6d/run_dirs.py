@@ -1,26 +1,19 @@
-"""Which method wrote a run directory: each method's ``run_dir`` module recognises its own; and the
+"""Which method wrote a run directory (each registered method's ``RunDir`` recognises its own, see
+:mod:`paz6d.methods`); and the
 check every ``paz6d train <method>`` and ``paz6d benchmark`` makes before writing into its ``--out``."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 from pathlib import Path
 
-from paz6d.aae import run_dir as aae_run_dir
-from paz6d.hrnet import run_dir as hrnet_run_dir
-from paz6d.keypointnet import run_dir as keypointnet_run_dir
-from paz6d.probabilistic_keypoints import run_dir as probabilistic_keypoints_run_dir
-from paz6d.segmentation import run_dir as segmentation_run_dir
-from paz6d.ssd import run_dir as ssd_run_dir
-from paz6d.stn import run_dir as stn_run_dir
+from paz6d import methods as registry
 
-#: Method name (as in ``paz6d train <method>``) -> the module that owns that method's run directories;
-#: each names the files that mark its run directories in ``MARKER_FILES``.
-RUN_DIR_MODULES = {"aae": aae_run_dir, "keypointnet": keypointnet_run_dir, "ssd": ssd_run_dir,
-                   "hrnet": hrnet_run_dir, "probabilistic-keypoints": probabilistic_keypoints_run_dir,
-                   "stn": stn_run_dir, "segmentation": segmentation_run_dir}
-
+#: Method name -> the module of its run directory class (file names, ``read_model``), for the methods
+#: registered when this module was imported.
+RUN_DIR_MODULES = {method.name: importlib.import_module(method.run_dir.__module__) for method in registry.methods()}
 
 #: Marker files of the other commands that own an output folder (no ``run_dir`` module of their own).
 OTHER_MARKER_FILES = {"emotion": ("classes.json",), "benchmark lmo": ("report.json",)}
@@ -40,7 +33,7 @@ def _owner(out: Path) -> str | None:
             raise ValueError(f'{stamp}: expected a regular file holding {{"method": "<name>"}}; remove it '
                              "only if the folder is yours")
         return method
-    found = [method for method in RUN_DIR_MODULES if is_run_dir(out, method)]
+    found = [method.name for method in registry.methods() if method.run_dir.is_run_dir(out)]
     found += [name for name, markers in OTHER_MARKER_FILES.items() if all((out / m).is_file() for m in markers)]
     return found[0] if len(found) == 1 else (", ".join(found) if found else None)
 
@@ -82,22 +75,13 @@ def prepare_run_output(out: str | Path, method: str, inputs: dict[str, str | Pat
 
 def is_run_dir(run_dir: str | Path, method: str) -> bool:
     """True when ``run_dir`` holds every marker file of ``method``'s run directories."""
-    return all((Path(run_dir) / name).is_file() for name in RUN_DIR_MODULES[method].MARKER_FILES)
+    return registry.get(method).run_dir.is_run_dir(run_dir)
 
 
 def method_of(run_dir: str | Path) -> str:
-    """The method (a key of :data:`RUN_DIR_MODULES`) whose training wrote ``run_dir``.
+    """The name of the method whose training wrote ``run_dir`` (:func:`paz6d.methods.method_of`).
 
     Raises:
         ValueError: not a directory, or no method recognises it (the message names the marker files).
     """
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise ValueError(f"run_dir: {run_dir} is not a directory")
-    found = [method for method in RUN_DIR_MODULES if is_run_dir(run_dir, method)]
-    if len(found) != 1:
-        markers = "; ".join(f"{method}: {' + '.join(module.MARKER_FILES)}"
-                            for method, module in RUN_DIR_MODULES.items())
-        state = "matches several methods" if found else "is not a run directory of any method"
-        raise ValueError(f"run_dir: {run_dir} {state} (expected the files of exactly one: {markers})")
-    return found[0]
+    return registry.method_of(run_dir).name

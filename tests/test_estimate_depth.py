@@ -154,8 +154,9 @@ def test_detect_and_estimate_passes_the_depth_image_to_the_pose_models():
 
 
 def test_keypoint_pipeline_refines_with_depth_on_points_sampled_from_the_run_mesh(world, tmp_path):
-    """KeypointPose6D adds its ``refine_with_depth`` step at the first call given a depth image; it samples the
-    run's mesh (config.json mesh_path) and undoes a depth error; without mesh_path the error names config.json.
+    """KeypointPose6D's ``refine_with_depth`` step (there from construction: a call does not change the steps)
+    samples the run's mesh (config.json mesh_path) at the first depth image and undoes a depth error; without
+    mesh_path the error names config.json.
     The untrained network's PnP step is replaced by one returning the pose with a depth error."""
     import json
 
@@ -196,10 +197,12 @@ def test_keypoint_pipeline_refines_with_depth_on_points_sampled_from_the_run_mes
     far[:3, 3] *= 1.06  # 3.3 cm along the ray
     image = np.zeros((240, 320, 3), np.uint8)
     estimator = estimator_with_pnp_pose(Pose6D.from_matrix(far))
+    steps = estimator.names
+    assert steps[-2:] == ["solve_pnp", "refine_with_depth"]
     assert estimator(image, box) == Pose6D.from_matrix(far)  # without depth: the pose of the PnP step
-    assert "refine_with_depth" not in estimator.names  # added by the first call given a depth image
+    assert estimator["refine_with_depth"].processor.statistics["refinements"] == 0
     refined = estimator(image, box, depth=depth)
-    assert estimator.names[-2:] == ["solve_pnp", "refine_with_depth"]
+    assert estimator.names == steps
     assert np.linalg.norm(refined.translation - T[:3, 3]) < 0.001
     assert estimator["refine_with_depth"].processor.statistics["accepted"] == 1
     del config["mesh_path"]

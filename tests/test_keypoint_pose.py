@@ -357,7 +357,7 @@ def test_pipeline_steps_can_be_read_replaced_inserted_and_removed(run_dir):
     camera = Camera(K, 640, 480)
     estimator = KeypointPose6D(run_dir, camera, depth_from_box=True)
     assert estimator.names == ["jitter", "crop", "predict", "decode", "to_image", "merge_crops", "score",
-                               "to_keypoints2d", "solve_pnp", "depth_from_box"]
+                               "to_keypoints2d", "solve_pnp", "depth_from_box", "refine_with_depth"]
     T = _pose([0.4, -0.7, 0.2], [0.03, -0.02, 0.5])
     perfect = transform_and_project(estimator.points_model, T, K)
     image = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)
@@ -473,7 +473,7 @@ def test_camera_per_call_defaults_to_the_constructor_camera(run_dir):
     assert by_matrix(image, box, camera=other) == without_camera(image, box, camera=other)
     assert by_matrix(image, box, camera=other) != by_matrix(image, box)
     assert by_matrix.estimate_batch([image, image], [box, box], [None, other]) == [by_matrix(image, box),
-                                                                                  by_matrix(image, box, other)]
+                                                                                  by_matrix(image, box, camera=other)]
     with pytest.raises(ValueError, match="camera: none given"):
         without_camera(image, box)
     with pytest.raises(ValueError, match="does not match the camera"):

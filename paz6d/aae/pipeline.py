@@ -389,14 +389,19 @@ class ImplicitPose6D(SequentialProcessor):
         values = self._values([image], [box], [camera], [None], top_k or self.top_k)
         return self.run_steps(values, stop="refine_with_depth")["candidates"][0]
 
-    def call(self, image, box, depth=None, camera=None) -> Pose6D:
+    @property
+    def model_points(self) -> np.ndarray:
+        """``(P, 3)`` surface points of the object (metres, model frame), e.g. to draw it under a pose."""
+        return self.surface_points
+
+    def call(self, image, box, *, camera=None, depth=None) -> Pose6D:
         """Pose of the object in ``box``: ``Box2D`` or ``(x_min, y_min, x_max, y_max)`` pixels.
 
         Args:
             image: ``(H, W, 3)`` uint8 RGB.
             box: the object's 2D box.
-            depth: optional ``(H, W)`` float32 depth in metres (0 = none): refines with ICP (open3d).
             camera: this image's Camera or ``K`` (default: the constructor's).
+            depth: optional ``(H, W)`` float32 depth in metres (0 = none): refines with ICP (open3d).
         """
         return self.run_steps(self._values([image], [box], [camera], [depth], self.top_k))["poses"][0]
 

@@ -103,7 +103,8 @@ class AAERunDir(RunDir):
 
     @classmethod
     def validate(cls, run_dir: str | Path) -> Path:
-        """Checks that ``run_dir`` has every file a pipeline needs and readable configuration and geometry.
+        """Checks that ``run_dir`` has every file a pipeline needs and readable configuration, geometry and
+        codebook.
 
         Returns:
             ``run_dir`` as a Path.
@@ -111,6 +112,7 @@ class AAERunDir(RunDir):
         run_dir = cls.check_files(run_dir)
         cls.read_config(run_dir)
         read_object(run_dir)
+        read_codebook(run_dir)
         return run_dir
 
 

@@ -5,7 +5,8 @@
 ``margin`` × the box's longer side, resampled to the network's input), ``predict`` (heatmaps),
 ``decode`` (heatmaps to crop pixels with sub-pixel refinement, :func:`paz6d.hrnet.heatmaps.decode_heatmaps`),
 ``to_image`` (crop pixels back to image pixels) and ``to_keypoints2d``. :class:`HRNetPose6D` adds
-``solve_pnp``: RANSAC PnP of those keypoints against the 3D keypoints the network was trained on.
+``solve_pnp``: RANSAC PnP of those keypoints against the 3D keypoints the network was trained on, and
+``refine_with_depth`` (ICP, when a call gives a depth image).
 
 Example:
     >>> detector = HRNetKeypoints2D("runs/hrnet")                     # doctest: +SKIP
@@ -25,6 +26,7 @@ import numpy as np
 from paz6d.abstract import Box2D, KeyedStep, Keypoints2D, Pose6D, Processor, SequentialProcessor
 from paz6d.backend.boxes import check_box_in_image
 from paz6d.backend.camera import Camera, as_camera
+from paz6d.backend.checks import check_depth
 from paz6d.backend.image import as_image
 from paz6d.backend.pnp import PnPError
 from paz6d.hrnet import run_dir as run_files
@@ -33,6 +35,7 @@ from paz6d.keypointnet.pipeline import KeypointPnP
 from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
 from paz6d.processors.predict import Predict
+from paz6d.processors.refine import RefineWithDepth
 
 
 class DecodeHeatmaps(Processor):
@@ -129,8 +132,11 @@ class HRNetKeypoints2D(SequentialProcessor):
 
 
 class HRNetPose6D(HRNetKeypoints2D):
-    """``(image, box2d, camera=None) -> Pose6D``: :class:`HRNetKeypoints2D` + ``solve_pnp`` (RANSAC EPnP then
-    Levenberg–Marquardt, :class:`~paz6d.keypointnet.pipeline.KeypointPnP`) against the run's 3D keypoints.
+    """``(image, box, *, camera=None, depth=None) -> Pose6D``: :class:`HRNetKeypoints2D` + ``solve_pnp``
+    (RANSAC EPnP then Levenberg–Marquardt, :class:`~paz6d.keypointnet.pipeline.KeypointPnP`) against the run's
+    3D keypoints + ``refine_with_depth`` (:class:`~paz6d.processors.refine.RefineWithDepth`: ICP against a
+    depth image when the call gives one, on points sampled from the run's training mesh; without one the
+    PnP pose as it is).
 
     Args:
         run_dir: HRNet run directory.
@@ -149,29 +155,46 @@ class HRNetPose6D(HRNetKeypoints2D):
         self.add(KeyedStep(KeypointPnP(self.points_model, ransac_threshold, self.input_size, 4, self.class_name),
                            ("keypoints", "windows", "cameras"), "poses", "solve_pnp", per_sample=True,
                            failures=(PnPError,)))
+        self.add(KeyedStep(RefineWithDepth(lambda: run_files.HRNetRunDir.surface_points(self.run_dir)),
+                           ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth", per_sample=True))
 
-    def _poses(self, images, boxes, cameras) -> list:
+    @property
+    def model_points(self) -> np.ndarray:
+        """``(N, 3)`` the run's 3D keypoints (metres, model frame), e.g. to draw the object under a pose."""
+        return self.points_model
+
+    def _poses(self, images, boxes, cameras, depths=None) -> list:
         values = self._values(images, boxes)
         cameras = [None] * len(images) if cameras is None else list(cameras)
-        if len(cameras) != len(images):
-            raise ValueError(f"cameras: expected one per image ({len(images)}), got {len(cameras)}")
+        depths = [None] * len(images) if depths is None else list(depths)
+        if len(cameras) != len(images) or len(depths) != len(images):
+            raise ValueError(f"cameras/depths: expected one per image ({len(images)}), got {len(cameras)} and "
+                             f"{len(depths)}")
         values["cameras"] = [as_camera(self.camera if camera is None else camera, image.shape[1], image.shape[0])
                              for image, camera in zip(values["images"], cameras)]
+        values["depths"] = [None if depth is None else check_depth(depth, shape=image.shape[:2])
+                            for image, depth in zip(values["images"], depths)]
         return self.run_steps(values)["poses"]
 
-    def estimate_batch(self, images, boxes, cameras: Sequence | None = None) -> list[Pose6D | None]:
-        """Poses for many ``(image, box)`` pairs; ``None`` where PnP fails."""
+    def estimate_batch(self, images, boxes, cameras: Sequence | None = None,
+                       depths: Sequence | None = None) -> list[Pose6D | None]:
+        """Poses for many ``(image, box)`` pairs; ``None`` where PnP fails (``depths``: optional ``(H, W)``
+        metres or ``None`` per image, for ICP refinement)."""
         if len(images) == 0 and len(boxes) == 0:
             return []
-        return [None if isinstance(pose, Exception) else pose for pose in self._poses(images, boxes, cameras)]
+        return [None if isinstance(pose, Exception) else pose
+                for pose in self._poses(images, boxes, cameras, depths)]
 
-    def call(self, image, box2d, camera=None) -> Pose6D:
-        """Pose ``T_model2cam`` (metres) of the object inside ``box2d``.
+    def call(self, image, box, *, camera=None, depth=None) -> Pose6D:
+        """Pose ``T_model2cam`` (metres) of the object inside ``box`` (``Box2D`` or ``xyxy`` pixels).
 
+        Args:
+            camera: this image's Camera or ``K`` (default: the constructor's).
+            depth: optional ``(H, W)`` depth image (metres, 0 = none) registered to ``image``: ICP refinement.
         Raises:
             PnPError: no PnP solution.
         """
-        pose = self._poses([image], [box2d], [camera])[0]
+        pose = self._poses([image], [box], [camera], [depth])[0]
         if isinstance(pose, Exception):
             raise pose
         return pose

@@ -176,25 +176,8 @@ class KeypointPnP(Processor):
                                    sigma[:, None, None] ** 2 * np.eye(2), camera, threshold)
 
 
-def surface_points_of_run(run_dir: str | Path, count: int = 2000, seed: int = 0) -> np.ndarray:
-    """``(count, 3)`` points (metres, model frame) sampled on the mesh a run was trained on (``mesh_path``
-    and ``mesh_scale`` of its ``config.json``), for depth refinement.
-
-    Raises:
-        ValueError: the run records no mesh, or its file is gone (naming both).
-    """
-    from paz6d.backend.mesh import load_mesh, sample_points  # here: trimesh, only when a depth image is given
-
-    config = run_files.read_config(run_dir)
-    mesh_path = config.get("mesh_path")
-    if not mesh_path or not Path(mesh_path).is_file():
-        raise ValueError(f"{Path(run_dir) / run_files.CONFIG_FILE}: mesh_path {mesh_path!r} is not a file; depth "
-                         f"refinement samples the object's surface from the mesh the run was trained on")
-    return sample_points(load_mesh(mesh_path, float(config.get("mesh_scale", 1.0))), count, seed)
-
-
 class KeypointPose6D(SequentialProcessor):
-    """``(image, box2d, camera=None) -> Pose6D`` with a trained KeypointNet run and PnP.
+    """``(image, box, *, camera=None, depth=None) -> Pose6D`` with a trained KeypointNet run and PnP.
 
     The steps pass a dict of per-sample lists (a batch) along; each is a
     :class:`~paz6d.abstract.KeyedStep` that reads and writes named values:
@@ -213,10 +196,10 @@ class KeypointPose6D(SequentialProcessor):
     - ``solve_pnp``: ``keypoints``, ``windows``, ``cameras`` -> ``poses`` (:class:`KeypointPnP`);
     - ``depth_from_box`` (only with ``depth_from_box=True``): ``poses``, ``boxes``, ``cameras`` -> ``poses``
       (:class:`~paz6d.processors.pose.DepthFromBox`);
-    - ``refine_with_depth`` (added at the first call given a depth image): ``poses``, ``depths``, ``boxes``,
-      ``cameras`` -> ``poses`` (:class:`~paz6d.processors.refine.RefineWithDepth`, ICP against the depth
-      image; a sample without one keeps its pose). Its model points are sampled on the run's mesh
-      (``mesh_path`` of ``config.json``) then.
+    - ``refine_with_depth``: ``poses``, ``depths``, ``boxes``, ``cameras`` -> ``poses``
+      (:class:`~paz6d.processors.refine.RefineWithDepth`, ICP against the depth image; a sample without one
+      keeps its pose). Its model points are sampled on the run's mesh (``mesh_path`` of ``config.json``) at
+      the first depth image.
 
     ``cameras`` holds a :class:`~paz6d.backend.camera.Camera` per image. A sample whose PnP fails
     carries its :class:`~paz6d.backend.pnp.PnPError` as its pose (raised by a call, ``None`` from
@@ -287,6 +270,8 @@ class KeypointPose6D(SequentialProcessor):
         if depth_from_box:
             self.add(KeyedStep(DepthFromBox(self.hull_points), ("poses", "boxes", "cameras"), "poses",
                                "depth_from_box", per_sample=True))
+        self.add(KeyedStep(RefineWithDepth(lambda: run_files.KeypointNetRunDir.surface_points(self.run_dir)),
+                           ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth", per_sample=True))
 
     # -- inputs ---------------------------------------------------------------------------------
     def _camera(self, camera, width: int | None = None, height: int | None = None) -> Camera:
@@ -311,10 +296,6 @@ class KeypointPose6D(SequentialProcessor):
         if len(depths) != len(images):
             raise ValueError(f"depths: expected one per image ({len(images)}), got {len(depths)}")
         samples = [self._sample(*sample) for sample in zip(images, boxes, cameras)]
-        if any(depth is not None for depth in depths) and "refine_with_depth" not in self.names:
-            self.add(KeyedStep(RefineWithDepth(lambda: surface_points_of_run(self.run_dir)),
-                               ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth",
-                               per_sample=True))
         return {"images": [sample[0] for sample in samples], "boxes": [sample[1] for sample in samples],
                 "cameras": [sample[2] for sample in samples], "depths": depths}
 
@@ -364,8 +345,14 @@ class KeypointPose6D(SequentialProcessor):
         poses = self.run_steps(self._values(images, boxes, cameras, depths))["poses"]
         return [None if isinstance(pose, Exception) else pose for pose in poses]
 
-    def call(self, image, box2d, camera=None, depth=None) -> Pose6D:
-        """Pose ``T_model2cam`` (metres) of the object inside ``box2d`` (``Box2D`` or ``xyxy`` pixels).
+    @property
+    def model_points(self) -> np.ndarray:
+        """``(N, 3)`` points of the object (metres, model frame) to draw it under a pose: its convex hull with
+        ``depth_from_box``, else its 3D keypoints."""
+        return self.points_model if self.hull_points is None else self.hull_points
+
+    def call(self, image, box, *, camera=None, depth=None) -> Pose6D:
+        """Pose ``T_model2cam`` (metres) of the object inside ``box`` (``Box2D`` or ``xyxy`` pixels).
 
         Args:
             camera: this image's Camera or ``K`` (default: the constructor's).
@@ -374,7 +361,7 @@ class KeypointPose6D(SequentialProcessor):
         Raises:
             PnPError: too few usable keypoints or no PnP solution.
         """
-        pose = self.run_steps(self._values([image], [box2d], [camera], [depth]))["poses"][0]
+        pose = self.run_steps(self._values([image], [box], [camera], [depth]))["poses"][0]
         if isinstance(pose, Exception):
             raise pose
         return pose

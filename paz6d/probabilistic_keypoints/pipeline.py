@@ -5,7 +5,8 @@ covariance-weighted PnP.
 (:mod:`paz6d.probabilistic_keypoints.run_dir`), crops the square around the box, predicts each
 keypoint's mean and covariance, maps both to image pixels and solves
 :func:`~paz6d.backend.pnp.solve_pnp_weighted`. Its named steps (``crop``, ``predict``, ``gaussians``,
-``to_image``, ``to_keypoints2d``, ``solve_pnp``) can be read, replaced, inserted or removed.
+``to_image``, ``to_keypoints2d``, ``solve_pnp``, ``refine_with_depth``) can be read, replaced, inserted
+or removed.
 
 Example:
     >>> estimator = ProbabilisticKeypointPose6D("runs/gaussian", camera)      # doctest: +SKIP
@@ -21,7 +22,7 @@ import numpy as np
 
 from paz6d.abstract import Box2D, KeyedStep, Keypoints2D, Pose6D, Processor, SequentialProcessor
 from paz6d.backend.camera import Camera, as_camera
-from paz6d.backend.checks import as_array
+from paz6d.backend.checks import as_array, check_depth
 from paz6d.backend.image import as_image
 from paz6d.backend.pnp import PnPError
 from paz6d.probabilistic_keypoints import run_dir as run_files
@@ -30,6 +31,7 @@ from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
 from paz6d.processors.pose import SolveWeightedPnP
 from paz6d.processors.predict import Predict
+from paz6d.processors.refine import RefineWithDepth
 
 
 class DecodeGaussians(Processor):
@@ -80,13 +82,15 @@ class WeightedPnP(Processor):
 
 
 class ProbabilisticKeypointPose6D(SequentialProcessor):
-    """``(image, box2d, camera=None) -> Pose6D`` with a trained probabilistic-keypoints run.
+    """``(image, box, *, camera=None, depth=None) -> Pose6D`` with a trained probabilistic-keypoints run.
 
     Steps over a dict of per-sample lists (:class:`~paz6d.abstract.KeyedStep`): ``crop`` (``images``,
     ``boxes`` -> ``crops``, ``windows``), ``predict`` (``crops`` -> ``outputs``), ``gaussians`` (``outputs``
     -> ``uv``, ``covariances_crop``), ``to_image`` (``uv``, ``windows`` -> ``points``), ``covariances_to_image``
     (``covariances_crop``, ``windows`` -> ``covariances``), ``to_keypoints2d`` (``points`` -> ``keypoints``),
-    ``solve_pnp`` (``keypoints``, ``covariances``, ``windows``, ``cameras`` -> ``poses``).
+    ``solve_pnp`` (``keypoints``, ``covariances``, ``windows``, ``cameras`` -> ``poses``), ``refine_with_depth``
+    (``poses``, ``depths``, ``boxes``, ``cameras`` -> ``poses``: ICP against a depth image when the call gives one,
+    :class:`~paz6d.processors.refine.RefineWithDepth`, on points sampled from the run's training mesh).
 
     Args:
         run_dir: the run directory.
@@ -122,22 +126,36 @@ class ProbabilisticKeypointPose6D(SequentialProcessor):
         self.add(KeyedStep(WeightedPnP(self.points_model, self.input_size, robust_scale=robust_scale,
                                        class_name=class_name), ("keypoints", "covariances", "windows", "cameras"),
                            "poses", "solve_pnp", per_sample=True, failures=(PnPError,)))
+        surface_points = run_files.ProbabilisticKeypointsRunDir.surface_points
+        self.add(KeyedStep(RefineWithDepth(lambda: surface_points(self.run_dir)),
+                           ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth", per_sample=True))
 
-    def _values(self, image, box, camera) -> dict:
+    @property
+    def model_points(self) -> np.ndarray:
+        """``(N, 3)`` the run's 3D keypoints (metres, model frame), e.g. to draw the object under a pose."""
+        return self.points_model
+
+    def _values(self, image, box, camera, depth=None) -> dict:
         image = as_image(image)
         height, width = image.shape[:2]
         box = box if isinstance(box, Box2D) else Box2D.from_array(box)
         return {"images": [image], "boxes": [box],
-                "cameras": [as_camera(self.camera if camera is None else camera, width, height)]}
+                "cameras": [as_camera(self.camera if camera is None else camera, width, height)],
+                "depths": [None if depth is None else check_depth(depth, shape=image.shape[:2])]}
 
     def detect(self, image, box2d, camera=None) -> tuple[Keypoints2D, np.ndarray]:
         """Keypoints (image pixels) and their covariances ``(N, 2, 2)`` (image pixels²) in ``box2d``."""
         values = self.run_steps(self._values(image, box2d, camera), stop="solve_pnp")
         return values["keypoints"][0], values["covariances"][0]
 
-    def call(self, image, box2d, camera=None) -> Pose6D:
-        """Pose ``T_model2cam`` (metres) of the object inside ``box2d`` (``Box2D`` or ``xyxy`` pixels)."""
-        pose = self.run_steps(self._values(image, box2d, camera))["poses"][0]
+    def call(self, image, box, *, camera=None, depth=None) -> Pose6D:
+        """Pose ``T_model2cam`` (metres) of the object inside ``box`` (``Box2D`` or ``xyxy`` pixels).
+
+        Args:
+            camera: this image's Camera or ``K`` (default: the constructor's).
+            depth: optional ``(H, W)`` depth image (metres, 0 = none) registered to ``image``: ICP refinement.
+        """
+        pose = self.run_steps(self._values(image, box, camera, depth))["poses"][0]
         if isinstance(pose, Exception):
             raise pose
         return pose

@@ -41,6 +41,11 @@ class SSDRunDir(RunDir):
         detector description."""
         return read_detector(cls.check_files(run_dir))
 
+    @classmethod
+    def class_names(cls, run_dir: str | Path) -> tuple[str, ...]:
+        """The detector's class names (``detector.json``), in class-id order."""
+        return tuple(read_detector(run_dir)["class_names"])
+
 
 # the module's functions, as its callers use them
 _RUN_DIR = SSDRunDir

@@ -1,2 +1,18 @@
 """Spatial transformer networks: a differentiable bilinear sampler, an affine localisation network and
 a digit classifier with and without them (``paz6d train stn``; see docs/stn.md)."""
+
+from __future__ import annotations
+
+from paz6d.method import Method
+from paz6d.stn.run_dir import STNRunDir
+
+
+def load_pipeline(run_dir):
+    """The run's :class:`~paz6d.stn.pipeline.ClassifyDigit` (imports TensorFlow)."""
+    from paz6d.stn.pipeline import ClassifyDigit
+
+    return ClassifyDigit(run_dir)
+
+
+#: The spatial transformer's record in :mod:`paz6d.methods`.
+METHOD = Method("stn", "spatial-transformer", STNRunDir, load_pipeline, task="classification", options=())
