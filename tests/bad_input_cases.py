@@ -1214,6 +1214,7 @@ def run_cases() -> list[Case]:
         "--score-threshold": [(("2",), ""), (("nan",), "")],
         "--faces": [(("smile",), ""), ((), "--detector or --faces")],
         "--run": [(("1={world}/runs/aae",), "--run: pose models need --detector")],
+        "--smooth": [(("0",), ""), (("nan",), ""), (("1.5",), ""), (("0.5",), "--smooth: smooths poses")],
     })
     found += _flag_cases("run-detector-", RUN_DETECTOR, {
         "--detector": [(("{case}/none",), "none"), (("{world}/runs/aae",), "aae run directory, not an SSD")],

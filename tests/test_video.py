@@ -209,3 +209,20 @@ def test_detect_and_estimate_poses_through_the_player_with_its_own_drawing(clip,
     centre = np.rint(Camera(K, *SIZE).project(pose.translation[None])[0]).astype(int)  # the axes start there
     assert not np.array_equal(first[centre[1] - 2:centre[1] + 3, centre[0] - 2:centre[0] + 3],
                               astronaut_frames()[0][centre[1] - 2:centre[1] + 3, centre[0] - 2:centre[0] + 3])
+
+
+def test_smoothing_as_the_players_transform_gives_the_smoothers_poses(clip, tmp_path):
+    from paz6d.video.smoothing import PoseSmoother
+
+    generator = np.random.default_rng(1)
+    poses = [Pose6D.from_rotation_vector(generator.normal(0, 0.02, 3), [0.0, 0.0, 0.5] + generator.normal(0, 0.003, 3),
+                                         "obj_000001") for _ in range(4)]
+    calls = iter(poses)
+    with open_frames(clip / "frames", fps=10.0) as source:
+        VideoPlayer(lambda image: [next(calls)], source, transform=PoseSmoother(0.4)).run(
+            records=tmp_path / "frames.jsonl")
+    reference = PoseSmoother(0.4)
+    expected = [reference([pose], frame)[0] for pose, frame in
+                zip(poses, (type("F", (), {"timestamp_s": i / 10.0}) for i in range(4)))]
+    written = [record.results[0]["pose"] for record in read_records(tmp_path / "frames.jsonl")]
+    assert written == expected and written[0] == poses[0] and written[1] != poses[1]

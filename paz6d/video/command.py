@@ -12,7 +12,8 @@ runs a face pipeline (:mod:`paz6d.faces`)::
 ``--out`` receives ``annotated.mp4`` (the frames with the pipeline's drawing), ``frames.jsonl`` (one
 line per frame, :mod:`paz6d.video.records`) and ``summary.json`` (frames per second, per-frame latency).
 ``--camera`` is a camera JSON file (:mod:`paz6d.backend.camera_file`); every frame must have its size,
-and a camera with distortion undistorts every frame first (``--no-undistort`` keeps them). Every flag,
+and a camera with distortion undistorts every frame first (``--no-undistort`` keeps them). ``--smooth
+WEIGHT`` smooths the poses over time (:mod:`paz6d.video.smoothing`). Every flag,
 the camera file, the run directories and the first frame are checked before a model loads.
 """
 
@@ -26,6 +27,7 @@ from pathlib import Path
 from paz6d.backend.files import write_json_atomically
 from paz6d.backend.paths import check_outputs
 from paz6d.ssd import run_dir as ssd_run_dir
+from paz6d.video.smoothing import PoseSmoother
 
 FACES = ("haar", "emotion", "head-pose")
 #: The files written in ``--out``.
@@ -49,6 +51,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=float, default=None,
                         help="frames per second of an image folder (default 30) or of a device that reports none")
     parser.add_argument("--max-frames", type=int, default=None, metavar="N", help="stop after N frames")
+    parser.add_argument("--smooth", type=float, default=None, metavar="WEIGHT",
+                        help="smooth poses over time (alpha-beta filter, paz6d.video.smoothing) with this weight in "
+                             "(0, 1] of each new pose (default: no smoothing)")
     parser.add_argument("--undistort", action=argparse.BooleanOptionalAction, default=True,
                         help="undistort the frames with the camera's distortion before the pipeline (default: yes)")
     parser.add_argument("--show", action="store_true", help="show the annotated frames in a window (needs a display)")
@@ -90,6 +95,10 @@ def check_flags(args: argparse.Namespace) -> dict[int, Path]:
         raise ValueError(f"--score-threshold: expected a number in [0, 1], got {args.score_threshold}")
     if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
         raise ValueError(f"--fps: expected a positive number of frames per second, got {args.fps}")
+    if args.smooth is not None and not (math.isfinite(args.smooth) and 0.0 < args.smooth <= 1.0):
+        raise ValueError(f"--smooth: expected a weight in (0, 1], got {args.smooth}")
+    if args.smooth is not None and not (args.run or args.faces == "head-pose"):
+        raise ValueError("--smooth: smooths poses; give pose models (--run) or --faces head-pose")
     if args.max_frames is not None and args.max_frames < 1:
         raise ValueError(f"--max-frames: expected a whole number >= 1, got {args.max_frames}")
     if args.detector is not None and not args.detector.is_dir():
@@ -171,11 +180,13 @@ def run(args: argparse.Namespace) -> int:
         pipeline_camera = None if camera is None else Camera(camera.K, camera.width, camera.height)
         pipeline, draw, description = build_pipeline(args, runs, pipeline_camera)
         out = prepare_run_output(args.out, "run", inputs)
-        player = VideoPlayer(pipeline, source, draw, undistort=undistort, camera=pipeline_camera)
+        smoother = None if args.smooth is None else PoseSmoother(args.smooth)
+        player = VideoPlayer(pipeline, source, draw, undistort=undistort, camera=pipeline_camera, transform=smoother)
         summary = player.run(out / VIDEO_FILE, out / RECORDS_FILE, args.max_frames, args.progress, args.show)
         report = {"input": {"kind": source.kind, "name": source.name, "fps": source.fps,
                             "size": list(source.size), "undistorted": undistort is not None},
                   "camera": None if args.camera is None else str(args.camera), "pipeline": description,
+                  "smooth": args.smooth,
                   "video": VIDEO_FILE, "records": RECORDS_FILE, **summary}
     write_json_atomically(out / SUMMARY_FILE, report, indent=2)
     latency = summary["latency_ms"]
