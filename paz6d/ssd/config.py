@@ -30,10 +30,22 @@ def check_light_input_size(size: int, error: type[ValueError] = ValueError) -> i
     return size
 
 
+#: Pretrained bodies of the light network (``--backbone``; docs/backbones.md); "none": its own, from scratch.
+BACKBONES = ("none", "efficientnet-lite0")
+#: Settings a backbone brings, applied over the config's (and under ``overrides`` and the flags): its input
+#: scaling's network at 320 px, batch 8 (one step about 3 s on 2 cores), the heads' learning rate and the
+#: backbone's factor of it, and the stages kept fixed (stem and stages up to stride 4).
+BACKBONE_SETTINGS: dict[str, dict] = {
+    "efficientnet-lite0": {"backbone": "efficientnet-lite0", "input_size": 320, "batch_size": 8,
+                           "learning_rate": 1e-3, "backbone_rate_factor": 0.1, "frozen_stages": 3,
+                           "warmup_steps": 100},
+}
+
 #: Data set formats ``paz6d train ssd --format`` reads (``paz6d.ssd.dataset.FORMATS``, kept here light).
 DATASET_FORMATS = ("auto", "generated", "voc", "coco", "openimages")
 #: Keys of a run's settings that must not change when it is resumed.
-FIXED_SETTINGS = ("architecture", "input_size", "width", "top_down", "scale_crops", "iou_threshold")
+FIXED_SETTINGS = ("architecture", "input_size", "width", "top_down", "scale_crops", "iou_threshold", "backbone",
+                  "frozen_stages")
 
 
 @dataclass
@@ -55,6 +67,10 @@ class SSDTraining:
         None, "light network only: train on input-sized windows of images rescaled by a factor in [LOW, HIGH] "
               "and detect on whole images at the factors' geometric mean (default: the config's)",
         metavar=("LOW", "HIGH"))
+    backbone: str | None = option(None, "body of the light network: efficientnet-lite0 (pretrained on ImageNet, "
+                                        "docs/backbones.md; brings its input size, batch size and learning rates "
+                                        "unless given) or none (its own, from scratch; default: the config's)",
+                                  choices=BACKBONES)
     progress: bool = option(True, "progress bar")
     overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
 
@@ -63,14 +79,29 @@ class SSDTraining:
         self.settings()
 
     def settings(self) -> dict:
-        """The config's settings with ``overrides``, ``steps``, ``batch_size`` and ``input_size`` applied.
+        """The config's settings with the backbone's (:data:`BACKBONE_SETTINGS`), ``overrides``, ``steps``,
+        ``batch_size`` and ``input_size`` applied, in that order.
 
         Raises:
-            ValueError: a non-positive value, or an ``input_size`` the network cannot take.
+            ValueError: a non-positive value, an ``input_size`` the network cannot take, or a backbone for
+                another network than the light one.
         """
-        settings = apply_positive_integers(preset_settings(CONFIGS, self.config, self.overrides, check_overrides=False),
+        settings = preset_settings(CONFIGS, self.config, {}, check_overrides=False)
+        backbone = self.backbone or self.overrides.get("backbone") or settings.get("backbone") or "none"
+        if backbone not in BACKBONES:
+            raise ValueError(f"backbone: expected one of {BACKBONES}, got {backbone!r}")
+        if backbone != "none":
+            if settings["architecture"] != "light":
+                raise ValueError(f"backbone: only the light network takes a pretrained body; the {self.config!r} "
+                                 f"config's is {settings['architecture']}")
+            settings.update(BACKBONE_SETTINGS[backbone])
+        settings = apply_positive_integers({**settings, **self.overrides},
                                            {"steps": self.steps, "batch_size": self.batch_size,
                                             "input_size": self.input_size})
+        if backbone == "none":
+            settings.pop("backbone", None)
+        else:
+            settings["backbone"] = backbone
         if self.input_size is not None:
             if settings["architecture"] != "light":
                 raise ValueError(f"input_size: only the light network takes another input size; the "

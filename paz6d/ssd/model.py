@@ -8,12 +8,15 @@ Three architectures share one head and one output layout:
 - ``"ssd512"``: the same body on 512 x 512 inputs, five extra blocks; feature maps 64, 32, 16, 8, 4, 2, 1.
 - ``"light"``: a CPU configuration (input 320 by default): MobileNet-style depthwise-separable body with
   batch normalisation, ``width`` channels scaling, feature maps of stride 8, 16, 32, 64 and two more, and
-  depthwise-separable heads; priors sized for small objects.
+  depthwise-separable heads; priors sized for small objects. With a ``backbone`` (:data:`BACKBONES`), a
+  pretrained ImageNet network (:mod:`paz6d.backbones`) replaces its body up to stride 32 (the same six
+  maps, priors and heads; the extra maps are the light network's).
 
-The model maps ``images (B, S, S, 3)`` float32 (normalised with :data:`IMAGE_MEAN`/:data:`IMAGE_STD`,
-see :func:`normalize_images`) to ``(B, P, 4 + C)``: per prior, the 4 box offsets (encoded as in
-:func:`paz6d.backend.boxes.encode`) then ``C`` class logits, class 0 being the background. Priors
-(:func:`priors_for`) are in the same order: feature map, then cell (row-major), then prior shape.
+The model maps ``images (B, S, S, 3)`` float32 (normalised with :data:`IMAGE_MEAN`/:data:`IMAGE_STD`, or a
+backbone's own scaling: :func:`input_normalization`, :func:`normalize_images`) to ``(B, P, 4 + C)``: per
+prior, the 4 box offsets (encoded as in :func:`paz6d.backend.boxes.encode`) then ``C`` class logits, class 0
+being the background. Priors (:func:`priors_for`) are in the same order: feature map, then cell
+(row-major), then prior shape.
 
 Models save as ``.keras`` with only registered layers (no ``Lambda``): loading runs in safe mode.
 """
@@ -22,14 +25,16 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
+from paz6d.backbones import efficientnet_lite0 as lite0
 from paz6d.backend.boxes import prior_boxes
 from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.image import normalize
 from paz6d.backend.tensorflow_guard import compiled_inference, import_keras, import_tensorflow, load_keras_model
-from paz6d.ssd.config import check_light_input_size
+from paz6d.ssd.config import BACKBONES, check_light_input_size
 
 tf = import_tensorflow()
 keras = import_keras()
@@ -39,6 +44,8 @@ ARCHITECTURES = ("ssd300", "ssd512", "light")
 #: Input normalisation: ``(image / 255 - IMAGE_MEAN) / IMAGE_STD`` per channel (RGB).
 IMAGE_MEAN = (0.485, 0.456, 0.406)
 IMAGE_STD = (0.229, 0.224, 0.225)
+#: Name of the nested backbone model inside an SSD built with a ``backbone``.
+BACKBONE_LAYER = "backbone"
 
 
 class SSDModelError(ValueError):
@@ -132,9 +139,22 @@ def priors_for(spec: PriorSpec, image_shape: tuple[int, int] | None = None) -> n
     return prior_boxes((width, height), maps, steps, spec.min_sizes, spec.max_sizes, spec.aspect_ratios)
 
 
-def normalize_images(images) -> np.ndarray:
-    """``uint8`` RGB ``(..., H, W, 3)`` to the network's float32 input (:func:`paz6d.backend.image.normalize`)."""
-    return normalize(images, IMAGE_MEAN, IMAGE_STD)
+def input_normalization(backbone: str | None = None) -> dict[str, list[float]]:
+    """``{"mean": [r, g, b], "std": [r, g, b]}`` of the network input ``(image / 255 - mean) / std``:
+    ImageNet's channel statistics for the from-scratch networks, a pretrained backbone's own scaling
+    (EfficientNet-Lite0: ``(image - 127) / 128``) otherwise."""
+    if backbone in (None, "none"):
+        return {"mean": list(IMAGE_MEAN), "std": list(IMAGE_STD)}
+    if backbone == "efficientnet-lite0":
+        return {"mean": [lite0.PIXEL_MEAN / 255.0] * 3, "std": [lite0.PIXEL_SCALE / 255.0] * 3}
+    raise SSDModelError(f"backbone: expected one of {BACKBONES}, got {backbone!r}")
+
+
+def normalize_images(images, normalization: dict | None = None) -> np.ndarray:
+    """``uint8`` RGB ``(..., H, W, 3)`` to the network's float32 input (:func:`paz6d.backend.image.normalize`)
+    with ``normalization`` (:func:`input_normalization`; default ImageNet's statistics)."""
+    normalization = normalization or input_normalization()
+    return normalize(images, normalization["mean"], normalization["std"])
 
 
 @keras.saving.register_keras_serializable(package=PACKAGE)
@@ -209,9 +229,7 @@ def _separable(x, filters: int, name: str, strides: int = 1):
 def _light_body(inputs, width: float, top_down: bool = False) -> list:
     """Depthwise-separable body: six feature maps of stride 8, 16, 32, 64, 128 and a 1x1 map; with
     ``top_down``, the maps of stride 8, 16 and 32 pass through :func:`_top_down`."""
-    def channels(count: int) -> int:
-        return max(8, int(round(count * width / 8)) * 8)
-
+    channels = _channels(width)
     x = keras.layers.Conv2D(channels(32), 3, strides=2, padding="same", use_bias=False,
                             kernel_initializer="he_normal", name="stem")(inputs)
     x = keras.layers.ReLU(name="stem_relu")(keras.layers.BatchNormalization(name="stem_bn")(x))
@@ -222,6 +240,13 @@ def _light_body(inputs, width: float, top_down: bool = False) -> list:
     x = _separable(stride8, channels(256), "block5", strides=2)
     stride16 = _separable(x, channels(256), "block6")
     stride32 = _separable(stride16, channels(256), "block7", strides=2)
+    return _light_extras([stride8, stride16, stride32], channels, top_down)
+
+
+def _light_extras(features: list, channels: Callable[[int], int], top_down: bool) -> list:
+    """The maps of stride 64 and 128 and a 1x1 map after the stride-32 map of ``features`` (strides 8, 16,
+    32), and with ``top_down`` :func:`_top_down` over those three: the six maps of the light network."""
+    stride8, stride16, stride32 = features
     x = _conv(stride32, channels(128), 1, "extra1_1")
     stride64 = _separable(x, channels(256), "extra1_2", strides=2)
     x = _conv(stride64, channels(64), 1, "extra2_1")
@@ -232,6 +257,27 @@ def _light_body(inputs, width: float, top_down: bool = False) -> list:
     if top_down:
         stride8, stride16, stride32 = _top_down([stride8, stride16, stride32], channels(128))
     return [stride8, stride16, stride32, stride64, stride128, last]
+
+
+def _backbone_body(inputs, backbone: str, width: float, top_down: bool, frozen_stages: int) -> list:
+    """The six light-network maps on a pretrained ``backbone``'s stride-8, 16 and 32 maps (a nested model
+    named :data:`BACKBONE_LAYER`, ImageNet weights, batch-norm statistics frozen)."""
+    if backbone != "efficientnet-lite0":
+        raise SSDModelError(f"backbone: expected one of {BACKBONES}, got {backbone!r}")
+    body = lite0.build_features(tuple(inputs.shape[1:]), pretrained=True, frozen_stages=frozen_stages,
+                                name=BACKBONE_LAYER)
+    return _light_extras(list(body(inputs)), _channels(width), top_down)
+
+
+def _channels(width: float) -> Callable[[int], int]:
+    """Channels of the light network's layers: ``count`` scaled by ``width``, a multiple of 8 (at least 8)."""
+    return lambda count: max(8, int(round(count * width / 8)) * 8)
+
+
+def backbone_variables(model) -> list:
+    """The trainable variables of an SSD's pretrained backbone (none for the from-scratch networks)."""
+    names = {layer.name for layer in model.layers}
+    return list(model.get_layer(BACKBONE_LAYER).trainable_variables) if BACKBONE_LAYER in names else []
 
 
 def _top_down(features: list, filters: int) -> list:
@@ -265,7 +311,8 @@ def _heads(features: list, spec: PriorSpec, num_classes: int, separable: bool):
 
 
 def build_ssd(num_classes: int, architecture: str = "light", input_size: int | None = None,
-              width: float = 1.0, top_down: bool = False, any_size: bool = False) -> tuple[object, PriorSpec]:
+              width: float = 1.0, top_down: bool = False, any_size: bool = False, backbone: str | None = None,
+              frozen_stages: int = 3) -> tuple[object, PriorSpec]:
     """An SSD network and its prior layout.
 
     Args:
@@ -276,6 +323,10 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
         top_down: ``light`` only: a feature-pyramid top-down path over its three finest maps.
         any_size: ``light`` only: the model takes inputs of any height and width that are multiples of 64
             (trained on ``input_size`` squares, run on whole images; priors from :func:`priors_for`).
+        backbone: ``light`` only: a pretrained body (:data:`BACKBONES`; ``None``/``"none"``: the light body,
+            randomly initialised); its input is scaled as :func:`input_normalization` says.
+        frozen_stages: with a ``backbone``: its first stages kept fixed
+            (:func:`paz6d.backbones.efficientnet_lite0.build_features`).
     Returns:
         ``(model, spec)``: ``model(images (B, S, S, 3)) -> (B, P, 4 + num_classes)``; ``spec`` gives the priors.
     Raises:
@@ -288,13 +339,16 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
                             f"{paper_priors(architecture).input_size} images, got {input_size}")
     if not 0.1 <= float(width) <= 4.0:
         raise SSDModelError(f"width: expected a channel multiplier in [0.1, 4], got {width}")
-    for name, value in (("top_down", top_down), ("any_size", any_size)):
+    backbone = None if backbone == "none" else backbone
+    for name, value in (("top_down", top_down), ("any_size", any_size), ("backbone", backbone)):
         if value and architecture != "light":
             raise SSDModelError(f"{name}: only the light network offers it, not {architecture}")
     spec = paper_priors(architecture, input_size)
     side = None if any_size else spec.input_size
     inputs = keras.Input((side, side, 3), name="image")
-    if architecture == "light":
+    if architecture == "light" and backbone is not None:
+        features = _backbone_body(inputs, backbone, float(width), bool(top_down), frozen_stages)
+    elif architecture == "light":
         features = _light_body(inputs, float(width), bool(top_down))
     else:
         features, fc7 = _vgg16_body(inputs)
@@ -303,7 +357,8 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
             features.append(_vgg_extras_last(features[-1]))
     sizes = spec.feature_map_sizes if any_size else tuple(int(feature.shape[1]) for feature in features)
     if sizes != spec.feature_map_sizes:
-        raise SSDModelError(f"{architecture}: feature maps {sizes} differ from the prior layout {spec.feature_map_sizes}")
+        raise SSDModelError(f"{architecture}: feature maps {sizes} differ from the prior layout "
+                            f"{spec.feature_map_sizes}")
     outputs = _heads(features, spec, int(num_classes), separable=architecture == "light")
     return keras.Model(inputs, outputs, name=f"ssd_{architecture}"), spec
 

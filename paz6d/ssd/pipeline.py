@@ -258,7 +258,7 @@ class DetectSingleShot(SequentialProcessor):
 
     def _build(self, model, detector: dict, score_threshold: float, iou_threshold: float, max_detections: int,
                flip: bool):
-        from paz6d.ssd.model import IMAGE_MEAN, IMAGE_STD, PriorSpec, inference_function, priors_for
+        from paz6d.ssd.model import PriorSpec, inference_function, input_normalization, priors_for
 
         spec = PriorSpec.from_dict(detector["priors"])
         self.model, self.class_names = model, tuple(detector["class_names"])
@@ -272,12 +272,14 @@ class DetectSingleShot(SequentialProcessor):
             decoder, decode_inputs = DecodeCanvasBoxes(spec, detector["variances"]), ("output", "canvas_size")
             to_pixels = KeyedStep(CanvasToPixels(self.image_scale), ("boxes", "canvas_size", "image_size"), "boxes",
                                   name="to_pixels")
+        normalization = detector.get("normalization") or input_normalization()
         predict = (PredictImageAndMirror if self.flip else PredictImage)(inference_function(model))
         decoder = AverageWithMirror(decoder) if self.flip else decoder
         SequentialProcessor.__init__(self, [
             KeyedStep(CheckImage(), "image", ("image", "image_size"), name="check"),
             resize_step,
-            KeyedStep(NormalizeImage(IMAGE_MEAN, IMAGE_STD), "resized", "input", name="normalize"),
+            KeyedStep(NormalizeImage(normalization["mean"], normalization["std"]), "resized", "input",
+                      name="normalize"),
             KeyedStep(predict, "input", "output", name="predict"),
             KeyedStep(decoder, decode_inputs, ("boxes", "probabilities"), name="decode"),
             KeyedStep(NonMaximumSuppression(score_threshold, iou_threshold, max_detections),

@@ -4,7 +4,9 @@
 
     RUN_DIR/detector.json   architecture, class_names (class id i is class_names[i - 1]; 0 = background),
                             priors (input_size, feature maps, steps, sizes, aspect ratios), variances,
-                            optionally image_scale (the network runs on whole images scaled by it)
+                            optionally image_scale (the network runs on whole images scaled by it) and
+                            normalization (mean, std of its input (image / 255 - mean) / std; absent:
+                            ImageNet's channel statistics)
     RUN_DIR/model.keras     the network (loaded in Keras safe mode)
     RUN_DIR/config.json     the training settings (dataset, seed, schedule)
     RUN_DIR/metrics.json    training summary
@@ -56,7 +58,8 @@ read_config, write_config, write_metrics = _RUN_DIR.read_config, _RUN_DIR.write_
 
 
 def write_detector(run_dir: str | Path, architecture: str, class_names, priors: dict,
-                   variances=SSD_VARIANCES, image_scale: float | None = None) -> Path:
+                   variances=SSD_VARIANCES, image_scale: float | None = None,
+                   normalization: dict | None = None) -> Path:
     """Writes ``detector.json``: what the pipeline needs besides the weights.
 
     Args:
@@ -66,6 +69,8 @@ def write_detector(run_dir: str | Path, architecture: str, class_names, priors: 
         image_scale: for a network trained on rescaled windows (``scale_crops``): the factor by which
             whole images are scaled before they are padded and detected; ``None``: they are resized to
             the square input.
+        normalization: ``{"mean": [3 floats], "std": [3 floats]}`` of the network input
+            (:func:`paz6d.ssd.model.input_normalization`); ``None``: ImageNet's statistics.
     """
     class_names = [str(name) for name in class_names]
     if not class_names or len(set(class_names)) != len(class_names):
@@ -75,6 +80,8 @@ def write_detector(run_dir: str | Path, architecture: str, class_names, priors: 
             "variances": [float(v) for v in variances]}
     if image_scale is not None:
         data["image_scale"] = float(image_scale)
+    if normalization is not None:
+        data["normalization"] = {key: [float(v) for v in normalization[key]] for key in ("mean", "std")}
     return write_json_atomically(Path(run_dir) / DETECTOR_FILE, data, indent=2)
 
 
@@ -93,6 +100,15 @@ def read_detector(run_dir: str | Path) -> dict[str, Any]:
     scale = data.get("image_scale")
     if scale is not None and not (isinstance(scale, (int, float)) and scale > 0):
         raise ValueError(f"{path}: image_scale: expected a positive number or null, got {scale!r}")
+    normalization = data.get("normalization")
+    if normalization is not None and not (
+            isinstance(normalization, dict) and set(normalization) == {"mean", "std"}
+            and all(isinstance(values, list) and len(values) == 3
+                    and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+                    for values in normalization.values())
+            and all(v > 0 for v in normalization["std"])):
+        raise ValueError(f"{path}: normalization: expected {{'mean': [3 numbers], 'std': [3 positive numbers]}} "
+                         f"or null, got {normalization!r}")
     if not isinstance(data["priors"], dict):
         raise ValueError(f"{path}: priors: expected an object, got {type(data['priors']).__name__}")
     return data

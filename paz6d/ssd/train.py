@@ -8,6 +8,11 @@ the priors. The loss is :class:`paz6d.ssd.loss.MultiboxLoss`. Configurations:
 - ``quick``: the ``light`` CPU network (320 x 320), sized for a half-hour run on 2 CPU cores;
 - ``full``: SSD300 with a VGG16 body (the paper's network), for a GPU.
 
+With ``backbone`` (``--backbone efficientnet-lite0``, docs/backbones.md) the light network's body is the
+pretrained ImageNet EfficientNet-Lite0: its batch-norm statistics and first stages stay fixed, its other
+variables step at ``backbone_rate_factor`` times the learning rate (:mod:`paz6d.training.scaled_rates`),
+and images are scaled as it expects (``detector.json``'s ``normalization``).
+
 The run directory (:mod:`paz6d.ssd.run_dir`) gets ``detector.json`` + ``model.keras`` (what
 :class:`~paz6d.ssd.pipeline.DetectSingleShot` loads), the Trainer's checkpoints, ``log.csv``,
 ``tensorboard/`` and ``samples/`` (detections on training images), and ``metrics.json``. Re-running
@@ -97,7 +102,9 @@ def train_ssd(job: SSDTraining) -> dict:
         ValueError: empty or malformed data set, a different run in ``job.out``.
     """
     from paz6d.ssd.loss import multibox_terms
-    from paz6d.ssd.model import build_ssd, keras, normalize_images, priors_for, save_ssd
+    from paz6d.ssd.model import (backbone_variables, build_ssd, input_normalization, normalize_images, priors_for,
+                                 save_ssd)
+    from paz6d.training.scaled_rates import ScaledRateAdamW, keras
     from paz6d.training.trainer import Trainer
 
     settings = job.settings()
@@ -108,18 +115,21 @@ def train_ssd(job: SSDTraining) -> dict:
     keras.utils.set_random_seed(job.seed)
     scale = image_scale(settings)
     model, spec = build_ssd(len(data.class_names) + 1, settings["architecture"], settings["input_size"],
-                            settings["width"], settings.get("top_down", False), any_size=scale is not None)
+                            settings["width"], settings.get("top_down", False), any_size=scale is not None,
+                            backbone=settings.get("backbone"), frozen_stages=settings.get("frozen_stages", 3))
     priors = priors_for(spec)
+    normalization = input_normalization(settings.get("backbone"))
     run_files.write_detector(job.out, settings["architecture"], data.class_names, spec.to_dict(), SSD_VARIANCES,
-                             image_scale=scale)
-    optimizer = keras.optimizers.AdamW(_schedule(keras, settings), weight_decay=settings["weight_decay"],
-                                       global_clipnorm=10.0)
+                             image_scale=scale, normalization=normalization)
+    optimizer = ScaledRateAdamW(backbone_variables(model), settings.get("backbone_rate_factor", 1.0),
+                                learning_rate=_schedule(keras, settings), weight_decay=settings["weight_decay"],
+                                global_clipnorm=10.0)
     augmentation = augmentation_factory(settings)
 
     def make_batch(step: int):
         images, targets = training_batch(data, augmentation, job.seed, step, settings["batch_size"],
                                          spec.input_size, priors, settings["iou_threshold"])
-        return normalize_images(images), targets
+        return normalize_images(images, normalization), targets
 
     def loss_fn(model, batch):
         images, targets = batch
@@ -134,7 +144,8 @@ def train_ssd(job: SSDTraining) -> dict:
                       progress=job.progress, prefetch=2, prefetch_workers=1)
     training = trainer.fit()
     save_ssd(model, run_files.model_path(job.out))
-    summary = {"config": job.config, "architecture": settings["architecture"], "steps": training.final_step,
+    summary = {"config": job.config, "architecture": settings["architecture"],
+               "backbone": settings.get("backbone", "none"), "steps": training.final_step,
                "train_seconds": round(time.perf_counter() - started, 1), "images": len(data),
                "class_names": list(data.class_names), "final_losses": training.metrics,
                "loader_samples_per_second": finite_or_none(training.loader_samples_per_second, 1),
