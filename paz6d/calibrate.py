@@ -14,6 +14,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
+from paz6d.backend.files import write_json_atomically
 from paz6d.backend.paths import check_output_folder
 
 #: Image files read from ``--images``.
@@ -77,11 +80,9 @@ def image_files(folder: Path) -> list[Path]:
 def run(args: argparse.Namespace) -> int:
     """Runs ``paz6d calibrate``; bad input raises ``ValueError`` naming the flag or file."""
     import cv2
-    import numpy as np
 
     from paz6d.backend.calibration import CalibrationError, calibrate, corner_grid
     from paz6d.backend.camera_file import write_camera_json
-    from paz6d.backend.files import write_json_atomically
     from paz6d.backend.image import load_image, save_image
 
     board = _board(args)

@@ -31,6 +31,8 @@ COMMANDS = {
     "estimate": ("paz6d.estimate", "run trained pose models on a BOP data set (ground-truth boxes or --detector) -> BOP results CSV"),
     "calibrate": ("paz6d.calibrate", "camera intrinsics and lens distortion from images of a chessboard or ChArUco "
                                      "board -> camera.json"),
+    "export": ("paz6d.export.command", "a run's network as a TensorFlow SavedModel, TFLite or ONNX file, checked "
+                                       "against the Keras model"),
     "demo": ("paz6d.demo.command", "end-to-end demo: generate data, train, estimate poses, evaluate"),
     "run": ("paz6d.video.command", "a pipeline (detector, 6D poses, faces) over a video, image folder or camera "
                                    "-> annotated video + JSON lines"),
