@@ -193,26 +193,25 @@ def config_inputs(settings: Any, outputs: tuple[str, ...] = ("out",)) -> dict[st
             if field.name not in outputs and isinstance(getattr(settings, field.name), Path)}
 
 
-def prepare_training_output(settings: Any, method: str) -> Path:
-    """``settings.out`` checked by the one output rule and claimed for ``method``
-    (:func:`paz6d.run_dirs.prepare_run_output`, with the settings' other paths as the inputs)."""
-    from paz6d.run_dirs import prepare_run_output  # here: it imports every method's run_dir module
+def training_output(settings: Any, method: str) -> contextlib.AbstractContextManager[Path]:
+    """``settings.out`` checked by the one output rule and claimed for ``method`` while the block runs
+    (:func:`paz6d.run_dirs.run_output`, with the settings' other paths as the inputs)."""
+    from paz6d.run_dirs import run_output  # here: it imports every method's run_dir module
 
-    return prepare_run_output(settings.out, method, config_inputs(settings))
+    return run_output(settings.out, method, config_inputs(settings))
 
 
 def run_training(config_class: type, args: argparse.Namespace, train: Callable[[Any], dict]) -> int:
     """The ``run`` of a ``paz6d train <method>`` command (the method is ``args.model``): the run's
     settings from the flags (every field but ``overrides``), ``--out`` checked and claimed
-    (:func:`prepare_training_output`), ``train(settings)`` and its summary printed as JSON; returns
-    the exit status 0.
+    (:func:`training_output`), ``train(settings)`` and its summary printed as JSON; returns the exit
+    status 0.
 
     Raises:
         ValueError: bad settings or a failed run, naming the flag (:func:`flags_in_errors`).
     """
     job = config_from_args(config_class, args, exclude=("overrides",))
-    with flags_in_errors(config_class):
-        prepare_training_output(job, args.model)
+    with flags_in_errors(config_class), training_output(job, args.model):
         summary = train(job)
     print(json.dumps(summary, indent=2))
     return 0

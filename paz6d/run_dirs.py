@@ -1,12 +1,13 @@
 """Which method wrote a run directory (each registered method's ``RunDir`` recognises its own, see
-:mod:`paz6d.methods`); and the
-check every ``paz6d train <method>`` and ``paz6d benchmark`` makes before writing into its ``--out``."""
+:mod:`paz6d.methods`); and the check every ``paz6d train <method>`` and ``paz6d benchmark`` makes before
+writing into its ``--out``."""
 
 from __future__ import annotations
 
 import importlib
-import json
+import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 from paz6d import methods as registry
@@ -71,6 +72,25 @@ def prepare_run_output(out: str | Path, method: str, inputs: dict[str, str | Pat
     if not os.path.lexists(out / OWNER_FILE):
         write_json_atomically(out / OWNER_FILE, {"method": method})
     return out
+
+
+@contextlib.contextmanager
+def run_output(out: str | Path, method: str, inputs: dict[str, str | Path | None] | None = None,
+               flag: str = "--out") -> Iterator[Path]:
+    """:func:`prepare_run_output` around a command's work: when the work fails having written nothing
+    but the owner file, the owner file (and the folder, when this call created it) is removed again,
+    so a refused command leaves no trace and claims no folder."""
+    out = Path(out)
+    existed = os.path.lexists(out)
+    prepare_run_output(out, method, inputs, flag)
+    try:
+        yield out
+    except BaseException:
+        if [path.name for path in out.iterdir()] == [OWNER_FILE]:
+            (out / OWNER_FILE).unlink()
+            if not existed:
+                out.rmdir()
+        raise
 
 
 def is_run_dir(run_dir: str | Path, method: str) -> bool:

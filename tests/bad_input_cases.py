@@ -1326,10 +1326,84 @@ def dataset_path_cases() -> list[Case]:
     ]
 
 
+def _voc_box(xmin: str, ymin: str, xmax: str, ymax: str) -> Callable[[World, Path], None]:
+    """Setup: the VOC fixture whose first box (a dog in a 40 x 30 image) is ``xmin ymin xmax ymax``."""
+    return fixture_text("voc", "VOC2007/Annotations/000001.xml",
+                        "<xmin>5</xmin>\n\t\t\t<ymin>4</ymin>\n\t\t\t<xmax>30</xmax>\n\t\t\t<ymax>25</ymax>",
+                        f"<xmin>{xmin}</xmin><ymin>{ymin}</ymin><xmax>{xmax}</xmax><ymax>{ymax}</ymax>")
+
+
+def _coco_box(box: list) -> Callable[[World, Path], None]:
+    return coco_edit(lambda data: data["annotations"][0].update(bbox=box))
+
+
+def _one_pixel_image(world: World, folder: Path) -> None:
+    """The COCO fixture whose 20 x 16 PNG is replaced by a 1 x 1 image (its record says so too)."""
+    from paz6d.backend.image import save_image
+
+    coco_edit(lambda data: data["images"][1].update(width=1, height=1))(world, folder)
+    save_image(folder / "coco" / "tiny2017" / "000003.png", np.zeros((1, 1, 3), np.uint8))
+
+
+def annotation_cases() -> list[Case]:
+    """Boxes and sizes that cannot be, checked against the image's real size where every loader's
+    samples pass (:func:`paz6d.datasets.sample.check_sample`): refused naming the file, record and field."""
+    voc, coco = ("000001.xml",), ("instances_tiny2017.json", "image id 7")
+    return [
+        Case("train-ssd-voc-box-1e9", TRAIN_SSD_VOC, _voc_box("5", "4", "1e9", "25"), voc + ("box 0 (dog)", "outside")),
+        Case("train-ssd-voc-box-minus-1e6", TRAIN_SSD_VOC, _voc_box("-1e6", "4", "30", "25"),
+             voc + ("box 0 (dog)", "outside")),
+        Case("train-ssd-voc-box-off-image", TRAIN_SSD_VOC, _voc_box("100", "4", "120", "25"),
+             voc + ("entirely outside the 40 x 30 px image",)),
+        Case("train-ssd-voc-box-1e308", TRAIN_SSD_VOC, _voc_box("5", "4", "1e308", "25"), voc + ("outside",)),
+        Case("train-ssd-voc-box-inverted", TRAIN_SSD_VOC, _voc_box("30", "4", "5", "25"), voc + ("<bndbox>",)),
+        Case("train-ssd-voc-box-nan", TRAIN_SSD_VOC, _voc_box("nan", "4", "30", "25"), voc + ("<xmin>",)),
+        Case("train-ssd-voc-size-negative", TRAIN_SSD_VOC,
+             fixture_text("voc", "VOC2007/Annotations/000001.xml", "<width>40</width>", "<width>-5</width>"),
+             voc + ("field image size", "-5")),
+        Case("train-ssd-voc-size-not-the-image", TRAIN_SSD_VOC,
+             fixture_text("voc", "VOC2007/Annotations/000001.xml", "<width>40</width>", "<width>400</width>"),
+             voc + ("says 400 x 30 px", "is 40 x 30 px")),
+        Case("train-ssd-voc-image-set-duplicate-id", TRAIN_SSD_VOC,
+             fixture_text("voc", "VOC2007/ImageSets/Main/train.txt", "000003", "000001"),
+             ("train.txt", "000001", "twice")),
+        Case("train-ssd-coco-width-10x", TRAIN_SSD_COCO, coco_edit(lambda data: data["images"][0].update(width=320)),
+             coco + ("says 320 x 24 px", "is 32 x 24 px")),
+        Case("train-ssd-coco-box-overflow", TRAIN_SSD_COCO, _coco_box([1e308, 0, 1e308, 5]),
+             coco + ("box 0", "not finite")),
+        Case("train-ssd-coco-box-off-image", TRAIN_SSD_COCO, _coco_box([-50, -50, 10, 10]),
+             coco + ("box 0", "entirely outside the 32 x 24 px image")),
+        Case("train-ssd-coco-box-1e9", TRAIN_SSD_COCO, _coco_box([0, 0, 1e9, 5]), coco + ("box 0", "outside")),
+        Case("train-ssd-coco-one-pixel-image", TRAIN_SSD_COCO, _one_pixel_image,
+             ("instances_tiny2017.json", "image id 3", "1 x 1 px image")),
+        Case("train-ssd-coco-duplicate-image-id", TRAIN_SSD_COCO,
+             coco_edit(lambda data: data["images"][1].update(id=7)), ("images[1]", "'id'", "also the id of images[0]")),
+        Case("train-ssd-coco-image-id-list", TRAIN_SSD_COCO, coco_edit(lambda data: data["images"][0].update(id=[7])),
+             ("images[0]", "'id'", "expected an integer")),
+        Case("train-ssd-coco-category-id-text", TRAIN_SSD_COCO,
+             coco_edit(lambda data: data["categories"][0].update(id="64")), ("categories[0]", "'id'")),
+        Case("train-ssd-coco-annotation-image-id-list", TRAIN_SSD_COCO,
+             coco_edit(lambda data: data["annotations"][0].update(image_id=[7])), ("annotations[0]", "'image_id'")),
+        Case("train-ssd-coco-width-negative", TRAIN_SSD_COCO,
+             coco_edit(lambda data: data["images"][0].update(width=-32)), ("images[0]", "'width'/'height'")),
+        Case("train-ssd-openimages-box-inverted", TRAIN_SSD_OPENIMAGES, fixture_text(
+            "openimages", "validation-annotations-bbox.csv", "1,0.25,0.5,0.25,0.5", "1,0.5,0.25,0.25,0.5"),
+             ("validation-annotations-bbox.csv", "line 2", "XMax < XMin")),
+        Case("train-keypointnet-ycb-video-box-1e9", TRAIN_KEYPOINTNET_YCB,
+             fixture_text("ycb_video", "data/0048/000001-box.txt", "16.55 10.86 37.01", "16.55 10.86 1e9"),
+             ("000001-box.txt", "003_cracker_box", "outside")),
+        Case("train-keypointnet-fat-box-off-image", TRAIN_KEYPOINTNET_FAT,
+             pose_copy("fat", "mixed/kitchen_0/000000.left.json",
+                       lambda frame: {**frame, "objects": [{**frame["objects"][0], "bounding_box": {
+                           "top_left": [7.0, 20.0], "bottom_right": [1e9, 1e9]}}, *frame["objects"][1:]]}),
+             ("000000.left.json", "outside")),
+    ]
+
+
 def all_cases() -> list[Case]:
     """The table: every case, names unique."""
     found = generate_cases() + evaluate_bop_cases() + evaluate_coco_cases() + evaluate_voc_cases() + \
-        estimate_cases() + train_cases() + output_rule_cases() + dataset_path_cases() + run_cases()
+        estimate_cases() + train_cases() + output_rule_cases() + dataset_path_cases() + annotation_cases() + run_cases()
     names = [case.name for case in found]
     duplicated = {name for name in names if names.count(name) > 1}
     if duplicated:

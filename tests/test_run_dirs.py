@@ -115,3 +115,66 @@ def test_each_method_is_recognised_by_its_own_marker_files_only(tmp_path, method
         (tmp_path / name).write_text("{}")
     assert method_of(tmp_path) == method
     assert [other for other in RUN_DIR_MODULES if is_run_dir(tmp_path, other)] == [method]
+
+
+def test_run_output_claims_a_folder_resumes_its_own_and_refuses_others(tmp_path):
+    from paz6d.run_dirs import OWNER_FILE, run_output
+
+    run = tmp_path / "run"
+    with run_output(run, "ssd"):
+        (run / "detector.json").write_text("{}")
+    assert json.loads((run / OWNER_FILE).read_text()) == {"method": "ssd"}
+    with run_output(run, "ssd"):  # its own run: resumed
+        pass
+    with pytest.raises(ValueError, match="--out: .* is an output folder of ssd, not emotion"):
+        with run_output(run, "emotion"):
+            raise AssertionError("not reached")
+    legacy = write_aae_run(tmp_path / "legacy")  # no owner file: its marker files tell
+    with pytest.raises(ValueError, match="output folder of aae, not keypointnet"):
+        with run_output(legacy, "keypointnet"):
+            pass
+    with run_output(legacy, "aae"):
+        pass
+    assert (legacy / OWNER_FILE).is_file()
+
+
+def test_a_failed_command_leaves_no_claim(tmp_path):
+    from paz6d.run_dirs import run_output
+
+    fresh, empty = tmp_path / "fresh", tmp_path / "empty"
+    empty.mkdir()
+    for folder in (fresh, empty):
+        with pytest.raises(ValueError, match="bad flag"):
+            with run_output(folder, "aae"):
+                raise ValueError("bad flag")
+    assert not fresh.exists() and list(empty.iterdir()) == []
+    with run_output(empty, "keypointnet"):  # nobody owns it
+        pass
+
+
+def test_run_output_refuses_data_sets_symlinks_inputs_and_a_bad_owner_file(tmp_path):
+    from paz6d.run_dirs import OWNER_FILE, run_output
+
+    dataset = tmp_path / "bop"
+    (dataset / "test" / "000000").mkdir(parents=True)
+    (dataset / "test" / "000000" / "scene_gt.json").write_text("{}")
+    for folder in (dataset, dataset / "test", dataset / "test" / "000000"):
+        with pytest.raises(ValueError, match="holds a BOP data set"):
+            with run_output(folder, "ssd"):
+                pass
+    (tmp_path / "link").symlink_to(tmp_path / "elsewhere")
+    with pytest.raises(ValueError, match="symbolic link"):
+        with run_output(tmp_path / "link", "ssd"):
+            pass
+    images = tmp_path / "images"
+    images.mkdir()
+    with pytest.raises(ValueError, match="is also --images"):
+        with run_output(tmp_path / "images", "aae", {"--images": images}):
+            pass
+    odd = tmp_path / "odd"
+    odd.mkdir()
+    (odd / OWNER_FILE).write_text("[1]")
+    with pytest.raises(ValueError, match=OWNER_FILE):
+        with run_output(odd, "ssd"):
+            pass
+    assert not (tmp_path / "elsewhere").exists() and (odd / OWNER_FILE).read_text() == "[1]"

@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 
 from paz6d.aae.config import AAETraining
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, prepare_training_output
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, training_output
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -39,8 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from paz6d.datasets.bop.reader import check_object_in_split
 
     job = config_from_args(AAETraining, args)
-    with flags_in_errors(AAETraining):
-        prepare_training_output(job, "aae")
+    with flags_in_errors(AAETraining), training_output(job, "aae"):
         mesh, object_id, object_class, scale = job.mesh, 1, None, job.mesh_scale
         split = job.split or "train"
         if job.format == "bop":

@@ -13,7 +13,7 @@ from pathlib import Path
 from paz6d.benchmark.lmo import DEFAULT_LMO, METHODS, Benchmark, run_benchmark
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.fields import BOX_FIELDS
-from paz6d.run_dirs import prepare_run_output
+from paz6d.run_dirs import run_output
 
 
 @dataclass(frozen=True)
@@ -64,8 +64,7 @@ def parse_object_methods(values: tuple[str, ...]) -> dict[int, str]:
 def run(args: argparse.Namespace) -> int:
     """Runs (or resumes) the benchmark."""
     options = config_from_args(LmoOptions, args)
-    with flags_in_errors(LmoOptions):
-        prepare_run_output(options.out, "benchmark lmo", {"--lmo": options.lmo})
+    with flags_in_errors(LmoOptions), run_output(options.out, "benchmark lmo", {"--lmo": options.lmo}):
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
                         progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
                         aae_lr_drop_steps=options.aae_lr_drop_steps, aae_crop_box=options.aae_crop_box,

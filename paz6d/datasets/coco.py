@@ -265,6 +265,7 @@ def load(root: str | Path, split: str | None = None, images: str | Path | None =
                               "category_ids": np.array([row["category_id"] for row in rows], dtype=np.int64),
                               "annotation_ids": [row["id"] for row in rows],
                               "area": np.array([row.get("area", 0.0) for row in rows], dtype=np.float64),
-                              "image_id": image["id"], "image_size": (image["width"], image["height"])})
+                              "image_id": image["id"], "image_size": (image["width"], image["height"])},
+                      source=f"{path}: image id {image['id']}")
 
     return SampleSequence(len(order), read, class_names)

@@ -292,7 +292,7 @@ def load(root: str | Path, split: str = "mixed", camera: str = "left", masks: bo
                       class_names=[record["class"] for record in records], masks=instance_masks,
                       keypoints=np.array([record["keypoints"] for record in records]).reshape(count, 8, 2),
                       poses=np.array([record["T_model2cam"] for record in records]).reshape(count, 4, 4),
-                      camera_matrix=K.copy(), extras=extras)
+                      camera_matrix=K.copy(), extras=extras, source=f"{prefix}.json")
 
     return SampleSequence(len(frames), read, class_names)
 

@@ -288,6 +288,7 @@ def load(root: str | Path, split: str = "train", boxes_csv: str | Path | None = 
                   "confidence": table["confidence"][rows]}
         extras.update({key: table[name][rows] for name, key in FLAG_EXTRAS.items()})
         return Sample(image=path, boxes=boxes.reshape(-1, 4), class_ids=class_ids,
-                      class_names=[display_names[i] for i in class_ids], extras=extras)
+                      class_names=[display_names[i] for i in class_ids], extras=extras,
+                      source=f"{boxes_path}: ImageID {image_id}")
 
     return SampleSequence(len(order), read, display_names)

@@ -62,8 +62,12 @@ def split_ids(root: str | Path, split: str) -> list[str]:
         available = sorted(p.stem for p in (Path(root) / IMAGE_SETS).glob("*.txt"))
         raise ValueError(f"split: {path} not found; the image sets of {root} are {available}")
     ids = [line.split()[0] for line in read_input_text(path, "VOC image-set file").splitlines() if line.strip()]
+    seen: dict[str, int] = {}
     for number, image_id in enumerate(ids, start=1):
         path_inside(Path(root) / ANNOTATIONS, f"{image_id}.xml", f"{path}: image id #{number}")
+        if image_id in seen:
+            raise ValueError(f"{path}: image id #{number} {image_id!r:.60} is listed twice (also #{seen[image_id]})")
+        seen[image_id] = number
     if not ids:
         raise ValueError(f"{path}: expected one image id per line, found none")
     return ids
@@ -193,6 +197,6 @@ def load(root: str | Path, split: str | None = None, drop_difficult: bool = Fals
                       class_names=names,
                       extras={"difficult": parsed["difficult"][keep], "truncated": parsed["truncated"][keep],
                               "image_id": paths[position].stem, "filename": parsed["filename"],
-                              "image_size": parsed["image_size"]})
+                              "image_size": parsed["image_size"]}, source=str(paths[position]))
 
     return SampleSequence(len(paths), read, class_names)

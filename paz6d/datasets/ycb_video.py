@@ -300,7 +300,8 @@ def load(root: str | Path, split: str = "train", masks: bool = True, depth: bool
             extras["depth"] = read_depth(extras["depth_path"], meta["factor_depth"])
         return Sample(image=Path(f"{prefix}-color.png"), boxes=boxes, class_ids=meta["label_ids"] - 1,
                       class_names=names, masks=instance_masks if masks else None, poses=meta["poses"],
-                      camera_matrix=meta["camera_matrix"], extras=extras)
+                      camera_matrix=meta["camera_matrix"], extras=extras,
+                      source=str(box_path if box_path.is_file() else Path(f"{prefix}-meta.mat")))
 
     return SampleSequence(len(frames), read, class_names)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, prepare_training_output
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, training_output
 from paz6d.faces.emotion_config import EmotionTraining
 
 
@@ -23,7 +23,6 @@ def run(args: argparse.Namespace) -> int:
     from paz6d.faces.emotion_train import train_emotion  # here: the trainer loads OpenCV and TensorFlow
 
     job = config_from_args(EmotionTraining, args)
-    with flags_in_errors(EmotionTraining):
-        prepare_training_output(job, "emotion")
+    with flags_in_errors(EmotionTraining), training_output(job, "emotion"):
         train_emotion(job)
     return 0

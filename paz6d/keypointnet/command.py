@@ -10,7 +10,7 @@ import argparse
 import json
 from dataclasses import replace
 
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, prepare_training_output
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, training_output
 from paz6d.keypointnet.config import KeypointTraining
 from paz6d.keypointnet.train import train_keypointnet
 
@@ -23,8 +23,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``paz6d train keypointnet``."""
     job = config_from_args(KeypointTraining, args, exclude=("overrides",))
-    with flags_in_errors(KeypointTraining):
-        prepare_training_output(job, "keypointnet")
+    with flags_in_errors(KeypointTraining), training_output(job, "keypointnet"):
         views = None
         if job.dataset is not None:
             from paz6d.keypointnet.dataset import bop_object_views, sample_object_views

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, prepare_training_output
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, training_output
 from paz6d.segmentation.config import SegmentationTraining
 
 
@@ -19,8 +19,7 @@ def run(args: argparse.Namespace) -> int:
     from paz6d.segmentation.train import train_segmentation  # here: it loads OpenCV and TensorFlow
 
     job = config_from_args(SegmentationTraining, args, exclude=("overrides",))
-    with flags_in_errors(SegmentationTraining):
-        prepare_training_output(job, "segmentation")
+    with flags_in_errors(SegmentationTraining), training_output(job, "segmentation"):
         summary = train_segmentation(job)
     print(json.dumps(summary, indent=2))
     return 0
