@@ -37,21 +37,34 @@ def errors(rotations, translations, poses) -> tuple[float, float]:
     return float(angles.mean()), float(distances.mean() * 1000)
 
 
-@pytest.mark.parametrize("weight", [0.3, 0.5])
-def test_smoothing_reduces_the_error_of_noisy_poses_of_a_smooth_motion(weight):
+def smooth_noisy_motion(weight: float, velocity: bool = True) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Mean errors (degrees, mm) of noisy poses of :func:`true_motion` and of the smoothed poses, frames 10-89."""
     rotations, translations = true_motion()
     noisy_rotations, noisy_translations = noisy(rotations, translations)
     raw = [Pose6D(q, t, "obj_000001") for q, t in zip(noisy_rotations.as_quat(), noisy_translations)]
-    smoother = PoseSmoother(weight=weight)
+    smoother = PoseSmoother(weight=weight, velocity=velocity)
     smoothed = [smoother([(Box2D(0, 0, 1, 1, 1.0, "obj_000001"), pose)], Frame(i, i / FPS, None))[0][1]
                 for i, pose in enumerate(raw)]
     settled = slice(10, None)  # after the average has settled from its first pose
     raw_errors = errors(rotations[settled], translations[settled], raw[settled])
     smooth_errors = errors(rotations[settled], translations[settled], smoothed[settled])
-    print(f"weight {weight}: rotation {raw_errors[0]:.2f} -> {smooth_errors[0]:.2f} deg, "
+    print(f"weight {weight}, velocity {velocity}: rotation {raw_errors[0]:.2f} -> {smooth_errors[0]:.2f} deg, "
           f"translation {raw_errors[1]:.2f} -> {smooth_errors[1]:.2f} mm")
-    assert smooth_errors[0] < 0.75 * raw_errors[0] and smooth_errors[1] < 0.75 * raw_errors[1]
     assert all(pose.class_name == "obj_000001" for pose in smoothed)
+    return raw_errors, smooth_errors
+
+
+@pytest.mark.parametrize("weight", [0.3, 0.5])
+def test_smoothing_reduces_the_error_of_noisy_poses_of_a_smooth_motion(weight):
+    raw, smoothed = smooth_noisy_motion(weight)
+    assert smoothed[0] < 0.75 * raw[0] and smoothed[1] < 0.75 * raw[1]
+
+
+@pytest.mark.parametrize("weight", [0.3, 0.5])
+def test_a_moving_average_without_velocity_lags_behind_the_moving_object(weight):
+    raw, averaged = smooth_noisy_motion(weight, velocity=False)
+    assert averaged[0] < raw[0]  # rotation: 20 degrees/s lags little
+    assert averaged[1] > raw[1]  # translation: 6.7 mm per frame lags (1 - w) / w frames behind
 
 
 def test_weight_one_keeps_the_poses_and_a_jump_starts_afresh():

@@ -53,12 +53,14 @@ class PoseSmoother:
         max_angle_degrees: a rotation this far from the predicted one starts a new track.
         max_jump_m: a translation this far (metres) from the predicted one starts a new track.
         max_gap_s: an object unseen for longer than this (seconds) starts a new track.
+        velocity: track velocities (alpha-beta filter); ``False``: a plain exponential moving average of the
+            poses (``beta`` 0), which lags behind a moving object.
     Raises:
         ValueError: a parameter out of range.
     """
 
     def __init__(self, weight: float = 0.5, max_angle_degrees: float = 30.0, max_jump_m: float = 0.05,
-                 max_gap_s: float = 0.5):
+                 max_gap_s: float = 0.5, velocity: bool = True):
         for name, value in (("max_angle_degrees", max_angle_degrees), ("max_jump_m", max_jump_m),
                             ("max_gap_s", max_gap_s)):
             if not (math.isfinite(value) and value > 0):
@@ -66,7 +68,7 @@ class PoseSmoother:
         if not (math.isfinite(weight) and 0.0 < weight <= 1.0):
             raise ValueError(f"weight: expected a number in (0, 1], got {weight}")
         self.weight, self.max_angle = float(weight), math.radians(max_angle_degrees)
-        self.beta = self.weight ** 2 / (2.0 - self.weight)
+        self.beta = self.weight ** 2 / (2.0 - self.weight) if velocity else 0.0
         self.max_jump, self.max_gap = float(max_jump_m), float(max_gap_s)
         self.tracks: dict[str | None, list[_Track]] = {}
 
