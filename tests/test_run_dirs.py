@@ -10,6 +10,8 @@ import pytest
 from paz6d.aae import run_dir as aae_run
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run
+from paz6d.methods import get, methods
+from paz6d.run_dir import RunDir
 from paz6d.run_dirs import RUN_DIR_MODULES, is_run_dir, method_of
 
 HULL = np.array([[x, y, z] for x in (-0.04, 0.04) for y in (-0.03, 0.03) for z in (-0.02, 0.02)])
@@ -115,6 +117,41 @@ def test_each_method_is_recognised_by_its_own_marker_files_only(tmp_path, method
         (tmp_path / name).write_text("{}")
     assert method_of(tmp_path) == method
     assert [other for other in RUN_DIR_MODULES if is_run_dir(tmp_path, other)] == [method]
+    assert [record.name for record in methods() if record.run_dir.is_run_dir(tmp_path)] == [method]
+
+
+def test_the_registry_lists_every_method_once_with_its_run_directory_class():
+    records = methods()
+    assert [record.name for record in records] == list(RUN_DIR_MODULES)
+    for record in records:
+        assert issubclass(record.run_dir, RunDir) and record.run_dir.__module__ == RUN_DIR_MODULES[record.name].__name__
+        assert record.run_dir.MARKER_FILES == RUN_DIR_MODULES[record.name].MARKER_FILES
+    assert [record.name for record in methods("pose")] == ["aae", "keypointnet", "hrnet", "probabilistic-keypoints"]
+    assert get("keypoints") is get("keypointnet")
+
+
+def test_run_dir_base_reads_settings_metrics_and_the_training_mesh(tmp_path):
+    class Tiny(RunDir):
+        KIND = "a tiny"
+        MARKER_FILES = REQUIRED_FILES = ("tiny.json",)
+
+    assert Tiny.read_config(tmp_path) is None and Tiny.read_metrics(tmp_path) is None
+    assert Tiny.training_mesh(tmp_path) is None and not Tiny.is_run_dir(tmp_path)
+    with pytest.raises(ValueError, match=r"tiny.json: file not found \(is .* a tiny run directory\?\)"):
+        Tiny.validate(tmp_path)
+    Tiny.write_config(tmp_path / "run", {"mesh_path": str(tmp_path / "obj_000007.ply"), "seed": 1})
+    Tiny.write_metrics(tmp_path / "run", {"loss": 0.5})
+    assert Tiny.read_config(tmp_path / "run")["seed"] == 1 and Tiny.read_metrics(tmp_path / "run") == {"loss": 0.5}
+    assert Tiny.training_mesh(tmp_path / "run") == (tmp_path / "obj_000007.ply", 1.0)  # scale defaults to 1
+    with pytest.raises(ValueError, match=r"config.json: mesh_path '.*obj_000007.ply' is not a file"):
+        Tiny.surface_points(tmp_path / "run")
+    (tmp_path / "run" / "metrics.json").write_text("[1]")
+    with pytest.raises(ValueError, match="metrics.json: expected a JSON object"):
+        Tiny.read_metrics(tmp_path / "run")
+    aae = write_aae_run(tmp_path / "aae")
+    assert aae_run.AAERunDir.training_mesh(aae) == ((aae / "mesh.ply").resolve(), 0.001)
+    keypointnet = write_keypointnet_run(tmp_path / "keypointnet")
+    assert keypointnet_run.KeypointNetRunDir.training_mesh(keypointnet) is None  # the config names no mesh
 
 
 def test_run_output_claims_a_folder_resumes_its_own_and_refuses_others(tmp_path):
