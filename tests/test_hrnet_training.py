@@ -103,7 +103,7 @@ def test_pose_pipeline_recovers_a_known_pose_from_perfect_heatmaps(trained):
 
     job, _ = trained
     estimator = HRNetPose6D(job.out, SMALL_CAMERA.K, decode="quadratic")
-    assert estimator.names[-1] == "solve_pnp"
+    assert estimator.names[-2:] == ["solve_pnp", "refine_with_depth"]
     T = np.eye(4)
     T[:3, :3] = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]) @ np.diag([1.0, -1.0, -1.0])
     T[:3, 3] = [0.01, -0.005, 0.45]
@@ -116,6 +116,9 @@ def test_pose_pipeline_recovers_a_known_pose_from_perfect_heatmaps(trained):
     estimator["predict"].processor.function = lambda crops: np.repeat(logits, len(crops), axis=0)
     pose = estimator(np.zeros((120, 160, 3), np.uint8), box)
     np.testing.assert_allclose(pose.to_matrix()[:3, 3], T[:3, 3], atol=2e-3)
+    # a depth image reaches the ICP step (on the training mesh); one without data keeps the PnP pose
+    assert estimator(np.zeros((120, 160, 3), np.uint8), box, depth=np.zeros((120, 160), np.float32)) == pose
+    assert estimator["refine_with_depth"].processor.statistics["refinements"] == 1
     assert len(estimator.detect_batch([np.zeros((120, 160, 3), np.uint8)], [box])[0]) == 5
 
 

@@ -138,7 +138,7 @@ def test_pipeline_steps_covariances_in_image_pixels_and_a_pose(tiny_run):
     K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
     estimator = ProbabilisticKeypointPose6D(tiny_run, K)
     assert estimator.names == ["crop", "predict", "gaussians", "to_image", "covariances_to_image", "to_keypoints2d",
-                               "solve_pnp"]
+                               "solve_pnp", "refine_with_depth"]
     image = np.random.default_rng(3).integers(0, 255, (480, 640, 3), dtype=np.uint8)
     box = (300.0, 200.0, 364.0, 264.0)  # 64 px: window 80 px, crop 32 px -> covariances x (80/32)^2
     keypoints, covariances = estimator.detect(image, box)
