@@ -106,12 +106,23 @@ def _argument_options(config_class: type, field: dataclasses.Field, annotation: 
     if origin is Literal:
         return {"type": type(arguments[0]), "choices": arguments}
     if origin is tuple and len(arguments) == 2 and arguments[1] is Ellipsis and arguments[0] in _SCALAR_TYPES:
-        return {"type": arguments[0], "nargs": "+"}
+        return {"type": _flag_type(arguments[0]), "nargs": "+"}
     if origin is tuple and arguments and len(set(arguments)) == 1 and arguments[0] in _SCALAR_TYPES:
-        return {"type": arguments[0], "nargs": len(arguments)}
+        return {"type": _flag_type(arguments[0]), "nargs": len(arguments)}
     if annotation in _SCALAR_TYPES:
-        return {"type": annotation}
+        return {"type": _flag_type(annotation)}
     raise TypeError(f"{where}: no flag form for the annotation {annotation}; exclude the field or change its type")
+
+
+def path_argument(text: str) -> Path:
+    """A path flag's value: any text but the empty string (``Path("")`` would quietly be the current folder)."""
+    if not text:
+        raise argparse.ArgumentTypeError("expected a path, got an empty string")
+    return Path(text)
+
+
+def _flag_type(annotation: type) -> Callable[[str], Any]:
+    return path_argument if annotation is Path else annotation
 
 
 def _display(value: Any) -> str:

@@ -70,6 +70,19 @@ def test_crop_intrinsics_equal_projection_then_crop_transform():
     np.testing.assert_allclose(to_full_image(expected, window, 128), pixels, atol=1e-9)
 
 
+@pytest.mark.parametrize("half_side", [1e5, 1e9])
+def test_crop_square_of_a_huge_window_is_quick_and_shows_the_image_small(half_side):
+    import time
+
+    image = np.full((480, 640, 3), 200, np.uint8)
+    window = square_window([-half_side, -half_side, half_side, half_side], margin=1.0)
+    started = time.perf_counter()
+    crop = crop_square(image, window, 128)
+    assert time.perf_counter() - started < 1.0
+    # the image covers 640 / (2 half_side) of the crop's 128 px: nothing but the padding is visible
+    assert crop.shape == (128, 128, 3) and np.count_nonzero(crop) <= 3 * 4
+
+
 def test_crop_square_rejects_a_window_off_the_image():
     with pytest.raises(ValueError, match="window"):
         crop_square(np.zeros((10, 10, 3), np.uint8), (50, 50, 8), 8)

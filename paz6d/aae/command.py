@@ -20,13 +20,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _dataset_mesh(dataset: Path, object_id: int | None) -> tuple[Path, int]:
-    models = sorted((dataset / "models").glob("obj_*.ply"))
+    from paz6d.datasets.bop.models import model_meshes
+
+    models = model_meshes(dataset / "models")
     if not models:
         raise ValueError(f"--dataset: {dataset / 'models'} holds no obj_XXXXXX.ply meshes")
     if object_id is None:
         if len(models) > 1:
             raise ValueError(f"--dataset: {len(models)} objects in {dataset / 'models'}; choose one with --object-id")
-        return models[0], int(models[0].stem.split("_")[1])
+        return next(iter(models.values())), next(iter(models))
     path = dataset / "models" / f"obj_{object_id:06d}.ply"
     if not path.exists():
         raise ValueError(f"--object-id: {path} does not exist")

@@ -83,7 +83,9 @@ def crop_square(image: np.ndarray, window: tuple[int, int, int], size: int, pad_
 
     One bilinear resampling through :func:`crop_transform` (so crop pixels sit exactly where
     ``crop_intrinsics`` says); when shrinking by more than 1.3× the window is first smoothed with a
-    Gaussian of sigma ``0.4 × shrink`` pixels against aliasing.
+    Gaussian of sigma ``0.4 × shrink`` pixels against aliasing, at most 1/32 of the image's longer
+    side: the cap is reached only when the whole image spans fewer than 13 crop pixels (a box of
+    ±1e9 px), where a wider blur would cost time growing with the window and show nothing more.
     """
     image = np.asarray(image)
     if image.ndim not in (2, 3) or 0 in image.shape:
@@ -95,7 +97,7 @@ def crop_square(image: np.ndarray, window: tuple[int, int, int], size: int, pad_
     A = crop_transform(window, size)
     shrink = side / size
     if shrink > 1.3:
-        sigma = 0.4 * shrink
+        sigma = min(0.4 * shrink, max(height, width) / 32.0)
         reach = int(np.ceil(3 * sigma)) + 1
         left, top = max(x_min - reach, 0), max(y_min - reach, 0)
         right, bottom = min(x_min + side + reach, width), min(y_min + side + reach, height)

@@ -51,7 +51,7 @@ from paz6d.backend.viewpoints import ViewpointRange
 from paz6d.benchmark.parallel import run_in_processes, threads_per_job
 from paz6d.cli import build_parser
 from paz6d.datasets.bop import read_pose_results
-from paz6d.datasets.bop.models import MODELS_INFO, load_models_info
+from paz6d.datasets.bop.models import MODELS_INFO, load_models_info, model_meshes
 from paz6d.estimate import estimate
 from paz6d.keypointnet.config import KeypointTraining
 from paz6d.keypointnet.orientation import is_single_half_turn
@@ -120,6 +120,9 @@ class BenchmarkSettings:
         check_crop_box(self.aae_crop_box)
 
 
+#: Most AAE training steps a benchmark accepts (the full sizes train 5,000).
+MAX_AAE_STEPS = 1_000_000
+
 # The quick benchmark keeps the detector at 320 px to stay within its time budget; the AAEs train their last
 # steps at a tenth of the rate, at no extra time. What each choice measured: docs/real_photos.md ("Experiments")
 # and docs/ssd.md ("Measured").
@@ -160,11 +163,14 @@ class Benchmark:
         for obj_id, method in self.object_methods.items():
             if method not in METHODS:
                 raise ValueError(f"object_methods: object {obj_id}: expected one of {METHODS}, got {method!r}")
+        if not is_whole_number(self.seed) or not 0 <= self.seed < 2 ** 32:
+            raise ValueError(f"seed: expected a whole number in 0..2^32-1, got {self.seed!r:.40}")
         if self.settings is None:
             self.settings = QUICK if self.quick else FULL
         if self.aae_steps is not None:
-            if not is_whole_number(self.aae_steps) or self.aae_steps < 1:
-                raise ValueError(f"aae_steps: expected a positive number of training steps, got {self.aae_steps!r}")
+            if not is_whole_number(self.aae_steps) or not 1 <= self.aae_steps <= MAX_AAE_STEPS:
+                raise ValueError(f"aae_steps: expected a number of training steps in 1..{MAX_AAE_STEPS:,}, got "
+                                 f"{self.aae_steps!r:.40}")
             steps, drop = int(self.aae_steps), self.settings.aae_lr_drop_steps
             if steps < self.settings.aae_steps:  # a shorter run keeps the sizes' drop as a share of its steps
                 drop = drop * steps // self.settings.aae_steps
@@ -181,7 +187,9 @@ class Benchmark:
         models = self.lmo / "models"
         if not models.is_dir():
             raise ValueError(f"lmo: {models} not found (expected the LM-O BOP folder with models/ and test/)")
-        found = sorted(int(path.stem.split("_")[1]) for path in models.glob("obj_*.ply"))
+        if not (self.lmo / "test").is_dir():
+            raise ValueError(f"lmo: {self.lmo / 'test'} not found (expected the LM-O BOP folder with models/ and test/)")
+        found = sorted(model_meshes(models))
         if not found:
             raise ValueError(f"lmo: {models} holds no obj_XXXXXX.ply meshes")
         if self.objects:

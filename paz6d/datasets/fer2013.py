@@ -112,7 +112,7 @@ def _read_kaggle_layout(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     label_ends, usage_starts = commas[first_comma], commas[first_comma + 1] + 1
     try:
         labels = np.array([int(raw[start:end]) for start, end in zip(line_starts, label_ends)], dtype=np.int64)
-    except ValueError:
+    except (ValueError, OverflowError):
         return None
     if labels.size and (labels.min() < 0 or labels.max() >= len(FER2013_CLASSES)):
         return None
@@ -138,7 +138,7 @@ def load_fer2013_csv(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise ValueError(f"data: FER-2013 CSV file {path} does not exist")
     fast = _read_kaggle_layout(path)
     if fast is not None:
-        return fast
+        return _checked_usage(path, *fast)
     faces, labels, usage = [], [], []
     reader = csv.DictReader(io.StringIO(read_input_text(path, "FER-2013 CSV file"), newline=""))
     try:
@@ -149,7 +149,7 @@ def load_fer2013_csv(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             try:
                 label = int(row["emotion"])
                 pixels = np.array(row["pixels"].split(), dtype=np.int64)
-            except (TypeError, ValueError, AttributeError):
+            except (TypeError, ValueError, AttributeError, OverflowError):
                 raise ValueError(f"{path}, line {line}: cannot parse emotion/pixels (expected an integer label "
                                  "and space-separated grey levels)") from None
             if not 0 <= label < len(FER2013_CLASSES):
@@ -164,7 +164,19 @@ def load_fer2013_csv(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise ValueError(f"{path}, line {reader.line_num}: malformed CSV ({error})") from None
     if not faces:
         raise ValueError(f"{path}: no data rows")
-    return np.stack(faces), np.array(labels, dtype=np.int64), np.array(usage)
+    return _checked_usage(path, np.stack(faces), np.array(labels, dtype=np.int64), np.array(usage))
+
+
+def _checked_usage(path: Path, faces: np.ndarray, labels: np.ndarray,
+                   usage: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arguments, when every row's ``Usage`` is one of :data:`SPLITS`' values (a misspelt or
+    garbled one would drop the row from every split without a word); else ``ValueError`` naming the row."""
+    unknown = np.flatnonzero(~np.isin(usage, list(SPLITS.values())))
+    if len(unknown):
+        row = int(unknown[0])
+        raise ValueError(f"{path}, data row {row + 1}, field Usage: {str(usage[row])!r:.60}; expected one of "
+                         f"{list(SPLITS.values())} ({len(unknown)} row(s) with another value)")
+    return faces, labels, usage
 
 
 def class_folders(root: Path) -> list[Path]:

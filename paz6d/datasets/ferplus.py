@@ -38,6 +38,8 @@ from paz6d.datasets.sample import Sample, SampleSequence
 
 FERPLUS_CLASSES = ("neutral", "happiness", "surprise", "sadness", "anger", "disgust", "fear", "contempt")
 VOTE_COLUMNS = FERPLUS_CLASSES + ("unknown", "NF")
+#: Largest vote count accepted in one cell (FERPlus has ten taggers per face).
+MAX_VOTES = 1000
 CSV_COLUMNS = ("Usage", "Image name") + VOTE_COLUMNS
 CSV_FILE = "fer2013new.csv"
 LABEL_MODES = ("majority", "probability")
@@ -70,8 +72,9 @@ def read_votes(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
                 except ValueError:
                     raise ValueError(f"{path}, line {line}, field {column}: expected a vote count (integer >= 0), "
                                      f"got {text!r}") from None
-                if value < 0:
-                    raise ValueError(f"{path}, line {line}, field {column}: expected a vote count >= 0, got {value}")
+                if not 0 <= value <= MAX_VOTES:
+                    raise ValueError(f"{path}, line {line}, field {column}: expected a vote count in 0..{MAX_VOTES}, "
+                                     f"got {text!r:.40}")
                 counts.append(value)
             votes.append(counts)
             usage.append(row[0].strip())

@@ -94,6 +94,21 @@ def load_models_info(path: str | Path, units: Units = "m") -> dict[int, ModelInf
     return result
 
 
+def model_meshes(models_folder: str | Path) -> dict[int, Path]:
+    """``{obj_id: path}`` of the ``obj_XXXXXX.ply`` meshes in a BOP ``models`` folder, by id.
+
+    Raises:
+        ValueError: a mesh named ``obj_*.ply`` whose rest is no object id (``obj_abc.ply``), naming it.
+    """
+    found = {}
+    for path in sorted(Path(models_folder).glob("obj_*.ply")):
+        digits = path.stem[len("obj_"):]
+        if not (digits.isascii() and digits.isdigit()):
+            raise ValueError(f"{path}: expected a mesh named obj_<object id>.ply (such as obj_000001.ply)")
+        found[int(digits)] = path
+    return found
+
+
 def model_path(models_folder: str | Path, obj_id: int) -> Path:
     """``<models_folder>/obj_XXXXXX.ply``."""
     return Path(models_folder) / f"obj_{obj_id:06d}.ply"
