@@ -11,9 +11,11 @@ runs a face pipeline (:mod:`paz6d.faces`)::
 
 ``--out`` receives ``annotated.mp4`` (the frames with the pipeline's drawing), ``frames.jsonl`` (one
 line per frame, :mod:`paz6d.video.records`) and ``summary.json`` (frames per second, per-frame latency).
-``--camera`` is a camera JSON file (:mod:`paz6d.backend.camera_file`); every frame must have its size,
-and a camera with distortion undistorts every frame first (``--no-undistort`` keeps them). ``--smooth
-WEIGHT`` smooths the poses over time (:mod:`paz6d.video.smoothing`). Every flag,
+Detections of classes without a ``--run`` (and boxes a pose model fails on) are skipped and counted in
+the summary's ``skipped_boxes``. ``--camera`` is a camera JSON file (:mod:`paz6d.backend.camera_file`);
+every frame must have its size, and a camera with distortion undistorts every frame first
+(``--no-undistort`` keeps them). ``--smooth WEIGHT`` smooths the poses over time
+(:mod:`paz6d.video.smoothing`). Every flag,
 the camera file, the run directories and the first frame are checked before a model loads.
 """
 
@@ -22,6 +24,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import warnings
 from pathlib import Path
 
 from paz6d.backend.files import write_json_atomically
@@ -127,6 +130,28 @@ def check_runs(detector: Path, runs: dict[int, Path]) -> None:
                              f"(its classes: {class_names})")
 
 
+class CountSkippedBoxes:
+    """A detect-and-estimate pipeline whose skipped boxes (a detected class without a pose model, a pose model
+    failing on a box: :class:`~paz6d.detect_and_estimate.MissingPoseModelWarning`) are counted in ``skipped``
+    instead of warned about once per box and frame; other warnings pass."""
+
+    def __init__(self, pipeline):
+        self.pipeline, self.draw, self.skipped = pipeline, pipeline.draw, 0
+
+    def __call__(self, image):
+        from paz6d.detect_and_estimate import MissingPoseModelWarning
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            output = self.pipeline(image)
+        for warning in caught:
+            if issubclass(warning.category, MissingPoseModelWarning):
+                self.skipped += 1
+            else:
+                warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+        return output
+
+
 def build_pipeline(args: argparse.Namespace, runs: dict[int, Path], camera):
     """``(pipeline, draw, description)`` of the flags; ``camera`` is the pipeline's (distortion removed) or None."""
     if args.faces == "haar":
@@ -148,8 +173,8 @@ def build_pipeline(args: argparse.Namespace, runs: dict[int, Path], camera):
     if runs:
         from paz6d.detect_and_estimate import DetectAndEstimatePose6D
 
-        pipeline = DetectAndEstimatePose6D.from_run_dirs(args.detector, runs, camera,
-                                                         score_threshold=args.score_threshold)
+        pipeline = CountSkippedBoxes(DetectAndEstimatePose6D.from_run_dirs(args.detector, runs, camera,
+                                                                           score_threshold=args.score_threshold))
         return pipeline, pipeline.draw, f"detector {args.detector} + poses of objects {sorted(runs)}"
     from paz6d.ssd.pipeline import DetectSingleShot, draw_detections
 
@@ -187,6 +212,7 @@ def run(args: argparse.Namespace) -> int:
                             "size": list(source.size), "undistorted": undistort is not None},
                   "camera": None if args.camera is None else str(args.camera), "pipeline": description,
                   "smooth": args.smooth,
+                  "skipped_boxes": getattr(pipeline, "skipped", None),
                   "video": VIDEO_FILE, "records": RECORDS_FILE, **summary}
     write_json_atomically(out / SUMMARY_FILE, report, indent=2)
     latency = summary["latency_ms"]
