@@ -77,6 +77,8 @@ def test_bad_sources_give_clear_errors(tmp_path):
         open_frames("96")
     with pytest.raises(ValueError, match="fps"):
         open_frames(tmp_path, fps=0)
+    with pytest.raises(FrameSourceError, match="input: empty"):
+        open_frames("")
 
 
 def test_frames_of_another_size_than_the_camera_are_refused(tmp_path):

@@ -196,6 +196,8 @@ def open_frames(spec: str | Path | int, fps: float | None = None, size: tuple[in
         size = (int(width), int(height))
         if size[0] <= 0 or size[1] <= 0:
             raise ValueError(f"size: expected positive (width, height) pixels, got {size}")
+    if isinstance(spec, str) and not spec.strip():
+        raise FrameSourceError("input: empty; expected a video file, an image folder or a device index")
     index = device_index(spec)
     if index is not None:
         name = f"device {index}"
