@@ -1400,10 +1400,65 @@ def annotation_cases() -> list[Case]:
     ]
 
 
+def _fer_rows(bad_row: bytes) -> bytes:
+    """A FER-2013 CSV of 14 valid faces (every class twice, Training and PublicTest) and ``bad_row``."""
+    pixels = " ".join(["128"] * 48 * 48)
+    rows = [f"{index % 7},{pixels},{('Training', 'PublicTest')[index % 2]}" for index in range(14)]
+    return ("emotion,pixels,Usage\n" + "\n".join(rows) + "\n").encode() + bad_row + b"\n"
+
+
+def _big_png_header(world: World, folder: Path) -> None:
+    """The COCO fixture whose 20 x 16 PNG claims 100000 x 100000 pixels in its header."""
+    import struct
+
+    pose_copy("coco")(world, folder)
+    path = folder / "coco" / "tiny2017" / "000003.png"
+    data = path.read_bytes()
+    path.write_bytes(data[:16] + struct.pack(">II", 100_000, 100_000) + data[24:])
+
+
+def late_validation_cases() -> list[Case]:
+    """Inputs that used to be refused late (after minutes), with a traceback, or not at all."""
+    pixels = " ".join(["128"] * 48 * 48).encode()
+    fer = {
+        "usage-misspelt": b"0," + pixels + b",Trainig",
+        "usage-nul": b"0," + pixels + b",Train\x00ing",
+        "usage-not-utf8": b"0," + pixels + b",Train\xffing",
+        "pixel-20-digits": b"0," + b"9" * 20 + b" " + pixels[4:] + b",Training",
+        "label-20-digits": b"9" * 20 + b"," + pixels + b",Training",
+    }
+    found = [Case(f"train-emotion-data-{name}", replace_flag(TRAIN_EMOTION, "--data", "{case}/fer.csv"),
+                  case_file("fer.csv", _fer_rows(row)), ("fer.csv",)) for name, row in fer.items()]
+    votes_header = "Usage,Image name,neutral,happiness,surprise,sadness,anger,disgust,fear,contempt,unknown,NF\n"
+    found += [
+        Case("train-emotion-ferplus-vote-1e30", TRAIN_EMOTION + ("--ferplus", "{case}/votes.csv"),
+             case_file("votes.csv", votes_header + "".join(f"Training,a{index}.png,{10 ** 30},0,0,0,0,0,0,0,0,0\n"
+                                                           for index in range(14))), ("votes.csv", "neutral")),
+        Case("benchmark-lmo-no-test-split", BENCHMARK_LMO + ("--lmo", "{case}/bop"),
+             lambda world, folder: (copy_bop(world, folder), shutil.rmtree(folder / "bop" / "test")),
+             ("--lmo", "test")),
+        Case("benchmark-lmo-aae-steps-1e18", BENCHMARK_LMO + ("--lmo", "{case}/bop", "--aae-steps", str(10 ** 18)),
+             copy_bop, ("--aae-steps",)),
+        Case("benchmark-lmo-seed-2-64", BENCHMARK_LMO + ("--lmo", "{case}/bop", "--seed", str(2 ** 64)), copy_bop,
+             ("--seed",)),
+        Case("benchmark-lmo-out-empty", replace_flag(BENCHMARK_LMO, "--out", "") + ("--lmo", "{case}/bop"),
+             copy_bop, ("--out", "empty")),
+        Case("train-ssd-out-empty", replace_flag(TRAIN_SSD, "--out", ""), None, ("--out", "empty")),
+        Case("train-aae-dataset-mesh-not-an-id", TRAIN_AAE_DATASET,
+             lambda world, folder: (copy_bop(world, folder),
+                                    shutil.copy(world.mesh, folder / "bop" / "models" / "obj_abc.ply")),
+             ("obj_abc.ply", "obj_<object id>.ply")),
+        Case("train-ssd-coco-png-header-100000", TRAIN_SSD_COCO, _big_png_header,
+             ("000003.png", "100000 x 100000")),
+    ]
+    return found
+
+
 def all_cases() -> list[Case]:
     """The table: every case, names unique."""
     found = generate_cases() + evaluate_bop_cases() + evaluate_coco_cases() + evaluate_voc_cases() + \
-        estimate_cases() + train_cases() + output_rule_cases() + dataset_path_cases() + annotation_cases() + run_cases()
+        estimate_cases() + train_cases() + output_rule_cases() + dataset_path_cases() + annotation_cases() + \
+        late_validation_cases() + run_cases()
     names = [case.name for case in found]
     duplicated = {name for name in names if names.count(name) > 1}
     if duplicated:
