@@ -74,10 +74,12 @@ def _api_cases():
     from paz6d.backend import quaternion
     from paz6d.backend.boxes import check_box_in_image
     from paz6d.backend.files import load_json, load_npz
-    from paz6d.backend.paths import check_output_file, check_output_folder, check_plain_name
+    from paz6d.backend.paths import check_output_file, check_output_folder, check_outputs, check_plain_name, path_inside
     from paz6d.backend.pnp import solve_pnp
+    from paz6d.datasets.sample import Sample, check_sample
     from paz6d.faces.haar import HaarCascadeDetector
     from paz6d.processors.crops import SquareCrop
+    from paz6d.ssd.pipeline import DetectSingleShot
 
     K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
     points = np.random.default_rng(0).uniform(-0.05, 0.05, (10, 3))
@@ -111,6 +113,27 @@ def _api_cases():
         "output-folder-file": (lambda: check_output_folder(__file__, "--plots"), "--plots"),
         "json-folder": (lambda: load_json(REPO / "tests"), "tests"),
         "npz-not-zip": (lambda: load_npz(__file__), "test_bad_inputs.py"),
+        "detector-run-dir-none": (lambda: DetectSingleShot(None), "run_dir"),
+        "detector-max-detections-inf": (lambda: DetectSingleShot("run", max_detections=float("inf")),
+                                        "max_detections"),
+        "detector-max-detections-fraction": (lambda: DetectSingleShot("run", max_detections=2.7), "max_detections"),
+        "detector-score-threshold-text": (lambda: DetectSingleShot("run", score_threshold="0.5"), "score_threshold"),
+        "detector-iou-threshold-nan": (lambda: DetectSingleShot("run", iou_threshold=float("nan")), "iou_threshold"),
+        "path-inside-parent": (lambda: path_inside(REPO, "../../etc/passwd", "a.json: file_name"),
+                               "a.json: file_name: expected a relative path inside"),
+        "path-inside-absolute": (lambda: path_inside(REPO, "/etc/passwd", "a.xml, field <filename>"), "<filename>"),
+        "outputs-over-an-input-file": (lambda: check_outputs({"--out": REPO / "README.md"}, {"--dataset": REPO}),
+                                       "a file of --dataset"),
+        "outputs-folder-is-a-data-set": (lambda: check_outputs({}, {}, {"--out": REPO / "tests" / "data" / "datasets"
+                                                                        / "coco"}), "COCO data set"),
+        "sample-nan-box": (lambda: check_sample(Sample(image, np.array([[np.nan, 0, 4, 4]]), np.zeros(1, int), ["a"],
+                                                       source="a.json: image id 1")),
+                           "a.json: image id 1, box 0"),
+        "sample-box-off-image": (lambda: check_sample(Sample(image, np.array([[100.0, 0, 120, 4]]), np.zeros(1, int),
+                                                             ["a"])), "entirely outside the 64 x 48 px image"),
+        "sample-size-not-the-image": (lambda: check_sample(Sample(image, np.zeros((0, 4)), np.zeros(0, int), [],
+                                                                  extras={"image_size": (640, 48)})),
+                                      "says 640 x 48 px"),
     }
 
 

@@ -8,7 +8,6 @@ import pytest
 from evaluation import coco_masks
 
 mask_utils = pytest.importorskip("pycocotools.mask")
-pytestmark = pytest.mark.filterwarnings("ignore:__array__ implementation doesn't accept a copy:DeprecationWarning")
 
 
 def random_mask(rng: np.random.Generator, height: int, width: int) -> np.ndarray:

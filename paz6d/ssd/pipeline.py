@@ -22,6 +22,7 @@ import numpy as np
 
 from paz6d.abstract import Box2D, KeyedStep, Processor, SequentialProcessor
 from paz6d.backend import boxes as boxes_backend
+from paz6d.backend.checks import is_whole_number
 from paz6d.backend.draw import draw_box, keypoint_colors
 from paz6d.backend.image import as_image, resize
 from paz6d.processors.boxes import ToBoxes2D
@@ -206,6 +207,17 @@ class DenormalizeBoxes(Processor):
         return boxes_backend.denormalize(np.asarray(boxes, np.float64).reshape(-1, 4), image_size)
 
 
+def check_detection_settings(score_threshold: float, iou_threshold: float, max_detections: int) -> None:
+    """``ValueError`` naming the argument unless both thresholds are numbers in [0, 1] and
+    ``max_detections`` a whole number >= 1 (``"0.5"``, NaN, ``inf`` and ``2.7`` are refused)."""
+    for name, value in (("score_threshold", score_threshold), ("iou_threshold", iou_threshold)):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not 0.0 <= value <= 1.0:
+            raise ValueError(f"{name}: expected a number in [0, 1], got {value!r:.40}")
+    if not is_whole_number(max_detections) or max_detections < 1:
+        raise ValueError(f"max_detections: expected a whole number >= 1, got {max_detections!r:.40}")
+
+
 class DetectSingleShot(SequentialProcessor):
     """``image (H, W, 3) uint8 RGB -> list[Box2D]`` (pixel boxes, score, class name) with a trained SSD.
 
@@ -238,11 +250,15 @@ class DetectSingleShot(SequentialProcessor):
         max_detections: most boxes per image.
         flip: average with the detections of the mirror image (test-time augmentation).
     Raises:
-        ValueError: missing or corrupt run directory (message names the file).
+        ValueError: missing or corrupt run directory (message names the file); a threshold that is no
+            number in [0, 1] or a ``max_detections`` that is no whole number >= 1 (checked first).
     """
 
     def __init__(self, run_dir: str | Path, score_threshold: float = 0.3, iou_threshold: float = 0.45,
                  max_detections: int = 100, flip: bool = False):
+        check_detection_settings(score_threshold, iou_threshold, max_detections)
+        if not isinstance(run_dir, (str, Path)) or not str(run_dir):
+            raise ValueError(f"run_dir: expected the path of an SSD run directory, got {run_dir!r:.60}")
         model, detector = run_files.read_model(run_dir)
         self.run_dir = Path(run_dir)
         self._build(model, detector, score_threshold, iou_threshold, max_detections, flip)
@@ -251,6 +267,7 @@ class DetectSingleShot(SequentialProcessor):
     def from_model(cls, model, detector: dict, score_threshold: float = 0.3, iou_threshold: float = 0.45,
                    max_detections: int = 100, flip: bool = False) -> "DetectSingleShot":
         """The pipeline of a network in memory (e.g. during training) and its ``detector.json`` contents."""
+        check_detection_settings(score_threshold, iou_threshold, max_detections)
         pipeline = cls.__new__(cls)
         pipeline.run_dir = None
         pipeline._build(model, detector, score_threshold, iou_threshold, max_detections, flip)
