@@ -193,3 +193,63 @@ def test_bad_input_exits_2_with_one_line(argv, expect, aae_run, tmp_path, capsys
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and error.startswith("paz6d export: error: ") and expect in error, error
     assert not (tmp_path / "out").exists()
+
+
+def tiny_network(method: str):
+    """A small network of ``method`` as its pipeline runs it (random weights), and one input's shape."""
+    from paz6d.backend.tensorflow_guard import import_keras
+    from paz6d.export.networks import INPUT_RANGES, Network
+    from paz6d.faces.xception import mini_xception
+    from paz6d.hrnet.model import OUTPUT_NAME, build_hrnet
+    from paz6d.keypointnet.model import build_keypointnet
+    from paz6d.probabilistic_keypoints.model import build_probabilistic_keypointnet
+    from paz6d.segmentation.model import build_segmenter
+    from paz6d.stn.model import build_classifier
+
+    keras = import_keras()
+    keras.utils.set_random_seed(0)
+    if method == "keypointnet":
+        model, shape = build_keypointnet(4, 32, 8, dilations=(1, 2)), (32, 32, 3)
+    elif method == "probabilistic-keypoints":
+        model, shape = build_probabilistic_keypointnet(4, 32, 8, dilations=(1, 2)), (32, 32, 3)
+    elif method == "hrnet":
+        full = build_hrnet(4, 32, widths=(8, 16, 32), stem_width=8)
+        model, shape = keras.Model(full.input, full.output[OUTPUT_NAME]), (32, 32, 3)
+    elif method == "segmentation":
+        full = build_segmenter(2, 32, widths=(8, 16))
+        model, shape = keras.Model(full.input, keras.layers.Activation("sigmoid")(full.output)), (32, 32, 3)
+    elif method == "stn":
+        model, shape = build_classifier(10, 48, True, filters=8), (48, 48, 1)
+    else:
+        model, shape = mini_xception((48, 48, 1), 7), (48, 48, 1)
+    return Network(method, model, shape, INPUT_RANGES[method], None)
+
+
+@pytest.mark.slow  # six networks, two conversions each: about a minute
+@pytest.mark.parametrize("method", ["keypointnet", "probabilistic-keypoints", "hrnet", "segmentation", "stn",
+                                    "emotion"])
+def test_every_method_network_exports_to_tflite_and_onnx(method, tmp_path):
+    from paz6d.export.command import TOLERANCE, check_exported
+    from paz6d.export.formats import export, load_exported
+
+    onnx_available()
+    network = tiny_network(method)
+    for format in ("tflite", "onnx"):
+        found = check_exported(network, load_exported(export(network.model, tmp_path, format, tmp_path), format),
+                               20, seed=0)
+        assert max(value["scaled"] for value in found.values()) < TOLERANCE, (format, found)
+        assert max(value["magnitude"] for value in found.values()) > 0.1
+
+
+def test_an_emotion_run_is_recognised_and_its_network_loaded(tmp_path):
+    from paz6d.backend.files import save_keras_model_atomically, write_json_atomically
+    from paz6d.export.networks import network_of, run_method
+
+    network = tiny_network("emotion")
+    save_keras_model_atomically(network.model, tmp_path / "model.keras")
+    with pytest.raises(ValueError, match="or emotion: model.keras \\+ classes.json"):
+        run_method(tmp_path)
+    write_json_atomically(tmp_path / "classes.json", ["a", "b", "c", "d", "e", "f", "g"])
+    loaded = network_of(tmp_path)
+    assert (loaded.method, loaded.input_shape, loaded.input_range, loaded.step) == ("emotion", (48, 48, 1),
+                                                                                   (-1.0, 1.0), None)

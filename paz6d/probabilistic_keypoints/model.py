@@ -58,7 +58,8 @@ class CholeskyFromMaps(keras.layers.Layer):
         probabilities = tf.stop_gradient(tf.cast(probabilities, tf.float32))
         shape = tf.shape(probabilities)
         maps = tf.reshape(tf.cast(maps, tf.float32), [shape[0], shape[1], shape[2], shape[3], 3])
-        parameters = tf.einsum("bhwn,bhwnk->bnk", probabilities, maps)
+        # a sum of products rather than tf.einsum, which the TFLite converter lowers wrongly (paz6d export)
+        parameters = tf.reduce_sum(probabilities[..., None] * maps, axis=[1, 2])
         diagonal_1 = tf.nn.softplus(parameters[..., 0]) + self.min_sigma
         diagonal_2 = tf.nn.softplus(parameters[..., 2]) + self.min_sigma
         zero = tf.zeros_like(diagonal_1)
