@@ -1444,6 +1444,7 @@ def late_validation_cases() -> list[Case]:
         Case("benchmark-lmo-out-empty", replace_flag(BENCHMARK_LMO, "--out", "") + ("--lmo", "{case}/bop"),
              copy_bop, ("--out", "empty")),
         Case("train-ssd-out-empty", replace_flag(TRAIN_SSD, "--out", ""), None, ("--out", "empty")),
+        Case("train-ssd-input-size-65536", TRAIN_SSD + ("--input-size", "65536"), None, ("--input-size", "2048")),
         Case("train-aae-dataset-mesh-not-an-id", TRAIN_AAE_DATASET,
              lambda world, folder: (copy_bop(world, folder),
                                     shutil.copy(world.mesh, folder / "bop" / "models" / "obj_abc.ply")),

@@ -108,6 +108,8 @@ class SSDTraining:
                                  f"{self.config!r} config's {settings['architecture']} is fixed at "
                                  f"{CONFIGS[self.config]['input_size']} px")
             check_light_input_size(settings["input_size"])
+            if settings["input_size"] > 2048:
+                raise ValueError(f"input_size: expected at most 2048 px (a training input side), got {self.input_size}")
         if self.scale_crops is not None:
             settings["scale_crops"] = [float(v) for v in self.scale_crops]
         scale_crops = settings.get("scale_crops")
