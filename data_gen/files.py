@@ -11,10 +11,9 @@ import numpy as np
 from paz6d.backend.files import TEMPORARY_PREFIX
 from paz6d.backend.image import encode_image
 
-#: PNG settings (zlib level 1, run-length strategy; deterministic output). Measured on a 640x480
-#: rendered image with sensor noise: the "sub" row filter makes the RGB file ~10 % smaller than
-#: OpenCV's default filters in ~40 % of the time (9 vs 23 ms); masks, which are runs of 0 and 255,
-#: compress best unfiltered (0.4 vs 2.2 ms).
+#: PNG settings (zlib level 1, run-length strategy; deterministic output). On rendered images with sensor
+#: noise the "sub" row filter gives smaller RGB files than OpenCV's default filters in less time; masks, which
+#: are runs of 0 and 255, compress best unfiltered (``benchmarks/generate.py`` times the whole writer).
 _PNG_ZLIB = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE]
 PNG_PARAMETERS = _PNG_ZLIB + [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB]
 MASK_PNG_PARAMETERS = _PNG_ZLIB + [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]

@@ -109,7 +109,8 @@ class RandomGaussianBlur(RandomProcessor):
 
 
 #: The 256 quantiles ``(i + 0.5) / 256`` of the standard normal: a uniform byte indexes one, which
-#: draws 8-bit-quantized Gaussian noise (cut at ±2.9 sigma) about 4x faster than ``standard_normal``.
+#: draws 8-bit-quantized Gaussian noise (cut at ±2.9 sigma) faster than ``standard_normal``
+#: (``benchmarks/photometric.py``).
 NORMAL_QUANTILES = np.array([NormalDist().inv_cdf((i + 0.5) / 256) for i in range(256)], dtype=np.float32)
 
 
@@ -148,7 +149,7 @@ class RandomImageNoise(RandomProcessor):
 
     Args:
         quantized: draw 8-bit-quantized noise through :data:`NORMAL_QUANTILES` (:func:`sensor_noise`,
-            ~4x faster; ``paz6d generate``) instead of ``Generator.normal``.
+            faster; ``paz6d generate``) instead of ``Generator.normal``.
     """
 
     def __init__(self, max_std: float = 10.0, probability: float = 1.0, quantized: bool = False, seed=None,
