@@ -89,7 +89,8 @@ def principal_components(data: np.ndarray, count: int) -> tuple[np.ndarray, np.n
 
     With fewer samples than dimensions (face images) ``U`` and ``S`` come from the ``N x N`` Gram
     matrix ``X X^T = U S^2 U^T`` and ``V = X^T U S^-1`` (Turk & Pentland's "snapshot" method):
-    the same decomposition, faster than LAPACK's SVD of the ``D x N`` matrix (``benchmarks/eigenfaces.py``), and far
+    the same decomposition, faster than LAPACK's SVD of the ``D x N`` matrix (the fit against OpenCV's:
+    ``benchmarks/eigenfaces.py``), and far
     less sensitive to BLAS thread oversubscription on a busy machine. Directions whose singular
     value is below ``1e-6`` of the largest (rank deficiency) fall back to the direct SVD.
 

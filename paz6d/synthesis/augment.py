@@ -109,8 +109,7 @@ class RandomGaussianBlur(RandomProcessor):
 
 
 #: The 256 quantiles ``(i + 0.5) / 256`` of the standard normal: a uniform byte indexes one, which
-#: draws 8-bit-quantized Gaussian noise (cut at ±2.9 sigma) faster than ``standard_normal``
-#: (``benchmarks/photometric.py``).
+#: draws 8-bit-quantized Gaussian noise (cut at ±2.9 sigma) faster than ``standard_normal``.
 NORMAL_QUANTILES = np.array([NormalDist().inv_cdf((i + 0.5) / 256) for i in range(256)], dtype=np.float32)
 
 
