@@ -1218,12 +1218,14 @@ def run_cases() -> list[Case]:
         "--faces": [(("smile",), ""), ((), "--detector or --faces")],
         "--run": [(("1={world}/runs/aae",), "--run: pose models need --detector")],
         "--smooth": [(("0",), ""), (("nan",), ""), (("1.5",), ""), (("0.5",), "--smooth: smooths poses")],
+        "--bop-scene-id": [(("2",), "without --run"), (("x",), "")],
     })
     found += _flag_cases("run-detector-", RUN_DETECTOR, {
         "--detector": [(("{case}/none",), "none"), (("{world}/runs/aae",), "aae run directory, not an SSD")],
         "--run": [(("1={case}/none",), "none"), (("x={world}/runs/aae",), "OBJ_ID=RUN_DIR"),
                   (("0={world}/runs/aae",), "positive BOP object id")],
         "--camera": [((), "--camera: --run needs")],
+        "--bop-scene-id": [(("-1",), "--bop-scene-id")],
     })
     found += [
         Case("run-video-corrupt", replace_flag(RUN, "--input", "{case}/clip.mp4"),

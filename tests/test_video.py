@@ -61,6 +61,9 @@ def test_records_round_trip_every_message_through_from_dict():
     assert back.results[2] == {"pose": pose, "box": box, "landmarks": keypoints, "reprojection_error": 1.25}
     assert back.results[3] == {"keypoints3d": points} and back.results[4] == {"custom": 3}
     assert json.loads(line)["results"][0]["pose"]["type"] == "Pose6D"
+    assert "file" not in json.loads(line)
+    named = FrameRecord.from_dict(json.loads(record_line(FrameRecord(1, 0.0, 1.0, [{"box": box}], "000012.png"))))
+    assert named.file == "000012.png" and named.results == [{"box": box}]
     assert result_entries(None) == [] and result_entries([(box, box)]) == [{"box": box, "box_1": box}]
 
 
@@ -93,6 +96,8 @@ def test_a_folder_and_a_video_give_identical_messages(clip, tmp_path):
     assert len(video) == len(folder) == 4 == summaries["video"]["frames"]
     assert [r.results for r in video] == [r.results for r in folder]
     assert [r.timestamp_s for r in video] == [r.timestamp_s for r in folder] == [0.0, 0.1, 0.2, 0.3]
+    assert [r.file for r in folder] == ["0000.png", "0001.png", "0002.png", "0003.png"]
+    assert all(r.file is None for r in video)
     expected = [detector(image) for image in astronaut_frames()]  # the detector on the frames themselves
     assert [[entry["box"] for entry in record.results] for record in video] == expected
     assert all(len(boxes) == 1 for boxes in expected)  # one face per frame: the comparison is not vacuous
@@ -226,3 +231,26 @@ def test_smoothing_as_the_players_transform_gives_the_smoothers_poses(clip, tmp_
                 zip(poses, (type("F", (), {"timestamp_s": i / 10.0}) for i in range(4)))]
     written = [record.results[0]["pose"] for record in read_records(tmp_path / "frames.jsonl")]
     assert written == expected and written[0] == poses[0] and written[1] != poses[1]
+
+
+def test_poses_of_the_stream_as_a_bop_results_csv(tmp_path):
+    from paz6d.datasets.bop import read_pose_results
+    from paz6d.video.bop_results import write_bop_results
+
+    first = Pose6D.from_rotation_vector([0.1, 0.2, 0.3], [0.01, -0.02, 0.6], "obj_000005", 0.7)
+    second = Pose6D.from_rotation_vector([-0.3, 0.0, 1.0], [0.05, 0.0, 0.9], "obj_000008", 0.4)
+    head = Pose6D.from_rotation_vector([0, 0, 0], [0, 0, 0.5], "head")
+    records = [FrameRecord(0, 0.0, 25.0, [{"box": Box2D(0, 0, 5, 5, 0.9, "obj_000005"), "pose": first}], "000012.png"),
+               FrameRecord(1, 0.1, 50.0, [{"pose": second}, {"pose": head}], "000020.png"),
+               FrameRecord(2, 0.2, 10.0, [{"pose": second}])]
+    assert write_bop_results(records, tmp_path / "results.csv", 2) == 3
+    results = read_pose_results(tmp_path / "results.csv")
+    assert results.scene_ids.tolist() == [2, 2, 2] and results.im_ids.tolist() == [12, 20, 2]
+    assert results.obj_ids.tolist() == [5, 8, 8] and results.scores.tolist() == [0.9, 0.4, 0.4]
+    np.testing.assert_allclose(results.times, [0.025, 0.05, 0.01])
+    np.testing.assert_allclose(results.rotations, [first.rotation_matrix, second.rotation_matrix,
+                                                   second.rotation_matrix], atol=1e-12)
+    np.testing.assert_allclose(results.translations, [first.translation, second.translation, second.translation],
+                               atol=1e-12)
+    with pytest.raises(ValueError, match="same image id 12"):
+        write_bop_results([records[0], FrameRecord(5, 0.5, 1.0, [], "12.jpg")], tmp_path / "again.csv", 2)

@@ -14,6 +14,7 @@ from paz6d import cli
 from paz6d.backend.camera import Camera
 from paz6d.backend.camera_file import write_camera_json
 from paz6d.backend.frames import open_frames
+from paz6d.backend.image import save_image
 from paz6d.backend.video_file import VideoFileWriter
 from paz6d.video.records import read_records
 
@@ -80,6 +81,32 @@ def test_paz6d_run_detector_and_poses_equal_the_pipeline_on_stills(runs, tmp_pat
     assert [[(entry["box"], entry["pose"]) for entry in record.results] for record in records] == stills
     assert sum(len(found) for found in stills) > 0  # poses were estimated: the comparison is not vacuous
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert "bop_results" not in summary
     assert summary["frames"] == 3 and summary["pipeline"].endswith("poses of objects [1]")
     with open_frames(tmp_path / "out" / "annotated.mp4") as source:
         assert source.size == (128, 96) and len(list(source)) == 3
+
+
+def test_paz6d_run_writes_a_bop_results_csv_with_image_ids_from_file_names(runs, tmp_path, capsys):
+    from paz6d.datasets.bop import read_pose_results
+
+    ssd, aae = runs
+    generator = np.random.default_rng(4)
+    folder = tmp_path / "rgb"
+    for im_id in (3, 7):
+        save_image(folder / f"{im_id:06d}.png", generator.integers(0, 256, (96, 128, 3), dtype=np.uint8))
+    camera = write_camera_json(tmp_path / "camera.json", Camera(K, 128, 96))
+    code = cli.main(["run", "--input", str(folder), "--camera", str(camera), "--detector", str(ssd), "--run",
+                     f"1={aae}", "--score-threshold", "0.05", "--bop-scene-id", "2", "--out", str(tmp_path / "out"),
+                     "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    records = list(read_records(tmp_path / "out" / "frames.jsonl"))
+    poses = [(int(record.file[:6]), entry["box"].score, entry["pose"]) for record in records
+             for entry in record.results]
+    results = read_pose_results(tmp_path / "out" / "results.csv")
+    assert len(poses) > 0 and json.loads((tmp_path / "out" / "summary.json").read_text())["bop_rows"] == len(poses)
+    assert results.scene_ids.tolist() == [2] * len(poses) and results.obj_ids.tolist() == [1] * len(poses)
+    assert results.im_ids.tolist() == [im_id for im_id, _, _ in poses] and set(results.im_ids) <= {3, 7}
+    np.testing.assert_allclose(results.scores, [score for _, score, _ in poses])
+    np.testing.assert_allclose(results.translations, [pose.translation for _, _, pose in poses], atol=1e-9)
+    np.testing.assert_allclose(results.rotations, [pose.rotation_matrix for _, _, pose in poses], atol=1e-9)

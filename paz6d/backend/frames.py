@@ -43,11 +43,13 @@ class FrameSizeError(ValueError):
 
 @dataclass(frozen=True)
 class Frame:
-    """One frame: its position ``index`` (from 0), ``timestamp_s`` (seconds) and ``image`` uint8 RGB ``(H, W, 3)``."""
+    """One frame: its position ``index`` (from 0), ``timestamp_s`` (seconds), ``image`` uint8 RGB ``(H, W, 3)``
+    and, for a folder's frames, the image file's ``name``."""
 
     index: int
     timestamp_s: float
     image: np.ndarray
+    name: str | None = None
 
 
 def _check_fps(fps: float | None, name: str = "fps") -> float | None:
@@ -119,7 +121,7 @@ class FrameSource:
     def _folder_frames(self) -> Iterator[Frame]:
         for index, path in enumerate(self._files):
             image = self._first if index == 0 else load_image(path)
-            yield Frame(index, index / self.fps, self._check_size(image, index, str(path)))
+            yield Frame(index, index / self.fps, self._check_size(image, index, str(path)), path.name)
 
     def _capture_frames(self) -> Iterator[Frame]:
         index, start = 0, time.monotonic()

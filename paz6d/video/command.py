@@ -15,7 +15,8 @@ Detections of classes without a ``--run`` (and boxes a pose model fails on) are 
 the summary's ``skipped_boxes``. ``--camera`` is a camera JSON file (:mod:`paz6d.backend.camera_file`);
 every frame must have its size, and a camera with distortion undistorts every frame first
 (``--no-undistort`` keeps them). ``--smooth WEIGHT`` smooths the poses over time
-(:mod:`paz6d.video.smoothing`). Every flag,
+(:mod:`paz6d.video.smoothing`). ``--bop-scene-id ID`` also writes the poses as a BOP'19 results CSV
+(``results.csv``, :mod:`paz6d.video.bop_results`) for ``paz6d evaluate bop``. Every flag,
 the camera file, the run directories and the first frame are checked before a model loads.
 """
 
@@ -30,11 +31,13 @@ from pathlib import Path
 from paz6d.backend.files import write_json_atomically
 from paz6d.backend.paths import check_outputs
 from paz6d.ssd import run_dir as ssd_run_dir
+from paz6d.video.bop_results import write_bop_results
+from paz6d.video.records import read_records
 from paz6d.video.smoothing import PoseSmoother
 
 FACES = ("haar", "emotion", "head-pose")
 #: The files written in ``--out``.
-VIDEO_FILE, RECORDS_FILE, SUMMARY_FILE = "annotated.mp4", "frames.jsonl", "summary.json"
+VIDEO_FILE, RECORDS_FILE, SUMMARY_FILE, BOP_FILE = "annotated.mp4", "frames.jsonl", "summary.json", "results.csv"
 DEFAULT_SCORE_THRESHOLD = 0.3
 
 
@@ -57,6 +60,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--smooth", type=float, default=None, metavar="WEIGHT",
                         help="smooth poses over time (alpha-beta filter, paz6d.video.smoothing) with this weight in "
                              "(0, 1] of each new pose (default: no smoothing)")
+    parser.add_argument("--bop-scene-id", type=int, default=None, metavar="ID",
+                        help="also write the poses as a BOP'19 results CSV (results.csv) of this scene for paz6d "
+                             "evaluate bop; image ids from a folder's file names (000012.png -> 12), else frame "
+                             "indices")
     parser.add_argument("--undistort", action=argparse.BooleanOptionalAction, default=True,
                         help="undistort the frames with the camera's distortion before the pipeline (default: yes)")
     parser.add_argument("--show", action="store_true", help="show the annotated frames in a window (needs a display)")
@@ -102,6 +109,9 @@ def check_flags(args: argparse.Namespace) -> dict[int, Path]:
         raise ValueError(f"--smooth: expected a weight in (0, 1], got {args.smooth}")
     if args.smooth is not None and not (args.run or args.faces == "head-pose"):
         raise ValueError("--smooth: smooths poses; give pose models (--run) or --faces head-pose")
+    if args.bop_scene_id is not None and (args.bop_scene_id < 0 or not args.run):
+        raise ValueError(f"--bop-scene-id: expected a scene id >= 0 and pose models (--run), got {args.bop_scene_id}"
+                         + ("" if args.run else " without --run"))
     if args.max_frames is not None and args.max_frames < 1:
         raise ValueError(f"--max-frames: expected a whole number >= 1, got {args.max_frames}")
     if args.detector is not None and not args.detector.is_dir():
@@ -194,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
     device = device_index(args.input)
     inputs = {"--input": None if device is not None else args.input, "--camera": args.camera,
               "--detector": args.detector, **{f"--run {obj_id}": path for obj_id, path in runs.items()}}
-    outputs = {f"--out {name}": args.out / name for name in (VIDEO_FILE, RECORDS_FILE, SUMMARY_FILE)}
+    outputs = {f"--out {name}": args.out / name for name in (VIDEO_FILE, RECORDS_FILE, SUMMARY_FILE, BOP_FILE)}
     check_outputs(outputs, inputs, {"--out": args.out})
     camera = read_camera_json(args.camera) if args.camera is not None else None
     if args.detector is not None:
@@ -214,6 +224,9 @@ def run(args: argparse.Namespace) -> int:
                   "smooth": args.smooth,
                   "skipped_boxes": getattr(pipeline, "skipped", None),
                   "video": VIDEO_FILE, "records": RECORDS_FILE, **summary}
+    if args.bop_scene_id is not None:
+        rows = write_bop_results(read_records(out / RECORDS_FILE), out / BOP_FILE, args.bop_scene_id)
+        report.update(bop_results=BOP_FILE, bop_rows=rows)
     write_json_atomically(out / SUMMARY_FILE, report, indent=2)
     latency = summary["latency_ms"]
     print(f"{summary['frames']} frames, {summary['fps']} frames/s ({summary['pipeline_fps']} in the pipeline), "

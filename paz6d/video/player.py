@@ -88,7 +88,7 @@ class VideoPlayer:
             image = frame.image
             if self.undistort is not None:
                 image = cv2.undistort(image, self.undistort.K, self.undistort.distortion)
-                frame = Frame(frame.index, frame.timestamp_s, image)
+                frame = Frame(frame.index, frame.timestamp_s, image, frame.name)
             start = time.perf_counter()
             output = self.pipeline(image)
             if self.transform is not None:
@@ -130,7 +130,7 @@ class VideoPlayer:
                     latencies.append(latency)
                     if lines is not None:
                         record = FrameRecord(frame.index, round(frame.timestamp_s, 6), round(latency * 1000.0, 3),
-                                             result_entries(output))
+                                             result_entries(output), frame.name)
                         lines.write((record_line(record) + "\n").encode())
                         lines.flush()
                     if writer is not None or show:

@@ -2,11 +2,12 @@
 
 A line is a JSON object::
 
-    {"frame": 12, "timestamp_s": 0.4, "latency_ms": 31.5,
+    {"frame": 12, "timestamp_s": 0.4, "latency_ms": 31.5, "file": "000012.png",
      "results": [{"box": {"type": "Box2D", "x_min": 210.4, ..., "class_name": "obj_000005"},
                   "pose": {"type": "Pose6D", "quaternion": [x, y, z, w], "translation": [tx, ty, tz], ...}}]}
 
-``results`` holds one object per thing the pipeline found. Its values are messages
+``file`` is the image's file name for a folder's frames (absent for a video or a device). ``results`` holds
+one object per thing the pipeline found. Its values are messages
 (:class:`~paz6d.abstract.Box2D`, :class:`~paz6d.abstract.Pose6D`, :class:`~paz6d.abstract.Keypoints2D`,
 :class:`~paz6d.abstract.Keypoints3D`), written as ``{"type": <class name>, **message.to_dict()}``, or plain
 values (a label, a list of class scores, a re-projection error). :func:`result_entries` turns what a
@@ -115,17 +116,21 @@ def decode(value: Any) -> Any:
 
 @dataclass(frozen=True)
 class FrameRecord:
-    """One line of the stream: the ``frame`` index, its ``timestamp_s``, the pipeline's ``latency_ms``
-    and its ``results`` (entries of messages and values)."""
+    """One line of the stream: the ``frame`` index, its ``timestamp_s``, the pipeline's ``latency_ms``,
+    its ``results`` (entries of messages and values) and, for a folder's frames, the image ``file`` name
+    (written only then)."""
 
     frame: int
     timestamp_s: float
     latency_ms: float
     results: list[dict[str, Any]] = field(default_factory=list)
+    file: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"frame": self.frame, "timestamp_s": self.timestamp_s, "latency_ms": self.latency_ms,
-                "results": encode(self.results)}
+        data = {"frame": self.frame, "timestamp_s": self.timestamp_s, "latency_ms": self.latency_ms}
+        if self.file is not None:
+            data["file"] = self.file
+        return {**data, "results": encode(self.results)}
 
     @classmethod
     def from_dict(cls, data: dict) -> "FrameRecord":
@@ -136,8 +141,11 @@ class FrameRecord:
             raise ValueError(f"FrameRecord.from_dict: missing field(s) {missing}")
         if not isinstance(data["results"], list):
             raise ValueError("FrameRecord.from_dict: field 'results' must be a list of entries")
+        file = data.get("file")
+        if file is not None and not isinstance(file, str):
+            raise ValueError(f"FrameRecord.from_dict: field 'file' must be a file name, got {type(file).__name__}")
         return cls(int(data["frame"]), float(data["timestamp_s"]), float(data["latency_ms"]),
-                   [decode(entry) for entry in data["results"]])
+                   [decode(entry) for entry in data["results"]], file)
 
 
 def record_line(record: FrameRecord) -> str:
