@@ -254,3 +254,11 @@ def test_poses_of_the_stream_as_a_bop_results_csv(tmp_path):
                                atol=1e-12)
     with pytest.raises(ValueError, match="same image id 12"):
         write_bop_results([records[0], FrameRecord(5, 0.5, 1.0, [], "12.jpg")], tmp_path / "again.csv", 2)
+
+
+def test_show_needs_a_display(clip, tmp_path, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with open_frames(clip / "frames") as source, pytest.raises(ValueError, match="show: no display"):
+        VideoPlayer(lambda image: [], source).run(tmp_path / "a.mp4", show=True)
+    assert list(tmp_path.iterdir()) == []
