@@ -241,9 +241,9 @@ class _Estimates:
         return result
 
 
-def _estimator(method: str, run_dir: Path, **options):
-    """The pose pipeline of one run directory (``method`` as :func:`paz6d.run_dirs.method_of` names it),
-    loaded once; each image's camera is given per call. ``options``: ``keypoint_crops``, ``box_variants``,
+def _estimator(run_dir: Path, **options):
+    """The pose pipeline of one run directory (its method found from its files), loaded once; each image's
+    camera is given per call. ``options``: ``keypoint_crops``, ``box_variants``,
     ``viewpoints`` of :func:`~paz6d.detect_and_estimate.load_pose_estimator`."""
     from paz6d.detect_and_estimate import load_pose_estimator
 
@@ -261,9 +261,9 @@ def _load_estimators(runs: dict[int, tuple[Path, str]], **options) -> tuple[dict
     from paz6d.backend.pnp import PnPError
 
     estimators, unusable = {}, {}
-    for obj_id, (run_dir, method) in runs.items():
+    for obj_id, (run_dir, _) in runs.items():
         try:
-            estimators[obj_id] = _estimator(method, run_dir, **options)
+            estimators[obj_id] = _estimator(run_dir, **options)
         except PnPError as error:
             unusable[obj_id] = str(error)
     if not estimators:
@@ -282,9 +282,9 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
 
     Returns:
         ``{"estimates": _Estimates, "targets": [Target], "skipped_images", "failed": {obj_id: count},
-        "images", "unusable": {obj_id: reason}}`` (see :func:`_load_estimators`); an estimate that fails
-        (e.g. PnP with too few keypoints, a ``ValueError``) is counted and left out (BOP scores a missing
-        estimate as a miss).
+        "images": [(scene_id, im_id)], "unusable": {obj_id: reason}}`` (see :func:`_load_estimators`); an
+        estimate that fails (e.g. PnP with too few keypoints, a ``ValueError``) is counted and left out (BOP
+        scores a missing estimate as a miss).
     """
     from tqdm.auto import tqdm
 
@@ -294,7 +294,7 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
     data = BOPDataset(dataset, split=split)
     estimators, unusable = None, {}  # loaded at the first instance to estimate
     estimates, targets = _Estimates(), []
-    skipped_images, images, failed = 0, 0, {obj_id: 0 for obj_id in runs}
+    skipped_images, images, failed = 0, [], {obj_id: 0 for obj_id in runs}
     for sample in tqdm(data, desc="estimate (ground-truth boxes)", unit="image", disable=not progress,
                        dynamic_ncols=True):
         instances = [instance for instance in sample.objects if instance.obj_id in runs
@@ -310,7 +310,7 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
         targets += [Target(sample.scene_id, sample.im_id, obj_id, count) for obj_id, count in sorted(counts.items())]
         if estimators is None:
             estimators, unusable = _load_estimators(runs, keypoint_crops=keypoint_crops, viewpoints=viewpoints)
-        images += 1
+        images.append((sample.scene_id, sample.im_id))
         poses, seconds = [], 0.0
         extra = {"depth": checked_depth(sample, dataset, split)} if depth else {}
         for instance in instances:
@@ -338,32 +338,6 @@ def estimate_with_ground_truth(runs: dict[int, tuple[Path, str]], dataset: Path,
             "images": images, "unusable": unusable}
 
 
-def split_images(dataset: Path, split: str):
-    """``(scene_id, im_id, rgb path or None, K (3, 3), (width, height) or None)`` of every image listed in
-    the split's ``scene_camera.json`` files (no ground truth read); the size is the data set's
-    ``camera.json`` size (``None`` when that file is absent: the image's own size applies)."""
-    from paz6d.datasets.bop.camera import load_camera, load_scene_camera
-    from paz6d.datasets.bop.scene import find_image
-
-    check_plain_name(split, "--split")
-    folder = Path(dataset) / split
-    if not folder.is_dir():
-        raise ValueError(f"{folder}: split folder not found")
-    camera_path = Path(dataset) / "camera.json"
-    size = None
-    if camera_path.is_file():
-        default = load_camera(camera_path)
-        size = (default.width, default.height)
-    scenes = sorted(path for path in folder.iterdir() if path.name.isdigit() and path.is_dir())
-    if not scenes:
-        raise ValueError(f"{folder}: no scene folders (expected numeric folder names)")
-    for scene in scenes:
-        cameras = load_scene_camera(scene / "scene_camera.json", units="m")
-        for im_id, scene_camera in cameras.items():
-            path = find_image(scene / "rgb", im_id)
-            yield int(scene.name), im_id, path, scene_camera.K, size
-
-
 def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path, dataset: Path, split: str,
                            score_threshold: float = DEFAULT_SCORE_THRESHOLD, progress: bool = True,
                            depth: bool = False, keypoint_crops: int = 1, verify: bool = False,
@@ -383,9 +357,8 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
     """
     from tqdm.auto import tqdm
 
-    from paz6d.backend.camera import Camera
-    from paz6d.backend.image import load_image
     from paz6d.datasets.bop.coco_ground_truth import coco_image_id
+    from paz6d.datasets.bop.reader import BOPDataset
     from paz6d.detect_and_estimate import DetectAndEstimatePose6D, MissingPoseModelWarning, bop_object_id, load_detector
 
     detector = load_detector(detector_dir, score_threshold, flip)
@@ -394,19 +367,16 @@ def estimate_with_detector(runs: dict[int, tuple[Path, str]], detector_dir: Path
     pipeline = DetectAndEstimatePose6D(detector, estimators, verify=verify, poses_per_class=poses_per_class)
     estimates, detections, images = _Estimates(), [], []
     skipped_images, failed, without_model, total = 0, {obj_id: 0 for obj_id in runs}, {}, 0.0
-    entries = list(split_images(dataset, split))
-    for scene_id, im_id, path, K, size in tqdm(entries, desc="detect + estimate", unit="image",
-                                               disable=not progress, dynamic_ncols=True):
-        if path is None:
+    for sample in tqdm(BOPDataset(dataset, split, ground_truth=False), desc="detect + estimate", unit="image",
+                       disable=not progress, dynamic_ncols=True):
+        scene_id, im_id, image, camera = sample.scene_id, sample.im_id, sample.image, sample.camera
+        if image is None:
             skipped_images += 1
             continue
-        image = load_image(path)
-        width, height = size if size is not None else (image.shape[1], image.shape[0])
-        if (image.shape[1], image.shape[0]) != (width, height):
-            raise ValueError(f"{path}: image is {image.shape[1]}x{image.shape[0]} pixels, but {dataset}/camera.json "
-                             f"says {width}x{height}")
-        camera = Camera(K, width, height)
-        depth_image = read_split_depth(dataset, split, scene_id, im_id, image.shape[:2]) if depth else None
+        if (image.shape[1], image.shape[0]) != (camera.width, camera.height):
+            raise ValueError(f"{dataset}/{split}/{scene_id:06d}/rgb: image {im_id} is {image.shape[1]}x"
+                             f"{image.shape[0]} pixels, but {dataset}/camera.json says {camera.width}x{camera.height}")
+        depth_image = checked_depth(sample, dataset, split) if depth else None
         started = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MissingPoseModelWarning)
@@ -471,20 +441,6 @@ def checked_depth(sample, dataset: Path, split: str) -> np.ndarray:
     finite and have its RGB image's size (errors name the depth file)."""
     path = _depth_file(dataset, split, sample.scene_id, sample.im_id)
     return check_depth(sample.depth, str(path), sample.image.shape[:2])
-
-
-def read_split_depth(dataset: Path, split: str, scene_id: int, im_id: int, shape: tuple[int, int]) -> np.ndarray:
-    """The depth ``(H, W)`` metres of one image of a split (its file times ``depth_scale`` of
-    ``scene_camera.json``), checked as :func:`checked_depth` does; no ground truth is read."""
-    from paz6d.datasets.bop.camera import load_scene_camera
-    from paz6d.datasets.bop.scene import read_depth
-
-    path = _depth_file(dataset, split, scene_id, im_id)
-    cameras_path = path.parent.parent / "scene_camera.json"
-    depth_scale = load_scene_camera(cameras_path, units="m")[im_id].depth_scale
-    if depth_scale is None:
-        raise ValueError(f"{cameras_path}: image {im_id}: missing field 'depth_scale' (needed by --depth)")
-    return check_depth(read_depth(path, depth_scale, units="m"), str(path), shape)
 
 
 def refinement_statistics(estimators) -> dict:
@@ -572,7 +528,7 @@ def estimate(args: argparse.Namespace) -> dict:
         found = estimate_with_ground_truth(runs, args.dataset, args.split, args.box, args.min_visible, args.progress,
                                            args.depth, args.keypoint_crops, viewpoints)
         targets = found["targets"]
-        if found["images"] == 0:
+        if not found["images"]:
             raise ValueError(f"{args.dataset}: no instance of objects {objects} with an RGB image and visible "
                              f"fraction >= {args.min_visible} in split {args.split!r}")
     else:

@@ -240,7 +240,7 @@ def test_estimate_fails_when_every_estimate_failed(world, tmp_path, monkeypatch)
     from paz6d import estimate
 
     monkeypatch.setattr(estimate, "_estimator",
-                        lambda method, run_dir, **options: lambda image, box, camera: None)
+                        lambda run_dir, **options: lambda image, box, camera: None)
     out = tmp_path / "results.csv"
     outcome = cases.run_cli(["estimate", "--run", str(world.aae_run), "--dataset", str(world.bop), "--split", "test",
                              "--object-id", "1", "--out", str(out)])

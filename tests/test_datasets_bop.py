@@ -240,3 +240,23 @@ def test_duplicated_targets_are_rejected_naming_file_and_entry(tmp_path):
     path.write_text(json.dumps([{"scene_id": 2, "im_id": "3", "obj_id": 5, "inst_count": 1}]))
     with pytest.raises(ValueError, match="target 0: field 'im_id' must be a non-negative integer, got '3'"):
         read_targets(path)
+
+
+def test_a_split_without_annotations_reads_the_images_of_scene_camera_json(tmp_path):
+    import cv2
+
+    scene = tmp_path / "set" / "test" / "000003"
+    (scene / "rgb").mkdir(parents=True)
+    (scene / "depth").mkdir()
+    K = [[300.0, 0, 15.5], [0, 300.0, 11.5], [0, 0, 1]]
+    (scene / "scene_camera.json").write_text(json.dumps({str(im_id): {"cam_K": np.ravel(K).tolist(), "depth_scale": 0.1}
+                                                         for im_id in (4, 9)}))
+    cv2.imwrite(str(scene / "rgb" / "000004.png"), np.full((24, 32, 3), 7, np.uint8))
+    cv2.imwrite(str(scene / "depth" / "000004.png"), np.full((24, 32), 5000, np.uint16))
+    with pytest.raises(ValueError, match="scene_gt.json"):
+        BOPDataset(tmp_path / "set", "test")
+    first, second = BOPDataset(tmp_path / "set", "test", ground_truth=False)
+    assert (first.scene_id, first.im_id, second.im_id) == (3, 4, 9)
+    assert first.objects == [] and first.image.shape == (24, 32, 3) and second.image is None
+    np.testing.assert_allclose(first.depth, 0.5)  # 5000 x 0.1 mm
+    np.testing.assert_allclose(first.K, K)

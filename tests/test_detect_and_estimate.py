@@ -422,10 +422,10 @@ def test_estimate_scores_an_object_whose_pose_model_cannot_estimate_as_misses(wo
 
     real = module._estimator
 
-    def estimator(method, run_dir, **options):  # as a KeypointNet run with 2 usable keypoints fails to load
+    def estimator(run_dir, **options):  # as a KeypointNet run with 2 usable keypoints fails to load
         if run_dir.name == "aae_8":
             raise PnPError(f"{run_dir}/keypoints.json: only 2 usable keypoints, PnP needs at least 4")
-        return real(method, run_dir, **options)
+        return real(run_dir, **options)
 
     monkeypatch.setattr(module, "_estimator", estimator)
     runs = [f"--run={obj_id}={world / f'aae_{obj_id}'}" for obj_id in OBJECTS]

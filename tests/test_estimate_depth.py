@@ -80,8 +80,8 @@ def rgb_error_estimator(world, monkeypatch):
 
     real, truth = module._estimator, _truth(world / "set")
 
-    def estimator(method, run_dir, **options):
-        pipeline = real(method, run_dir, **options)
+    def estimator(run_dir, **options):
+        pipeline = real(run_dir, **options)
         pipeline.replace("pose_from_codebook", KeyedStep(
             TruthWithRGBError(truth), ("indices", "similarities", "rotations", "boxes", "cameras"), "candidates",
             "pose_from_codebook", per_sample=True))

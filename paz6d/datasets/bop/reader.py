@@ -66,35 +66,42 @@ class BOPSample:
 
 
 class BOPScene:
-    """One ``<root>/<split>/<scene_id>`` folder; iterating yields :class:`BOPSample` per GT image."""
+    """One ``<root>/<split>/<scene_id>`` folder; iterating yields :class:`BOPSample` per GT image.
 
-    def __init__(self, folder: str | Path, image_size: tuple[int, int] | None = None):
+    Args:
+        folder: the scene folder.
+        image_size: ``(width, height)`` of every image (``camera.json``'s); ``None``: each image's own.
+        ground_truth: read ``scene_gt.json`` (and ``scene_gt_info.json``); ``False``: the images are those
+            of ``scene_camera.json`` and the samples have no objects (a split without annotations).
+    """
+
+    def __init__(self, folder: str | Path, image_size: tuple[int, int] | None = None, ground_truth: bool = True):
         self.folder = Path(folder)
         if not self.folder.is_dir():
             raise ValueError(f"{self.folder}: scene folder not found")
         if not self.folder.name.isdigit():
             raise ValueError(f"{self.folder}: expected a numeric BOP scene folder name")
         self.scene_id = int(self.folder.name)
-        self.ground_truth = load_scene_gt(self.folder / "scene_gt.json", units="m")
+        self.ground_truth = load_scene_gt(self.folder / "scene_gt.json", units="m") if ground_truth else None
         self.cameras = load_scene_camera(self.folder / "scene_camera.json", units="m")
         info_path = self.folder / "scene_gt_info.json"
-        self.infos = load_scene_gt_info(info_path) if info_path.is_file() else {}
+        self.infos = load_scene_gt_info(info_path) if ground_truth and info_path.is_file() else {}
         self._image_size = image_size
 
     @property
     def image_ids(self) -> list[int]:
-        return list(self.ground_truth)
+        return list(self.cameras if self.ground_truth is None else self.ground_truth)
 
     def __len__(self) -> int:
-        return len(self.ground_truth)
+        return len(self.image_ids)
 
     def __iter__(self) -> Iterator[BOPSample]:
-        for im_id in self.ground_truth:
+        for im_id in self.image_ids:
             yield self.sample(im_id)
 
     def sample(self, im_id: int) -> BOPSample:
         """The sample of image ``im_id`` (files read now)."""
-        if im_id not in self.ground_truth:
+        if self.ground_truth is not None and im_id not in self.ground_truth:
             raise ValueError(f"{self.folder / 'scene_gt.json'}: no image {im_id}")
         if im_id not in self.cameras:
             raise ValueError(f"{self.folder / 'scene_camera.json'}: no entry for image {im_id}")
@@ -115,7 +122,7 @@ class BOPScene:
             depth = read_depth(depth_path, scene_camera.depth_scale, units="m").astype(np.float32)
         infos = self.infos.get(im_id)
         objects = []
-        for index, pose in enumerate(self.ground_truth[im_id]):
+        for index, pose in enumerate([] if self.ground_truth is None else self.ground_truth[im_id]):
             name = f"{im_id:06d}_{index:06d}.png"
             objects.append(BOPObject(pose.obj_id, pose.T_model2cam, read_mask(self.folder / "mask" / name),
                                      read_mask(self.folder / "mask_visib" / name),
@@ -130,9 +137,11 @@ class BOPDataset:
         root: data set folder.
         split: split folder (``test``, ``train``, ``train_pbr``...).
         scene_ids: scenes to read (default: all numeric folders of the split).
+        ground_truth: read the annotations (see :class:`BOPScene`); ``False`` for a split without them.
     """
 
-    def __init__(self, root: str | Path, split: str = "test", scene_ids: list[int] | None = None):
+    def __init__(self, root: str | Path, split: str = "test", scene_ids: list[int] | None = None,
+                 ground_truth: bool = True):
         self.root = Path(root)
         check_plain_name(split, "split")
         split_folder = self.root / split
@@ -143,7 +152,7 @@ class BOPDataset:
         if scene_ids is None:
             scene_ids = sorted(int(path.name) for path in split_folder.iterdir() if path.name.isdigit())
         size = None if self.camera is None else (self.camera.width, self.camera.height)
-        self.scenes = [BOPScene(split_folder / f"{scene_id:06d}", image_size=size) for scene_id in scene_ids]
+        self.scenes = [BOPScene(split_folder / f"{scene_id:06d}", size, ground_truth) for scene_id in scene_ids]
 
     @property
     def models_folder(self) -> Path:
