@@ -137,6 +137,7 @@ class CocoGroundTruth:
                 if key in image and not (_is_integer(image[key]) and image[key] > 0):
                     raise ValueError(f"{source}: images[{i}].{key} must be a positive integer")
             image_rows[image["id"]] = image
+        _check_unique([image["id"] for image in images], "images[].id", source)
         image_ids = np.array(sorted(image_rows), dtype=np.int64)
         heights = np.array([image_rows[i].get("height", 0) for i in image_ids.tolist()], dtype=np.int64)
         widths = np.array([image_rows[i].get("width", 0) for i in image_ids.tolist()], dtype=np.int64)
@@ -145,8 +146,15 @@ class CocoGroundTruth:
             if not isinstance(category, dict) or not _is_integer(category.get("id")):
                 raise ValueError(f"{source}: categories[{i}] must be an object with an integer 'id'")
             names[category["id"]] = str(category.get("name", category["id"]))
+        _check_unique([category["id"] for category in data["categories"]], "categories[].id", source)
+        _check_unique([str(category.get("name", category["id"])) for category in data["categories"]],
+                      "categories[].name", source)
         category_ids = np.array(sorted(names), dtype=np.int64)
         columns = _annotation_columns(data["annotations"], source)
+        bad = _bad_box_rows(columns["bbox"])
+        if len(bad):
+            raise ValueError(f"{source}: annotations[{int(bad[0])}].bbox must be [x, y, w, h] with w, h >= 0 and a "
+                             f"finite x + w, y + h, got {data['annotations'][int(bad[0])]['bbox']!r:.80}")
         image_row = np.minimum(np.searchsorted(image_ids, columns["image_id"]), max(len(image_ids) - 1, 0))
         category_row = np.minimum(np.searchsorted(category_ids, columns["category_id"]),
                                   max(len(category_ids) - 1, 0))
@@ -164,8 +172,29 @@ class CocoGroundTruth:
 
 
 def _integers(values: list) -> np.ndarray | None:
+    if bool in set(map(type, values)):  # np.array([1, True]) would quietly be [1, 1]
+        return None
     array = np.array(values) if values else np.zeros(0, dtype=np.int64)
     return array.astype(np.int64) if array.dtype.kind == "i" else None
+
+
+def _bad_box_rows(boxes: np.ndarray) -> np.ndarray:
+    """Rows of ``(N, 4)`` ``[x, y, w, h]`` boxes with a negative size or an overflowing corner
+    (``x + w`` infinite); rows of NaN (no box) are not reported."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        present = ~np.isnan(boxes).any(axis=1)
+        bad = (boxes[:, 2] < 0) | (boxes[:, 3] < 0) | ~np.isfinite(boxes[:, :2] + boxes[:, 2:]).all(axis=1)
+    return np.flatnonzero(present & bad)
+
+
+def _check_unique(values: list, what: str, source: str) -> None:
+    """``ValueError`` naming the first value of ``values`` (``what``: ``"categories[].id"``) seen twice."""
+    seen: dict = {}
+    for index, value in enumerate(values):
+        if value in seen:
+            raise ValueError(f"{source}: {what.replace('[]', f'[{index}]')} {value!r:.60} is also that of "
+                             f"{what.split('[')[0]}[{seen[value]}]; expected unique values")
+        seen[value] = index
 
 
 def _finite_numbers(values: list, shape: tuple[int, ...]) -> np.ndarray | None:
@@ -288,6 +317,10 @@ class CocoDetections:
                     raise ValueError(message)
             raise ValueError(f"{source}: malformed results (expected objects with integer image_id/category_id, "
                              "numeric score and bbox [x, y, w, h] or segmentation)")
+        bad = _bad_box_rows(boxes) if has_boxes else []
+        if len(bad):
+            raise ValueError(f"{source}: entry [{int(bad[0])}].bbox must be [x, y, w, h] with w, h >= 0 and a finite "
+                             f"x + w, y + h, got {results[int(bad[0])]['bbox']!r:.80}")
         image_ids = ground_truth.image_ids
         row = np.minimum(np.searchsorted(image_ids, image_id), max(len(image_ids) - 1, 0))
         unknown = np.flatnonzero(image_ids[row] != image_id) if len(image_ids) else np.arange(n)

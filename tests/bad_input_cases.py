@@ -767,7 +767,7 @@ def evaluate_coco_cases() -> list[Case]:
         argv = replace_flag(EVALUATE_COCO, "--results", "{case}/res.json")
         if name == "segm-without-segmentation":
             argv += ("--iou-type", "segm")
-        code = 0 if name in ("huge-box", "unknown-category") else 2
+        code = 0 if name == "unknown-category" else 2
         found.append(Case(f"evaluate-coco-results-{name}", argv, case_file("res.json", content),
                           (expect,) if code else (), code=code))
     found += _flag_cases("evaluate-coco-flag-", EVALUATE_COCO, {
@@ -781,6 +781,40 @@ def evaluate_coco_cases() -> list[Case]:
                       replace_flag(EVALUATE_COCO, "--out", "{world}/results.csv/x.json"), None, ("results.csv",)))
     found.append(Case("evaluate-coco-out-fifo", replace_flag(EVALUATE_COCO, "--out", "{case}/fifo"),
                       lambda world, folder: os.mkfifo(folder / "fifo"), ("fifo",)))
+    return found + evaluate_coco_silent_cases()
+
+
+def evaluate_coco_silent_cases() -> list[Case]:
+    """COCO ground truth and results that pycocotools would score without a word (negative sizes,
+    overflowing boxes, duplicate or boolean ids, duplicate category names): refused naming the entry."""
+
+    def first_annotation(**fields):
+        return lambda d: {**d, "annotations": [{**d["annotations"][0], **fields}, *d["annotations"][1:]]}
+
+    def extra_category(**fields):
+        return lambda d: {**d, "categories": d["categories"] + [{**d["categories"][0], **fields}]}
+
+    gt = {
+        "bbox-negative-width": (first_annotation(bbox=[1, 2, -5, 4]), "annotations[0].bbox"),
+        "bbox-overflow": (first_annotation(bbox=[1e308, 2, 1e308, 4]), "annotations[0].bbox"),
+        "image-id-boolean": (first_annotation(image_id=True), "annotations[0].image_id"),
+        "category-id-duplicate": (extra_category(name="other"), ".id"),
+        "category-name-duplicate": (extra_category(id=999), ".name"),
+        "image-id-duplicate": (lambda d: {**d, "images": d["images"] + [d["images"][0]]}, ".id"),
+    }
+    found = []
+    for name, (content, expect) in gt.items():
+        def setup(world, folder, content=content):
+            put(folder / "gt.json", content(json.loads(world.coco_gt.read_text())))
+        found.append(Case(f"evaluate-coco-gt-{name}", replace_flag(EVALUATE_COCO, "--gt", "{case}/gt.json"), setup,
+                          ("gt.json", expect)))
+    results = {"bbox-negative-height": [1, 2, 5, -4], "bbox-overflow": [1, -1e308, 5, -1e308]}
+    for name, box in results.items():
+        def setup(world, folder, box=box):
+            entries = json.loads(world.coco_results.read_text())
+            put(folder / "res.json", [{**entries[0], "bbox": box}, *entries[1:]])
+        found.append(Case(f"evaluate-coco-results-{name}", replace_flag(EVALUATE_COCO, "--results", "{case}/res.json"),
+                          setup, ("res.json", "entry [0].bbox")))
     return found
 
 
