@@ -64,8 +64,10 @@ def test_backbone_flag_brings_its_settings_and_leaves_the_light_defaults_alone()
         build_parser().parse_args(["train", "ssd", "--dataset", "d", "--out", "o", "--backbone", "resnet50"])
 
 
-def test_backbone_ssd_maps_match_the_priors_and_its_body_is_partly_frozen():
-    from paz6d.ssd.model import BACKBONE_LAYER, backbone_variables, build_ssd, input_normalization, priors_for
+def test_backbone_ssd_maps_match_the_priors_its_body_is_partly_frozen_and_it_loads_back(tmp_path):
+    from paz6d.pipelines import DetectSingleShot
+    from paz6d.ssd.model import (BACKBONE_LAYER, backbone_variables, build_ssd, input_normalization, priors_for,
+                                 save_ssd)
 
     model, spec = build_ssd(3, "light", 192, width=0.25, backbone=BACKBONE, frozen_stages=3)
     assert spec.feature_map_sizes == (24, 12, 6, 3, 2, 1)
@@ -86,6 +88,15 @@ def test_backbone_ssd_maps_match_the_priors_and_its_body_is_partly_frozen():
     np.testing.assert_allclose(scaled, (pixels - 127.0) / 128.0, atol=1e-6)
     with pytest.raises(ValueError, match="backbone: only the light network"):
         build_ssd(3, "ssd300", backbone=BACKBONE)
+    save_ssd(model, run_files.model_path(tmp_path))  # a run directory, read back in safe mode
+    run_files.write_detector(tmp_path, "light", ["a", "b"], spec.to_dict(),
+                             normalization=input_normalization(BACKBONE))
+    detect = DetectSingleShot(tmp_path, score_threshold=0.0)
+    image = np.random.default_rng(0).integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    values = detect.run_steps({"image": image}, stop="decode")
+    np.testing.assert_allclose(values["input"], (values["resized"] - 127.0) / 128.0, atol=1e-5)
+    np.testing.assert_allclose(values["output"], np.asarray(model(values["input"][None], training=False))[0],
+                               rtol=1e-4, atol=1e-4)
 
 
 def test_slow_variables_step_at_the_lower_rate():
@@ -110,6 +121,7 @@ def test_slow_variables_step_at_the_lower_rate():
         ScaledRateAdamW([slow], 0.0)
 
 
+@pytest.mark.slow  # about a minute: data generation, tracing the backbone's gradients, 20 steps
 def test_tiny_backbone_training_lowers_the_loss_and_loads_through_the_pipeline(trained, generated):
     from paz6d.backend.image import load_image
     from paz6d.pipelines import DetectSingleShot
