@@ -262,3 +262,11 @@ def test_show_needs_a_display(clip, tmp_path, monkeypatch):
     with open_frames(clip / "frames") as source, pytest.raises(ValueError, match="show: no display"):
         VideoPlayer(lambda image: [], source).run(tmp_path / "a.mp4", show=True)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_paz6d_run_show_without_a_display_fails_before_any_output(clip, tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    code, err = run_cli(capsys, "run", "--input", clip / "frames", "--faces", "haar", "--show", "--out",
+                        tmp_path / "out", "--no-progress")
+    assert code == 2 and "--show: no display" in err and not (tmp_path / "out").exists()

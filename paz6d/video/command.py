@@ -114,6 +114,11 @@ def check_flags(args: argparse.Namespace) -> dict[int, Path]:
                          + ("" if args.run else " without --run"))
     if args.max_frames is not None and args.max_frames < 1:
         raise ValueError(f"--max-frames: expected a whole number >= 1, got {args.max_frames}")
+    if args.show:
+        from paz6d.video.player import has_display
+
+        if not has_display():
+            raise ValueError("--show: no display (DISPLAY/WAYLAND_DISPLAY unset); run without --show")
     if args.detector is not None and not args.detector.is_dir():
         raise ValueError(f"--detector: {args.detector} is not a directory")
     return parse_pose_runs(args.run)
