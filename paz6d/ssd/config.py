@@ -32,9 +32,9 @@ def check_light_input_size(size: int, error: type[ValueError] = ValueError) -> i
 
 #: Pretrained bodies of the light network (``--backbone``; docs/backbones.md); "none": its own, from scratch.
 BACKBONES = ("none", "efficientnet-lite0")
-#: Settings a backbone brings, applied over the config's (and under ``overrides`` and the flags): its input
-#: scaling's network at 320 px, batch 8 (one step about 3 s on 2 cores), the heads' learning rate and the
-#: backbone's factor of it, and the stages kept fixed (stem and stages up to stride 4).
+#: Settings a backbone brings, applied over the config's (and under ``overrides`` and the flags): input 320 px,
+#: batch 8 (their cost: docs/backbones.md), the heads' learning rate and the backbone's factor of it, and the
+#: stages kept fixed (stem and stages up to stride 4).
 BACKBONE_SETTINGS: dict[str, dict] = {
     "efficientnet-lite0": {"backbone": "efficientnet-lite0", "input_size": 320, "batch_size": 8,
                            "learning_rate": 1e-3, "backbone_rate_factor": 0.1, "frozen_stages": 3,

@@ -312,7 +312,7 @@ def _heads(features: list, spec: PriorSpec, num_classes: int, separable: bool):
 
 def build_ssd(num_classes: int, architecture: str = "light", input_size: int | None = None,
               width: float = 1.0, top_down: bool = False, any_size: bool = False, backbone: str | None = None,
-              frozen_stages: int = 3) -> tuple[object, PriorSpec]:
+              frozen_stages: int = lite0.DEFAULT_FROZEN_STAGES) -> tuple[object, PriorSpec]:
     """An SSD network and its prior layout.
 
     Args:
