@@ -1487,6 +1487,10 @@ def late_validation_cases() -> list[Case]:
              ("obj_abc.ply", "obj_<object id>.ply")),
         Case("train-ssd-coco-png-header-100000", TRAIN_SSD_COCO, _big_png_header,
              ("000003.png", "100000 x 100000")),
+        Case("estimate-principal-point-1e9", replace_flag(ESTIMATE, "--dataset", "{case}/bop"),
+             bop_file("test/000000/scene_camera.json", lambda d: {
+                 key: {**entry, "cam_K": [*entry["cam_K"][:2], 1e9, *entry["cam_K"][3:]]} for key, entry in d.items()}),
+             ("scene_camera.json", "cam_K", "principal point")),
     ]
     return found
 

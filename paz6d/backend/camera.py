@@ -143,6 +143,18 @@ class Camera:
         return cls(np.asarray(data["K"], dtype=np.float64), data["width"], data["height"], data.get("distortion"))
 
 
+def check_principal_point(K: np.ndarray, width: int, height: int, where: str) -> None:
+    """``ValueError`` naming ``where`` when the principal point of ``K`` lies further outside the
+    ``width × height`` image than the image's own size (``cx`` outside ``[-width, 2 width]`` or ``cy``
+    outside ``[-height, 2 height]``): intrinsics of another camera, or a corrupt file, whose poses
+    would land at absurd distances. Crops' intrinsics (whose principal point may be far outside
+    the crop) are not meant."""
+    cx, cy = float(K[0, 2]), float(K[1, 2])
+    if not (-width <= cx <= 2 * width and -height <= cy <= 2 * height):
+        raise ValueError(f"{where}: principal point ({cx:.6g}, {cy:.6g}) px lies outside the {width} x {height} px "
+                         "image by more than its size; expected the intrinsics of this image's camera")
+
+
 def as_camera(camera, width: int | None = None, height: int | None = None, name: str = "camera") -> Camera:
     """The :class:`Camera` of an image of ``width x height`` pixels, from a Camera or a 3×3 ``K``.
 

@@ -21,11 +21,12 @@ from typing import Iterator
 
 import numpy as np
 
-from paz6d.backend.camera import Camera
+from paz6d.backend.camera import Camera, check_principal_point
 from paz6d.backend.paths import check_plain_name
 from paz6d.backend.image import load_image
 from paz6d.datasets.bop.camera import load_camera, load_scene_camera
 from paz6d.datasets.bop.models import MODELS_INFO, ModelInfo, load_model, load_models_info
+from paz6d.datasets.sample import Sample, SampleSequence
 from paz6d.datasets.bop.scene import (DEPTH_SUFFIXES, find_image, load_scene_gt, load_scene_gt_info, read_depth,
                                       read_mask)
 
@@ -114,6 +115,8 @@ class BOPScene:
             height, width = image.shape[:2]
         else:
             width, height = round(2 * scene_camera.K[0, 2] + 1), round(2 * scene_camera.K[1, 2] + 1)
+        check_principal_point(scene_camera.K, width, height,
+                              f"{self.folder / 'scene_camera.json'}: image {im_id}, field 'cam_K'")
         depth = None
         depth_path = find_image(self.folder / "depth", im_id, DEPTH_SUFFIXES)
         if depth_path is not None:
@@ -187,3 +190,57 @@ def check_object_in_split(root: str | Path, split: str, obj_id: int | None = Non
     if obj_id is not None and not any(pose.obj_id == obj_id for scene in dataset.scenes
                                       for poses in scene.ground_truth.values() for pose in poses):
         raise ValueError(f"object_id: no instance of object {obj_id} in {Path(root) / split}/*/scene_gt.json")
+
+
+def load(root: str | Path, split: str = "test", box: str = "visib") -> SampleSequence:
+    """A BOP split as the shared :class:`~paz6d.datasets.sample.Sample` interface (lazy: a sample's files
+    are read when it is asked for; the pixels are not read at all).
+
+    Each annotated image gives one sample: ``image`` (the RGB path, named even when the file is absent),
+    ``boxes`` ``(N, 4)`` pixels (``bbox_<box>`` of ``scene_gt_info.json``; an instance with no such box,
+    BOP's ``-1`` entries of an object out of sight, gets the empty box ``(0, 0, 0, 0)``), ``class_names``
+    ``obj_XXXXXX`` and ``class_ids`` into the split's sorted object ids, ``poses`` ``(N, 4, 4)``
+    ``T_model2cam`` in metres, ``camera_matrix`` and ``extras``: ``scene_id``, ``im_id``, ``obj_ids``
+    ``(N,)``, ``visibility`` ``(N,)`` (``visib_fract``; NaN without ``scene_gt_info.json``), ``depth``
+    (the depth file's path or ``None``), ``depth_scale`` (``scene_camera.json``'s, mm per unit) and
+    ``image_size`` (``camera.json``'s ``(width, height)`` or ``None``).
+
+    Args:
+        root: the data set folder; split: its split folder; box: ``"visib"`` or ``"obj"``.
+    Raises:
+        ValueError: a missing split or malformed file (naming it), or another ``box``.
+    """
+    if box not in ("visib", "obj"):
+        raise ValueError(f"box: expected 'visib' or 'obj', got {box!r}")
+    dataset = BOPDataset(root, split)
+    size = None if dataset.camera is None else (dataset.camera.width, dataset.camera.height)
+    entries = [(scene, im_id) for scene in dataset.scenes for im_id in scene.image_ids]
+    object_ids = sorted({pose.obj_id for scene in dataset.scenes for poses in scene.ground_truth.values()
+                         for pose in poses})
+    class_names = [f"obj_{obj_id:06d}" for obj_id in object_ids]
+
+    def read(position: int) -> Sample:
+        scene, im_id = entries[position]
+        if im_id not in scene.cameras:
+            raise ValueError(f"{scene.folder / 'scene_camera.json'}: no entry for image {im_id}")
+        poses, infos = scene.ground_truth[im_id], scene.infos.get(im_id) or []
+        boxes = np.zeros((len(poses), 4))
+        visibility = np.full(len(poses), np.nan)
+        for index, info in enumerate(infos[:len(poses)]):
+            x, y, width, height = info.get(f"bbox_{box}", (-1, -1, -1, -1))
+            if width > 0 and height > 0:
+                boxes[index] = (x, y, x + width, y + height)
+            visibility[index] = info.get("visib_fract", np.nan)
+        obj_ids = np.array([pose.obj_id for pose in poses], dtype=np.int64)
+        image = find_image(scene.folder / "rgb", im_id) or scene.folder / "rgb" / f"{im_id:06d}.png"
+        return Sample(image=image, boxes=boxes, class_ids=np.searchsorted(object_ids, obj_ids).astype(np.int64),
+                      class_names=[f"obj_{obj_id:06d}" for obj_id in obj_ids],
+                      poses=np.array([pose.T_model2cam for pose in poses]).reshape(-1, 4, 4),
+                      camera_matrix=scene.cameras[im_id].K,
+                      extras={"scene_id": scene.scene_id, "im_id": im_id, "obj_ids": obj_ids,
+                              "visibility": visibility, "depth": find_image(scene.folder / "depth", im_id,
+                                                                            DEPTH_SUFFIXES),
+                              "depth_scale": scene.cameras[im_id].depth_scale, "image_size": size},
+                      source=f"{scene.folder / 'scene_gt.json'}, image {im_id}")
+
+    return SampleSequence(len(entries), read, class_names)
