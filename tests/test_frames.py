@@ -1,4 +1,4 @@
-"""Frame sources (paz6d.backend.frames) and the video writer (paz6d.backend.video_file), against OpenCV."""
+"""Frame sources (paz6d.video.frames) and the video writer (paz6d.video.video_file), against OpenCV."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from paz6d.backend.files import TEMPORARY_PREFIX
-from paz6d.backend.frames import FrameSizeError, FrameSourceError, device_index, open_frames
+from paz6d.video.frames import FrameSizeError, FrameSourceError, device_index, open_frames
 from paz6d.backend.image import save_image
-from paz6d.backend.video_file import VideoFileWriter
+from paz6d.video.video_file import VideoFileWriter
 
 
 def random_frames(count: int = 6, size: tuple[int, int] = (64, 48), seed: int = 0) -> list[np.ndarray]:

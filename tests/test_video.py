@@ -14,9 +14,9 @@ from paz6d.abstract import Box2D, Keypoints2D, Keypoints3D, Pose6D
 from paz6d.backend.camera import Camera
 from paz6d.backend.camera_file import write_camera_json
 from paz6d.backend.files import TEMPORARY_PREFIX
-from paz6d.backend.frames import open_frames
+from paz6d.video.frames import open_frames
 from paz6d.backend.image import save_image
-from paz6d.backend.video_file import VideoFileWriter
+from paz6d.video.video_file import VideoFileWriter
 from paz6d.faces.haar import HaarCascadeDetector
 from paz6d.faces.head_pose import HeadDetection
 from paz6d.video.player import VideoPlayer, latency_summary

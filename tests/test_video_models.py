@@ -13,9 +13,9 @@ import pytest
 from paz6d import cli
 from paz6d.backend.camera import Camera
 from paz6d.backend.camera_file import write_camera_json
-from paz6d.backend.frames import open_frames
+from paz6d.video.frames import open_frames
 from paz6d.backend.image import save_image
-from paz6d.backend.video_file import VideoFileWriter
+from paz6d.video.video_file import VideoFileWriter
 from paz6d.video.records import read_records
 
 CLASS_NAMES = ["obj_000001", "obj_000002"]

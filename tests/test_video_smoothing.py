@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from paz6d.abstract import Box2D, Keypoints2D, Pose6D
-from paz6d.backend.frames import Frame
+from paz6d.video.frames import Frame
 from paz6d.faces.head_pose import HeadDetection
 from paz6d.video.smoothing import PoseSmoother
 

@@ -201,7 +201,7 @@ def build_pipeline(args: argparse.Namespace, runs: dict[int, Path], camera):
 def run(args: argparse.Namespace) -> int:
     from paz6d.backend.camera import Camera
     from paz6d.backend.camera_file import read_camera_json
-    from paz6d.backend.frames import device_index, open_frames
+    from paz6d.video.frames import device_index, open_frames
     from paz6d.run_dirs import prepare_run_output
     from paz6d.video.player import VideoPlayer
 

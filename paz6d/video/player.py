@@ -1,11 +1,11 @@
 """``VideoPlayer``: any pipeline over the frames of a video, a folder or a camera device.
 
 Each frame goes through the pipeline (timed), the output is drawn on the frame with the pipeline's own
-drawing, and the player writes an annotated video (:class:`~paz6d.backend.video_file.VideoFileWriter`)
+drawing, and the player writes an annotated video (:class:`~paz6d.video.video_file.VideoFileWriter`)
 and a JSON-lines stream of the messages (:mod:`paz6d.video.records`), and returns a summary with the
 frames per second and the per-frame latency::
 
-    from paz6d.backend.frames import open_frames
+    from paz6d.video.frames import open_frames
     from paz6d.pipelines import HaarCascadeDetector
     from paz6d.ssd.pipeline import draw_detections
 
@@ -33,8 +33,8 @@ import numpy as np
 
 from paz6d.backend.camera import Camera
 from paz6d.backend.files import atomic_output
-from paz6d.backend.frames import Frame, FrameSource
-from paz6d.backend.video_file import VideoFileWriter
+from paz6d.video.frames import Frame, FrameSource
+from paz6d.video.video_file import VideoFileWriter
 from paz6d.video.drawing import draw_entries
 from paz6d.video.records import FrameRecord, record_line, result_entries
 
@@ -58,7 +58,7 @@ class VideoPlayer:
 
     Args:
         pipeline: ``image (H, W, 3) uint8 RGB -> output`` (messages, tuples of them, dataclasses, a dict).
-        source: an open :class:`~paz6d.backend.frames.FrameSource`.
+        source: an open :class:`~paz6d.video.frames.FrameSource`.
         draw: ``(image, output) -> image``, the pipeline's drawing; default ``pipeline.draw`` when it has
             one, else :func:`draw_entries`.
         undistort: a camera whose distortion is removed from every frame before the pipeline.

@@ -113,7 +113,7 @@ class PoseSmoother:
         return item
 
     def __call__(self, output: Any, frame) -> Any:
-        """``output`` of the pipeline on ``frame`` (a :class:`~paz6d.backend.frames.Frame`) with its poses smoothed."""
+        """``output`` of the pipeline on ``frame`` (a :class:`~paz6d.video.frames.Frame`) with its poses smoothed."""
         taken: set[int] = set()
         if isinstance(output, list):
             return [self._item(item, frame.timestamp_s, taken) for item in output]
