@@ -4,6 +4,7 @@ millimetre reads that keep the stored values, the camera, targets and writer, an
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -260,3 +261,53 @@ def test_a_split_without_annotations_reads_the_images_of_scene_camera_json(tmp_p
     assert first.objects == [] and first.image.shape == (24, 32, 3) and second.image is None
     np.testing.assert_allclose(first.depth, 0.5)  # 5000 x 0.1 mm
     np.testing.assert_allclose(first.K, K)
+
+
+def test_load_gives_the_lmo_split_as_the_shared_sample_interface(lmo):
+    from paz6d.datasets.bop import load
+
+    samples = load(lmo, "test")
+    raw_gt = json.loads((lmo / "test" / "000002" / "scene_gt.json").read_text())
+    raw_info = json.loads((lmo / "test" / "000002" / "scene_gt_info.json").read_text())
+    assert len(samples) == len(raw_gt) == 200 and samples.class_names == [f"obj_{i:06d}" for i in (1, 5, 6, 8, 9,
+                                                                                                      10, 11, 12)]
+    scene = BOPDataset(lmo, "test").scenes[0]
+    for sample in (samples[0], samples[57], samples[199]):
+        reference = scene.sample(sample.extras["im_id"])
+        gt, info = raw_gt[str(reference.im_id)], raw_info[str(reference.im_id)]
+        assert sample.class_names == [f"obj_{entry['obj_id']:06d}" for entry in gt]
+        assert [samples.class_names[i] for i in sample.class_ids] == sample.class_names
+        for index, (entry, instance) in enumerate(zip(info, reference.objects)):
+            x, y, width, height = entry["bbox_visib"]
+            expected = (x, y, x + width, y + height) if width > 0 else (0, 0, 0, 0)
+            np.testing.assert_array_equal(sample.boxes[index], expected)
+            np.testing.assert_array_equal(sample.poses[index], instance.T_model2cam)  # metres, as BOPDataset's
+            assert sample.extras["visibility"][index] == entry["visib_fract"]
+        np.testing.assert_array_equal(sample.camera_matrix, reference.K)
+        assert Path(sample.image).name == f"{reference.im_id:06d}.png" and sample.extras["image_size"] == (640, 480)
+        assert sample.extras["depth"] is None and sample.extras["scene_id"] == 2
+
+
+def test_load_names_an_unseen_instance_with_an_empty_box(tmp_path):
+    from paz6d.datasets.bop import load
+
+    scene = tmp_path / "set" / "test" / "000000"
+    scene.mkdir(parents=True)
+    K = [[300.0, 0, 15.5], [0, 300.0, 11.5], [0, 0, 1]]
+    T = np.eye(4)
+    T[:3, 3] = [0.0, 0.0, 0.5]
+    (scene / "scene_camera.json").write_text(json.dumps({"0": {"cam_K": np.ravel(K).tolist(), "depth_scale": 1}}))
+    (scene / "scene_gt.json").write_text(json.dumps({"0": [gt_entry(7, T), gt_entry(3, T)]}))
+    info = {"bbox_obj": [1, 2, 3, 4], "bbox_visib": [-1, -1, -1, -1], "visib_fract": 0.0, "px_count_all": 12,
+            "px_count_valid": 12, "px_count_visib": 0}
+    (scene / "scene_gt_info.json").write_text(json.dumps({"0": [info, {**info, "bbox_visib": [2, 3, 4, 5],
+                                                                         "visib_fract": 0.5}]}))
+    samples = load(tmp_path / "set", "test")
+    sample, = samples
+    assert samples.class_names == ["obj_000003", "obj_000007"] and sample.class_ids.tolist() == [1, 0]
+    np.testing.assert_array_equal(sample.boxes, [[0, 0, 0, 0], [2, 3, 6, 8]])
+    np.testing.assert_array_equal(load(tmp_path / "set", "test", box="obj")[0].boxes, [[1, 2, 4, 6], [1, 2, 4, 6]])
+    np.testing.assert_array_equal(sample.extras["visibility"], [0.0, 0.5])
+    np.testing.assert_allclose(sample.poses[0], T)
+    with pytest.raises(ValueError, match="box: expected 'visib' or 'obj'"):
+        load(tmp_path / "set", "test", box="full")

@@ -22,7 +22,8 @@ Modules:
 * :mod:`~paz6d.datasets.bop.models`: model meshes and ``models_info.json``.
 * :mod:`~paz6d.datasets.bop.targets`: ``test_targets_bop19.json``.
 * :mod:`~paz6d.datasets.bop.results`: BOP'19 results CSV (reader and writer).
-* :mod:`~paz6d.datasets.bop.reader`: :class:`BOPDataset` / :class:`BOPScene` samples in metres.
+* :mod:`~paz6d.datasets.bop.reader`: :class:`BOPDataset` / :class:`BOPScene` samples in metres, and
+  :func:`load`: a split as the :class:`~paz6d.datasets.sample.Sample` interface the other loaders share.
 * :mod:`~paz6d.datasets.bop.writer`: ``camera.json``, models and the scene JSON entries.
 
 Importing the package loads none of its modules: each name below is imported from its module on
@@ -36,7 +37,7 @@ from paz6d.backend.lazy_exports import lazy_exports
 __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     "camera": ("SceneCamera", "load_camera", "load_scene_camera"),
     "models": ("ModelInfo", "load_model", "load_models_info", "model_path"),
-    "reader": ("BOPDataset", "BOPObject", "BOPSample", "BOPScene"),
+    "reader": ("BOPDataset", "BOPObject", "BOPSample", "BOPScene", "load"),
     "results": ("PoseResults", "read_pose_results", "write_pose_results"),
     "scene": ("GroundTruthPose", "load_scene_gt", "load_scene_gt_info"),
     "targets": ("Target", "read_targets", "write_targets"),
