@@ -5,9 +5,10 @@ Each method keeps its pipeline in its own package (``paz6d.aae``, ``paz6d.keypoi
 (and TensorFlow) load when a pipeline is created.
 
 Every pipeline is a :class:`~paz6d.abstract.SequentialProcessor` of named steps
-(``pipeline.names``; ``pipeline["crop"]``; ``replace``, ``insert`` and ``remove`` by name), and the
-pose pipelines take the camera per call (``pipeline(image, box, camera=...)``, default: the
-constructor's).
+(``pipeline.names``; ``pipeline["crop"]``, ``replace``, ``insert`` and ``remove`` by name), built once
+(a call does not add steps). The pose pipelines of the methods (:mod:`paz6d.methods`) share one call,
+``pipeline(image, box, *, camera=None, depth=None) -> Pose6D``: the camera per call (default: the
+constructor's) and an optional depth image (metres) for ICP refinement.
 """
 
 from paz6d.aae.pipeline import ImplicitPose6D
