@@ -253,3 +253,23 @@ def test_an_emotion_run_is_recognised_and_its_network_loaded(tmp_path):
     loaded = network_of(tmp_path)
     assert (loaded.method, loaded.input_shape, loaded.input_range, loaded.step) == ("emotion", (48, 48, 1),
                                                                                    (-1.0, 1.0), None)
+
+
+@pytest.mark.slow  # two SSD conversions: about 30 s
+def test_a_detector_of_any_image_size_exports_with_free_sides(tmp_path):
+    from paz6d.backend.tensorflow_guard import import_keras
+    from paz6d.export.formats import export, load_exported
+    from paz6d.ssd.model import build_ssd
+
+    onnx_available()
+    import_keras().utils.set_random_seed(0)
+    model, _ = build_ssd(3, "light", input_size=128, width=0.25, any_size=True)
+    for weight in model.weights:
+        if weight.path.startswith(("conf_", "loc_")) and weight.path.endswith("pointwise_kernel"):
+            weight.assign(weight.numpy() * 1000)
+    for format in ("tflite", "onnx"):
+        runner = load_exported(export(model, tmp_path, format, tmp_path), format)
+        for height, width in ((128, 128), (192, 256)):
+            inputs = np.random.default_rng(height).uniform(-2.5, 2.5, (2, height, width, 3)).astype(np.float32)
+            expected = np.asarray(model(inputs, training=False))
+            assert np.abs(expected).max() > 0.5 and np.abs(runner(inputs) - expected).max() < 1e-4
