@@ -270,3 +270,13 @@ def test_paz6d_run_show_without_a_display_fails_before_any_output(clip, tmp_path
     code, err = run_cli(capsys, "run", "--input", clip / "frames", "--faces", "haar", "--show", "--out",
                         tmp_path / "out", "--no-progress")
     assert code == 2 and "--show: no display" in err and not (tmp_path / "out").exists()
+
+
+def test_paz6d_run_streams_the_json_lines_to_standard_output(clip, tmp_path, capsys):
+    code = cli.main(["run", "--input", str(clip / "frames"), "--faces", "haar", "--stream", "--out",
+                     str(tmp_path / "out"), "--no-progress"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert captured.out == (tmp_path / "out" / "frames.jsonl").read_text()  # the lines as they were done
+    assert [json.loads(line)["frame"] for line in captured.out.splitlines()] == [0, 1, 2, 3]
+    assert "4 frames" in captured.err

@@ -15,9 +15,10 @@ Detections of classes without a ``--run`` (and boxes a pose model fails on) are 
 the summary's ``skipped_boxes``. ``--camera`` is a camera JSON file (:mod:`paz6d.backend.camera_file`);
 every frame must have its size, and a camera with distortion undistorts every frame first
 (``--no-undistort`` keeps them). ``--smooth WEIGHT`` smooths the poses over time
-(:mod:`paz6d.video.smoothing`). ``--bop-scene-id ID`` also writes the poses as a BOP'19 results CSV
-(``results.csv``, :mod:`paz6d.video.bop_results`) for ``paz6d evaluate bop``. Every flag,
-the camera file, the run directories and the first frame are checked before a model loads.
+(:mod:`paz6d.video.smoothing`). ``--stream`` also writes each frame's JSON line to standard output as
+soon as the frame is done, for a process reading the pipe. ``--bop-scene-id ID`` also writes the poses
+as a BOP'19 results CSV (``results.csv``, :mod:`paz6d.video.bop_results`) for ``paz6d evaluate bop``.
+Every flag, the camera file, the run directories and the first frame are checked before a model loads.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import sys
 import warnings
 from pathlib import Path
 
@@ -66,6 +68,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "indices")
     parser.add_argument("--undistort", action=argparse.BooleanOptionalAction, default=True,
                         help="undistort the frames with the camera's distortion before the pipeline (default: yes)")
+    parser.add_argument("--stream", action="store_true",
+                        help="also write each frame's JSON line to standard output as soon as it is done (for a "
+                             "process reading the pipe); the closing line then goes to standard error")
     parser.add_argument("--show", action="store_true", help="show the annotated frames in a window (needs a display)")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
                         help="progress bar (default: --progress)")
@@ -222,7 +227,8 @@ def run(args: argparse.Namespace) -> int:
         out = prepare_run_output(args.out, "run", inputs)
         smoother = None if args.smooth is None else PoseSmoother(args.smooth)
         player = VideoPlayer(pipeline, source, draw, undistort=undistort, camera=pipeline_camera, transform=smoother)
-        summary = player.run(out / VIDEO_FILE, out / RECORDS_FILE, args.max_frames, args.progress, args.show)
+        summary = player.run(out / VIDEO_FILE, out / RECORDS_FILE, args.max_frames, args.progress, args.show,
+                             sys.stdout if args.stream else None)
         report = {"input": {"kind": source.kind, "name": source.name, "fps": source.fps,
                             "size": list(source.size), "undistorted": undistort is not None},
                   "camera": None if args.camera is None else str(args.camera), "pipeline": description,
@@ -235,5 +241,6 @@ def run(args: argparse.Namespace) -> int:
     write_json_atomically(out / SUMMARY_FILE, report, indent=2)
     latency = summary["latency_ms"]
     print(f"{summary['frames']} frames, {summary['fps']} frames/s ({summary['pipeline_fps']} in the pipeline), "
-          f"latency median {latency['median']} ms, p95 {latency['p95']} ms -> {out}")
+          f"latency median {latency['median']} ms, p95 {latency['p95']} ms -> {out}",
+          file=sys.stderr if args.stream else sys.stdout)
     return 0

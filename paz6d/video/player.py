@@ -26,7 +26,7 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, TextIO
 
 import cv2
 import numpy as np
@@ -96,13 +96,16 @@ class VideoPlayer:
             yield frame, output, time.perf_counter() - start
 
     def run(self, video: str | Path | None = None, records: str | Path | None = None,
-            max_frames: int | None = None, progress: bool = False, show: bool = False) -> dict[str, Any]:
+            max_frames: int | None = None, progress: bool = False, show: bool = False,
+            stream: TextIO | None = None) -> dict[str, Any]:
         """Plays the source, writing the annotated ``video`` and the JSON-lines ``records`` (each when given).
 
         Args:
             max_frames: stop after this many frames (default: all; a device runs until Ctrl-C).
             progress: a progress bar (tqdm).
             show: show the annotated frames in a window (``q`` stops); needs a display.
+            stream: a text stream (e.g. ``sys.stdout``, a pipe to another process) that also gets each frame's
+                JSON line, flushed as soon as the frame is done (``records`` appears only when the run ends).
         Returns:
             ``{"frames", "seconds", "fps", "pipeline_fps", "latency_ms": {median, p95, mean, max}, "first_frame_ms",
             "stopped"}``: ``fps`` counts the whole loop (read, pipeline, draw, write), ``pipeline_fps`` and the
@@ -128,11 +131,15 @@ class VideoPlayer:
             try:
                 for frame, output, latency in self.play(max_frames):
                     latencies.append(latency)
-                    if lines is not None:
-                        record = FrameRecord(frame.index, round(frame.timestamp_s, 6), round(latency * 1000.0, 3),
-                                             result_entries(output), frame.name)
-                        lines.write((record_line(record) + "\n").encode())
-                        lines.flush()
+                    if lines is not None or stream is not None:
+                        line = record_line(FrameRecord(frame.index, round(frame.timestamp_s, 6),
+                                                       round(latency * 1000.0, 3), result_entries(output),
+                                                       frame.name)) + "\n"
+                        if lines is not None:
+                            lines.write(line.encode())
+                        if stream is not None:
+                            stream.write(line)
+                            stream.flush()
                     if writer is not None or show:
                         annotated = self.draw(frame.image, output)
                         if writer is not None:
