@@ -215,3 +215,12 @@ def test_run_output_refuses_data_sets_symlinks_inputs_and_a_bad_owner_file(tmp_p
         with run_output(odd, "ssd"):
             pass
     assert not (tmp_path / "elsewhere").exists() and (odd / OWNER_FILE).read_text() == "[1]"
+
+
+def test_keypoints_that_could_not_be_lifted_are_written_with_a_null_error(tmp_path):
+    error = np.array([0.5, np.nan, 1.5, np.inf, 0.1, 0.2, 0.3, 0.4])
+    keypointnet_run.write_keypoints(tmp_path, HULL, np.isfinite(error), "triangulated", error)
+    data = json.loads((tmp_path / keypointnet_run.KEYPOINTS_FILE).read_text())
+    assert data["error"] == [0.5, None, 1.5, None, 0.1, 0.2, 0.3, 0.4]
+    points, usable = keypointnet_run.read_keypoints(tmp_path)
+    assert usable.tolist() == np.isfinite(error).tolist() and np.allclose(points, HULL)

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.checks import as_array, number_field
-from paz6d.backend.files import load_run_json, write_json_atomically
+from paz6d.backend.files import load_run_json, null_non_finite, write_json_atomically
 from paz6d.run_dir import CropRunDir, RunDir
 
 KEYPOINTS_FILE = "keypoints.json"
@@ -79,7 +79,7 @@ def write_keypoints(run_dir: str | Path, points_model, usable, method: str, erro
     if usable.shape != (len(points_model),):
         raise ValueError(f"usable: expected {len(points_model)} flags, got shape {usable.shape}")
     data = {"points_model": points_model.tolist(), "usable": usable.tolist(), "method": method, "units": "metres",
-            "error": None if error is None else np.asarray(error, dtype=np.float64).tolist(),
+            "error": None if error is None else null_non_finite(np.asarray(error, dtype=np.float64).tolist()),
             "targets": None if targets is None else as_array(targets, "targets", (3,)).tolist()}
     return write_json_atomically(Path(run_dir) / KEYPOINTS_FILE, data, indent=2)
 

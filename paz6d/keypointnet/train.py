@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.farthest_points import farthest_point_sampling
-from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
+from paz6d.backend.files import finite_or_none, null_non_finite, read_cache, save_npz_atomically
 from paz6d.backend.transform import apply, compose, invert
 from paz6d.keypointnet import run_dir as run_files
 from paz6d.keypointnet.config import (DISCOVERY_WEIGHTS, LIFTINGS, MAX_LIFTING_ERROR, ORIENTATION_WEIGHT,
@@ -536,5 +536,6 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         summary[f"cross_view_px_mean{suffix}"] = float(np.mean(consistency))
         summary[f"reprojection_px_median{suffix}"] = float(np.median(reprojection)) if reprojection.size else None
     summary["spread_px_median"] = float(np.median(keypoint_spread(outputs["probabilities"], outputs["uv"], downsample)))
+    summary = null_non_finite(summary)  # a keypoint that could not be lifted has no error: null
     run_files.write_metrics(out, summary)
     return summary
