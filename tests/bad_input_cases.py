@@ -1495,11 +1495,62 @@ def late_validation_cases() -> list[Case]:
     return found
 
 
+CALIBRATE = ("calibrate", "--images", "{world}/bop/test/000000/rgb", "--chessboard", "9x6", "--square-size", "0.025",
+             "--out", "{out}")
+EXPORT = ("export", "--run", "{world}/runs/aae", "--format", "tflite", "--out", "{out}")
+
+
+def _images_of_two_sizes(world: World, folder: Path) -> None:
+    from paz6d.backend.image import save_image
+
+    save_image(folder / "shots" / "a.png", np.zeros((48, 64, 3), np.uint8))
+    save_image(folder / "shots" / "b.png", np.zeros((24, 32, 3), np.uint8))
+
+
+def calibrate_and_export_cases() -> list[Case]:
+    """``paz6d calibrate`` (images, board flags, output folder) and ``paz6d export`` (run, format, inputs)."""
+    found = _flag_cases("calibrate-", CALIBRATE, {
+        "--images": [(("{case}/none",), "is not a folder"), (("{world}/results.csv",), "is not a folder"),
+                     ((), "--images")],
+        "--chessboard": [(("9by6",), "COLSxROWS"), (("2x6",), "at least 3"), (("",), "COLSxROWS"),
+                         ((), "--chessboard --charuco")],
+        "--square-size": [(("0",), ""), (("nan",), ""), (("-1",), ""), (("x",), "")],
+        "--min-views": [(("2",), ""), (("x",), "")],
+        "--depth-scale": [(("0",), ""), (("nan",), "")],
+        "--out": [(("{world}/results.csv",), "--out")],
+    })
+    found += [
+        Case("calibrate-no-board", CALIBRATE, None, ("found in 0 of 2 images", "--min-views")),
+        Case("calibrate-folder-empty", replace_flag(CALIBRATE, "--images", "{case}/shots"), case_file("shots", "<dir>"),
+             ("shots", "no image file")),
+        Case("calibrate-image-garbage", replace_flag(CALIBRATE, "--images", "{case}/shots"),
+             case_file("shots/a.png", b"\x89PNG\r\n\x1a\nbroken"), ("a.png",)),
+        Case("calibrate-image-sizes", replace_flag(CALIBRATE, "--images", "{case}/shots"), _images_of_two_sizes,
+             ("b.png", "32x24", "64x48")),
+        Case("calibrate-marker-without-charuco", CALIBRATE + ("--marker-size", "0.01"), None, ("--marker-size",)),
+        Case("calibrate-charuco-without-marker", replace_flag(replace_flag(CALIBRATE, "--chessboard"), "--charuco",
+                                                              "7x5"), None, ("--marker-size",)),
+        Case("calibrate-charuco-marker-too-big", replace_flag(replace_flag(CALIBRATE, "--chessboard"), "--charuco",
+                                                              "7x5") + ("--marker-size", "0.03"), None,
+             ("--marker-size", "less than --square-size")),
+        Case("calibrate-charuco-dictionary", replace_flag(replace_flag(CALIBRATE, "--chessboard"), "--charuco", "7x5")
+             + ("--marker-size", "0.01", "--dictionary", "DICT_X"), None, ("--dictionary", "DICT_X")),
+    ]
+    found += _flag_cases("export-", EXPORT, {
+        "--run": [(("{case}/none",), "is not a directory"), (("{world}/bop",), "not a run directory of any method"),
+                  (("{world}/runs/aae",), "model.keras")],
+        "--format": [(("pdf",), ""), ((), "--format")],
+        "--inputs": [(("1",), ""), (("x",), "")],
+        "--out": [(("{world}/results.csv",), "--out"), (("{world}/runs/aae",), "--out")],
+    })
+    return found
+
+
 def all_cases() -> list[Case]:
     """The table: every case, names unique."""
     found = generate_cases() + evaluate_bop_cases() + evaluate_coco_cases() + evaluate_voc_cases() + \
         estimate_cases() + train_cases() + output_rule_cases() + dataset_path_cases() + annotation_cases() + \
-        late_validation_cases() + run_cases()
+        late_validation_cases() + run_cases() + calibrate_and_export_cases()
     names = [case.name for case in found]
     duplicated = {name for name in names if names.count(name) > 1}
     if duplicated:
