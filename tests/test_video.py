@@ -280,3 +280,11 @@ def test_paz6d_run_streams_the_json_lines_to_standard_output(clip, tmp_path, cap
     assert captured.out == (tmp_path / "out" / "frames.jsonl").read_text()  # the lines as they were done
     assert [json.loads(line)["frame"] for line in captured.out.splitlines()] == [0, 1, 2, 3]
     assert "4 frames" in captured.err
+
+
+def test_max_frames_reads_no_frame_beyond_the_last(tmp_path):
+    for index, image in enumerate(astronaut_frames(3)):
+        save_image(tmp_path / f"{index}.png", image)
+    (tmp_path / "3.png").write_bytes(b"not an image")  # read only if the player went one frame too far
+    with open_frames(tmp_path) as source:
+        assert [frame.index for frame, _, _ in VideoPlayer(lambda image: [], source).play(max_frames=3)] == [0, 1, 2]

@@ -82,9 +82,9 @@ class VideoPlayer:
     def play(self, max_frames: int | None = None) -> Iterator[tuple[Frame, Any, float]]:
         """``(frame, output, latency_s)`` of each frame (at most ``max_frames``); ``frame.image`` is the
         image the pipeline saw (undistorted when asked)."""
+        if max_frames is not None and max_frames < 1:
+            raise ValueError(f"max_frames: expected a whole number >= 1, got {max_frames}")
         for frame in self.source:
-            if max_frames is not None and frame.index >= max_frames:
-                return
             image = frame.image
             if self.undistort is not None:
                 image = cv2.undistort(image, self.undistort.K, self.undistort.distortion)
@@ -94,6 +94,8 @@ class VideoPlayer:
             if self.transform is not None:
                 output = self.transform(output, frame)
             yield frame, output, time.perf_counter() - start
+            if max_frames is not None and frame.index + 1 >= max_frames:
+                return  # no frame read beyond the last one asked for
 
     def run(self, video: str | Path | None = None, records: str | Path | None = None,
             max_frames: int | None = None, progress: bool = False, show: bool = False,
