@@ -62,9 +62,6 @@ from paz6d.ssd.config import SSDTraining
 DEFAULT_LMO = Path(__file__).resolve().parents[3] / "shared" / "data" / "bop_lmo"
 #: LM-O's camera (``camera.json`` of the BOP data set): fx, fy, cx, cy.
 LMO_INTRINSICS = (572.4114, 573.57043, 325.2611, 242.04899)
-#: Pose methods: the AAE, KeypointNet's quick preset at the benchmark's length, and its ``robust`` preset
-#: (photo backgrounds, its own length): the one that does more than fail on the driller (docs/real_photos.md).
-METHODS = ("aae", "keypointnet", "keypointnet_robust")
 #: Estimate conditions: real frames with ground-truth visible boxes, real frames with the detector's boxes, and
 #: held-out synthetic images with ground-truth visible boxes and with the detector's boxes (their names in
 #: report.json).
@@ -218,7 +215,7 @@ class Benchmark:
         return self.method + "".join(f"+{method}@{obj_id}" for obj_id, method in self.object_methods.items())
 
     def pose_root(self, method: str) -> Path:
-        return self.out / ("pose" if method == "aae" else f"pose_{method}")
+        return self.out / POSE_MODELS[method].folder
 
     def pose_dir(self, obj_id: int) -> Path:
         return self.pose_root(self.method_of(obj_id)) / f"obj_{obj_id:06d}"
@@ -287,34 +284,68 @@ def _stage_detector(job: Benchmark) -> dict:
                                  seed=job.seed, progress=job.progress))
 
 
-def _stage_pose(job: Benchmark, obj_id: int) -> dict:
-    method = job.method_of(obj_id)
-    if method == "aae":
-        from paz6d.aae.config import QUICK as AAE_QUICK, Augmentation
-        from paz6d.aae.train import train_aae
+def _train_aae(job: Benchmark, obj_id: int) -> dict:
+    """Trains the AAE of one object (``DIR/pose/obj_XXXXXX``) at the benchmark's sizes."""
+    from paz6d.aae.config import QUICK as AAE_QUICK, Augmentation
+    from paz6d.aae.train import train_aae
 
-        # paper-sized crop shifts/scales: the boxes come from a detector or from visible parts
-        config = replace(AAE_QUICK, steps=job.settings.aae_steps, in_plane=job.settings.aae_in_plane,
-                         views=job.settings.aae_views, lr_drop_steps=job.settings.aae_lr_drop_steps,
-                         augmentation=Augmentation())
-        crops = job.settings.scene_crops > 0
-        return train_aae(job.mesh(obj_id), job.pose_dir(obj_id), config, mesh_scale=0.001, seed=job.seed,
-                         workers=job.settings.workers, progress=job.progress,
-                         dataset=job.out / "synthetic" if crops else None, object_id=obj_id,
-                         pair_fraction=job.settings.scene_crops if crops else 0.5,
-                         crop_box=job.settings.aae_crop_box)
+    # paper-sized crop shifts/scales: the boxes come from a detector or from visible parts
+    config = replace(AAE_QUICK, steps=job.settings.aae_steps, in_plane=job.settings.aae_in_plane,
+                     views=job.settings.aae_views, lr_drop_steps=job.settings.aae_lr_drop_steps,
+                     augmentation=Augmentation())
+    crops = job.settings.scene_crops > 0
+    return train_aae(job.mesh(obj_id), job.pose_dir(obj_id), config, mesh_scale=0.001, seed=job.seed,
+                     workers=job.settings.workers, progress=job.progress,
+                     dataset=job.out / "synthetic" if crops else None, object_id=obj_id,
+                     pair_fraction=job.settings.scene_crops if crops else 0.5,
+                     crop_box=job.settings.aae_crop_box)
 
-    # objects with one half-turn symmetry (LM-O's eggbox and glue) get the orientation network
+
+def _train_keypointnet(job: Benchmark, obj_id: int, preset: str, steps: int | None, views: int | None) -> dict:
+    """Trains the KeypointNet of one object with a preset, ``steps`` and rendered ``views`` (None: the preset's);
+    objects with one half-turn symmetry (LM-O's eggbox and glue) get the orientation network."""
     symmetries = load_models_info(job.mesh(obj_id).parent / MODELS_INFO)[obj_id].symmetries_discrete
-    settings = job.settings
-    if method == "keypointnet_robust":
-        preset, steps, views = "robust", settings.keypointnet_robust_steps, settings.keypointnet_robust_views
-    else:
-        preset, steps, views = "quick", settings.keypointnet_steps, settings.keypointnet_views
     return train_keypointnet(KeypointTraining(
         job.pose_dir(obj_id), job.mesh(obj_id), mesh_scale=0.001, config=preset, seed=job.seed,
-        workers=settings.workers, steps=steps, progress=job.progress,
+        workers=job.settings.workers, steps=steps, progress=job.progress,
         overrides={} if views is None else {"views": views}, orientation_network=is_single_half_turn(symmetries)))
+
+
+@dataclass(frozen=True)
+class PoseModel:
+    """A pose model the benchmark trains per object.
+
+    Attributes:
+        method: the registered method (:mod:`paz6d.methods`) whose run directories it writes.
+        folder: ``DIR/<folder>/obj_XXXXXX``.
+        train: ``(job, obj_id) -> training summary``.
+        steps_setting: the :class:`BenchmarkSettings` field that sets its training length (a larger
+            ``aae_steps`` on a finished run resumes the models it sets, see :func:`_extends_aae`).
+    """
+
+    method: str
+    folder: str
+    train: Callable[[Benchmark, int], dict]
+    steps_setting: str
+
+
+#: ``--method`` value -> its pose model: the AAE, KeypointNet's quick preset at the benchmark's length, and its
+#: ``robust`` preset (photo backgrounds, its own length): the one that does more than fail on the driller
+#: (docs/real_photos.md).
+POSE_MODELS = {
+    "aae": PoseModel("aae", "pose", _train_aae, "aae_steps"),
+    "keypointnet": PoseModel("keypointnet", "pose_keypointnet", lambda job, obj_id: _train_keypointnet(
+        job, obj_id, "quick", job.settings.keypointnet_steps, job.settings.keypointnet_views), "keypointnet_steps"),
+    "keypointnet_robust": PoseModel("keypointnet", "pose_keypointnet_robust", lambda job, obj_id: _train_keypointnet(
+        job, obj_id, "robust", job.settings.keypointnet_robust_steps, job.settings.keypointnet_robust_views),
+        "keypointnet_robust_steps"),
+}
+#: The ``--method`` values.
+METHODS = tuple(POSE_MODELS)
+
+
+def _stage_pose(job: Benchmark, obj_id: int) -> dict:
+    return POSE_MODELS[job.method_of(obj_id)].train(job, obj_id)
 
 
 def _scored_split(job: Benchmark, condition: str) -> list[str]:
@@ -471,9 +502,10 @@ def _extends_aae(job: Benchmark, stored: dict, current: dict) -> bool:
                          f"that many (a run resumes its AAEs, it cannot shorten them), got {steps}")
     if stored_settings != current_settings or steps == stored_steps:
         return False
-    for name, _, _ in stages(replace(job, method="aae", object_methods={})):
-        if name.startswith("pose/"):
-            job.marker(name).unlink(missing_ok=True)
+    for method in _resumed_by_aae_steps(POSE_MODELS):
+        for name, _, _ in stages(replace(job, method=method, object_methods={})):
+            if name.startswith("pose/"):
+                job.marker(name).unlink(missing_ok=True)
     for marker in (job.out / "stages").glob("*.json"):  # the scores of every combination with an AAE in it
         if marker.stem.startswith(("estimate_", "evaluate_")) and _has_aae(marker.stem):
             marker.unlink()
@@ -481,9 +513,15 @@ def _extends_aae(job: Benchmark, stored: dict, current: dict) -> bool:
     return True
 
 
+def _resumed_by_aae_steps(names) -> list[str]:
+    """The pose models among ``names`` whose training length ``aae_steps`` sets."""
+    return [name for name in names if name in POSE_MODELS and POSE_MODELS[name].steps_setting == "aae_steps"]
+
+
 def _has_aae(name: str) -> bool:
-    """Whether a label (``aae+keypointnet_robust@8``) or a stage marker's name uses an AAE."""
-    return "aae" in re.split(r"[_+@]", name)
+    """Whether a label (``aae+keypointnet_robust@8``) or a stage marker's name uses a pose model that
+    ``aae_steps`` sets."""
+    return bool(_resumed_by_aae_steps(re.split(r"[_+@]", name)))
 
 
 def _report(job: Benchmark) -> dict:
