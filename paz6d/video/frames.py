@@ -105,8 +105,8 @@ class FrameSource:
         height, width = image.shape[:2]
         if (width, height) != self.size:
             raise FrameSizeError(f"{where}: frame {index} is {width}x{height} pixels, expected "
-                                 f"{self.size[0]}x{self.size[1]} (width x height, the camera's size); a camera's "
-                                 "intrinsics hold for one image size")
+                                 f"{self.size[0]}x{self.size[1]} (width x height: the camera's, else the first "
+                                 "frame's); a camera's intrinsics hold for one image size")
         return image
 
     def __iter__(self) -> Iterator[Frame]:
