@@ -214,3 +214,10 @@ def test_detect_and_estimate_loads_registered_methods_from_their_run_directories
         (_, pose), = pipeline(image, depth=depth)
     np.testing.assert_allclose(pose.to_matrix(), expected_pose(BOXES[1], distance=0.9), atol=1e-6)
     assert pipeline.draw(image, [(box, pose)]).shape == image.shape
+
+
+def test_the_benchmark_trains_pose_models_of_registered_pose_methods():
+    from paz6d.benchmark.lmo import METHODS, POSE_MODELS
+
+    assert METHODS == tuple(POSE_MODELS) and len({model.folder for model in POSE_MODELS.values()}) == len(METHODS)
+    assert all(get(model.method).task == "pose" for model in POSE_MODELS.values())
