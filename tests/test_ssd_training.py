@@ -218,6 +218,21 @@ def test_input_size_flag_sets_the_light_network_input_and_is_checked():
             SSDTraining(dataset="d", out="o", input_size=size)
     with pytest.raises(ValueError, match="only the light network"):
         SSDTraining(dataset="d", out="o", config="full", input_size=512)
+    assert SSDTraining(dataset="d", out="o", config="full", input_size=300).settings()["input_size"] == 300
+    with pytest.raises(ValueError, match="input_size: expected a multiple of 64"):  # overrides pass the same check
+        SSDTraining(dataset="d", out="o", overrides={**TINY, "input_size": 100})
+
+
+def test_input_size_has_one_default_and_one_check_for_settings_and_the_model():
+    from paz6d.ssd.model import SSDModelError, paper_priors
+
+    assert paper_priors("light").input_size == SSDTraining(dataset="d", out="o").settings()["input_size"] == 448
+    assert paper_priors("ssd512").input_size == 512
+    for size, message in ((4096, "at most 2048"), (100, "multiple of 64")):
+        with pytest.raises(SSDModelError, match=message):
+            paper_priors("light", size)
+        with pytest.raises(ValueError, match=message):
+            SSDTraining(dataset="d", out="o", input_size=size)
 
 
 def test_bop_to_coco_boxes_equal_bbox_visib_on_lmo(shared_data):

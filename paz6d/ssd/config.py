@@ -22,11 +22,42 @@ CONFIGS: dict[str, dict] = {
 }
 
 
-def check_light_input_size(size: int, error: type[ValueError] = ValueError) -> int:
-    """``size`` when the light network can take it as its input side (a multiple of 64 pixels, at least
-    128: its coarsest feature map is 1/64 of the input), else raises ``error``."""
+#: SSD networks: the paper's two VGG16 ones and a light CPU one (:mod:`paz6d.ssd.model`).
+ARCHITECTURES = ("ssd300", "ssd512", "light")
+#: Input sides of the VGG networks (fixed); the light network takes any :func:`check_light_side` up to
+#: :data:`MAX_INPUT_SIZE`, by default :data:`DEFAULT_INPUT_SIZE` (the quick config's).
+FIXED_INPUT_SIZES = {"ssd300": 300, "ssd512": 512}
+DEFAULT_INPUT_SIZE: int = CONFIGS["quick"]["input_size"]
+MAX_INPUT_SIZE = 2048
+
+
+def check_light_side(size: int, error: type[ValueError] = ValueError) -> int:
+    """``size`` when the light network can run on an image side of that many pixels (a multiple of 64, at
+    least 128: its coarsest feature map is 1/64 of the input), else raises ``error``."""
     if size < 128 or size % 64:
         raise error(f"input_size: expected a multiple of 64 of at least 128 for 'light', got {size}")
+    return size
+
+
+def check_input_size(architecture: str, size: int | None, error: type[ValueError] = ValueError) -> int:
+    """The side in pixels of ``architecture``'s square training input for a requested ``size`` (``None``:
+    the default): the VGG networks' fixed side, or for ``light`` a :func:`check_light_side` of at most
+    :data:`MAX_INPUT_SIZE`. The one check of ``input_size`` (settings, :func:`paz6d.ssd.model.paper_priors`).
+
+    Raises:
+        error: an unknown ``architecture`` or a size it cannot take (naming the setting).
+    """
+    if architecture not in ARCHITECTURES:
+        raise error(f"architecture: expected one of {ARCHITECTURES}, got {architecture!r}")
+    if architecture in FIXED_INPUT_SIZES:
+        fixed = FIXED_INPUT_SIZES[architecture]
+        if size is not None and int(size) != fixed:
+            raise error(f"input_size: only the light network takes another input size; {architecture} takes "
+                        f"{fixed} x {fixed} images, got {size}")
+        return fixed
+    size = check_light_side(DEFAULT_INPUT_SIZE if size is None else int(size), error)
+    if size > MAX_INPUT_SIZE:
+        raise error(f"input_size: expected at most {MAX_INPUT_SIZE} px (a training input side), got {size}")
     return size
 
 
@@ -102,14 +133,7 @@ class SSDTraining:
             settings.pop("backbone", None)
         else:
             settings["backbone"] = backbone
-        if self.input_size is not None:
-            if settings["architecture"] != "light":
-                raise ValueError(f"input_size: only the light network takes another input size; the "
-                                 f"{self.config!r} config's {settings['architecture']} is fixed at "
-                                 f"{CONFIGS[self.config]['input_size']} px")
-            check_light_input_size(settings["input_size"])
-            if settings["input_size"] > 2048:
-                raise ValueError(f"input_size: expected at most 2048 px (a training input side), got {self.input_size}")
+        settings["input_size"] = check_input_size(settings["architecture"], settings["input_size"])
         if self.scale_crops is not None:
             settings["scale_crops"] = [float(v) for v in self.scale_crops]
         scale_crops = settings.get("scale_crops")

@@ -6,11 +6,12 @@ Three architectures share one head and one output layout:
   L2-normalised conv4_3 (learned per-channel scale, initialised to 20), four extra blocks; feature maps
   38, 19, 10, 5, 3, 1 and the paper's prior boxes.
 - ``"ssd512"``: the same body on 512 x 512 inputs, five extra blocks; feature maps 64, 32, 16, 8, 4, 2, 1.
-- ``"light"``: a CPU configuration (input 320 by default): MobileNet-style depthwise-separable body with
-  batch normalisation, ``width`` channels scaling, feature maps of stride 8, 16, 32, 64 and two more, and
-  depthwise-separable heads; priors sized for small objects. With a ``backbone`` (:data:`BACKBONES`), a
-  pretrained ImageNet network (:mod:`paz6d.backbones`) replaces its body up to stride 32 (the same six
-  maps, priors and heads; the extra maps are the light network's).
+- ``"light"``: a CPU configuration (input side :data:`~paz6d.ssd.config.DEFAULT_INPUT_SIZE` by default):
+  MobileNet-style depthwise-separable body with batch normalisation, ``width`` channels scaling, feature
+  maps of stride 8, 16, 32, 64 and two more, and depthwise-separable heads; priors sized for small
+  objects. With a ``backbone`` (:data:`BACKBONES`), a pretrained ImageNet network (:mod:`paz6d.backbones`)
+  replaces its body up to stride 32 (the same six maps, priors and heads; the extra maps are the light
+  network's).
 
 The model maps ``images (B, S, S, 3)`` float32 (normalised with :data:`IMAGE_MEAN`/:data:`IMAGE_STD`, or a
 backbone's own scaling: :func:`input_normalization`, :func:`normalize_images`) to ``(B, P, 4 + C)``: per
@@ -34,13 +35,12 @@ from paz6d.backend.boxes import prior_boxes
 from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.image import normalize
 from paz6d.backend.tensorflow_guard import compiled_inference, import_keras, import_tensorflow, load_keras_model
-from paz6d.ssd.config import BACKBONES, check_light_input_size
+from paz6d.ssd.config import ARCHITECTURES, BACKBONES, check_input_size, check_light_side
 
 tf = import_tensorflow()
 keras = import_keras()
 
 PACKAGE = "paz6d"
-ARCHITECTURES = ("ssd300", "ssd512", "light")
 #: Input normalisation: ``(image / 255 - IMAGE_MEAN) / IMAGE_STD`` per channel (RGB).
 IMAGE_MEAN = (0.485, 0.456, 0.406)
 IMAGE_STD = (0.229, 0.224, 0.225)
@@ -93,23 +93,25 @@ class PriorSpec:
 
 def paper_priors(architecture: str, input_size: int | None = None) -> PriorSpec:
     """The prior layout of ``architecture``: the SSD paper's (Caffe release) for ``ssd300``/``ssd512``,
-    small-object priors for ``light`` (any ``input_size`` divisible by 64; default 320)."""
+    small-object priors for ``light`` (``input_size``: :func:`paz6d.ssd.config.check_input_size`).
+
+    Raises:
+        SSDModelError: an unknown ``architecture`` or an ``input_size`` it cannot take.
+    """
+    size = check_input_size(architecture, input_size, SSDModelError)
     if architecture == "ssd300":
-        return PriorSpec(300, (38, 19, 10, 5, 3, 1), (8, 16, 32, 64, 100, 300), (30, 60, 111, 162, 213, 264),
+        return PriorSpec(size, (38, 19, 10, 5, 3, 1), (8, 16, 32, 64, 100, 300), (30, 60, 111, 162, 213, 264),
                          (60, 111, 162, 213, 264, 315), ((2,), (2, 3), (2, 3), (2, 3), (2,), (2,)))
     if architecture == "ssd512":
-        return PriorSpec(512, (64, 32, 16, 8, 4, 2, 1), (8, 16, 32, 64, 128, 256, 512),
+        return PriorSpec(size, (64, 32, 16, 8, 4, 2, 1), (8, 16, 32, 64, 128, 256, 512),
                          (35.84, 76.8, 153.6, 230.4, 307.2, 384.0, 460.8),
                          (76.8, 153.6, 230.4, 307.2, 384.0, 460.8, 537.6),
                          ((2,), (2, 3), (2, 3), (2, 3), (2, 3), (2,), (2,)))
-    if architecture == "light":
-        size = check_light_input_size(320 if input_size is None else int(input_size), SSDModelError)
-        maps = tuple(rows for rows, _ in light_feature_maps(size, size))
-        fractions = np.array([0.044, 0.094, 0.19, 0.34, 0.53, 0.75, 1.0])
-        sides = tuple(float(v) for v in np.round(fractions * size, 1))
-        return PriorSpec(size, maps, tuple(float(size) / m for m in maps), sides[:-1], sides[1:],
-                         ((2,), (2, 3), (2, 3), (2, 3), (2,), (2,)))
-    raise SSDModelError(f"architecture: expected one of {ARCHITECTURES}, got {architecture!r}")
+    maps = tuple(rows for rows, _ in light_feature_maps(size, size))
+    fractions = np.array([0.044, 0.094, 0.19, 0.34, 0.53, 0.75, 1.0])
+    sides = tuple(float(v) for v in np.round(fractions * size, 1))
+    return PriorSpec(size, maps, tuple(float(size) / m for m in maps), sides[:-1], sides[1:],
+                     ((2,), (2, 3), (2, 3), (2, 3), (2,), (2,)))
 
 
 def light_feature_maps(height: int, width: int) -> tuple[tuple[int, int], ...]:
@@ -131,7 +133,7 @@ def priors_for(spec: PriorSpec, image_shape: tuple[int, int] | None = None) -> n
     if image_shape is None:
         return prior_boxes(spec.input_size, spec.feature_map_sizes, spec.steps, spec.min_sizes, spec.max_sizes,
                            spec.aspect_ratios)
-    height, width = (check_light_input_size(int(v), SSDModelError) for v in image_shape)
+    height, width = (check_light_side(int(v), SSDModelError) for v in image_shape)
     maps = light_feature_maps(height, width)
     if len(maps) != len(spec.feature_map_sizes):
         raise SSDModelError(f"priors: a {len(spec.feature_map_sizes)}-map prior layout is not the light network's")
@@ -318,7 +320,8 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
     Args:
         num_classes: classes including the background (class 0), at least 2.
         architecture: ``"ssd300"``, ``"ssd512"`` or ``"light"``.
-        input_size: ``light`` only (multiple of 64, default 320); the VGG models use 300 / 512.
+        input_size: side of the square input (:func:`paz6d.ssd.config.check_input_size`: ``light`` a multiple
+            of 64 in [128, 2048], by default the quick config's; the VGG models 300 / 512).
         width: ``light`` only: channel multiplier of the body.
         top_down: ``light`` only: a feature-pyramid top-down path over its three finest maps.
         any_size: ``light`` only: the model takes inputs of any height and width that are multiples of 64
@@ -334,16 +337,13 @@ def build_ssd(num_classes: int, architecture: str = "light", input_size: int | N
     """
     if int(num_classes) < 2:
         raise SSDModelError(f"num_classes: expected at least 2 (background + one object class), got {num_classes}")
-    if architecture != "light" and input_size not in (None, paper_priors(architecture).input_size):
-        raise SSDModelError(f"input_size: {architecture} takes {paper_priors(architecture).input_size} x "
-                            f"{paper_priors(architecture).input_size} images, got {input_size}")
+    spec = paper_priors(architecture, input_size)
     if not 0.1 <= float(width) <= 4.0:
         raise SSDModelError(f"width: expected a channel multiplier in [0.1, 4], got {width}")
     backbone = None if backbone == "none" else backbone
     for name, value in (("top_down", top_down), ("any_size", any_size), ("backbone", backbone)):
         if value and architecture != "light":
             raise SSDModelError(f"{name}: only the light network offers it, not {architecture}")
-    spec = paper_priors(architecture, input_size)
     side = None if any_size else spec.input_size
     inputs = keras.Input((side, side, 3), name="image")
     if architecture == "light" and backbone is not None:

@@ -5,7 +5,7 @@ by :mod:`paz6d.ssd.dataset`; every sample goes through SSD's augmentation
 (:func:`paz6d.synthesis.box_augment.ssd_augmentation`), is resized to the network input and matched to
 the priors. The loss is :class:`paz6d.ssd.loss.MultiboxLoss`. Configurations:
 
-- ``quick``: the ``light`` CPU network (320 x 320), sized for a half-hour run on 2 CPU cores;
+- ``quick``: the ``light`` CPU network (448 x 448 inputs), sized for a half-hour run on 2 CPU cores;
 - ``full``: SSD300 with a VGG16 body (the paper's network), for a GPU.
 
 With ``backbone`` (``--backbone efficientnet-lite0``, docs/backbones.md) the light network's body is the
