@@ -3,7 +3,9 @@ TFLite export (and its ONNX export run by onnxruntime), in the same process, wit
 
 With ``--run RUN`` the run's network (:func:`paz6d.export.networks.network_of`); without, the networks of
 ``paz6d benchmark lmo``'s quick settings with random weights (speed does not depend on them): the light
-SSD at 320 px and the AAE encoder of the quick config (64 px crops, latent 128, batch norm).
+SSD at 320 px and the AAE encoder of the quick config (64 px crops, latent 128, batch norm). For a
+detector it also times the whole detection pipeline (``DetectSingleShot``) on a 640 x 480 frame, as it
+is and with its ``predict`` step replaced by the TFLite network.
 
 Run: ``.venv/bin/python benchmarks/export_speed.py [--run RUN] [--threads 2] [--batch 8] [--repeats 30]``.
 """
@@ -17,6 +19,37 @@ from pathlib import Path
 
 import numpy as np
 from timing import median_seconds
+
+
+def default_ssd_run(folder: Path) -> Path:
+    """A light SSD run directory at 320 px, 8 classes, random weights."""
+    from paz6d.backend.tensorflow_guard import import_keras
+    from paz6d.ssd import run_dir
+    from paz6d.ssd.model import build_ssd, save_ssd
+
+    import_keras().utils.set_random_seed(0)
+    model, spec = build_ssd(9, "light", input_size=320)
+    run_dir.write_detector(folder, "light", [f"obj_{index:06d}" for index in range(1, 9)], spec.to_dict())
+    save_ssd(model, run_dir.model_path(folder))
+    return folder
+
+
+def measure_detector(run: Path, folder: Path, threads: int, repeats: int) -> tuple[float, float]:
+    """Median milliseconds of ``DetectSingleShot(run)`` on a 640 x 480 frame: as it is, and with its
+    ``predict`` step replaced by name with the TFLite network."""
+    from paz6d.abstract.processor import KeyedStep
+    from paz6d.export.formats import TFLiteFunction, export
+    from paz6d.export.networks import network_of
+    from paz6d.pipelines import DetectSingleShot
+    from paz6d.ssd.pipeline import PredictImage
+
+    path = export(network_of(run).model, folder, "tflite", folder)
+    keras_detector, tflite_detector = DetectSingleShot(run), DetectSingleShot(run)
+    tflite_detector.replace("predict", KeyedStep(PredictImage(TFLiteFunction(path, threads)), "input", "output",
+                                                 name="predict"))
+    image = np.random.default_rng(0).integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    return (1000 * median_seconds(lambda: keras_detector(image), repeats),
+            1000 * median_seconds(lambda: tflite_detector(image), repeats))
 
 
 def default_networks() -> list:
@@ -75,6 +108,13 @@ def main() -> None:
           f"threads: {args.threads}")
     networks = [network_of(args.run)] if args.run else default_networks()
     with tempfile.TemporaryDirectory() as work:
+        if args.run is None or networks[0].method == "ssd":
+            run = args.run or default_ssd_run(Path(work) / "ssd_run")
+            (Path(work) / "pipeline").mkdir()
+            keras_ms, tflite_ms = measure_detector(run, Path(work) / "pipeline", args.threads, args.repeats)
+            print(f"DetectSingleShot on a 640x480 frame: Keras {keras_ms:.2f} ms ({1000 / keras_ms:.1f} fps), "
+                  f"predict step on TFLite {tflite_ms:.2f} ms ({1000 / tflite_ms:.1f} fps) "
+                  f"(Keras / TFLite {keras_ms / tflite_ms:.2f}x)")
         for index, network in enumerate(networks):
             folder = Path(work) / str(index)
             folder.mkdir()
