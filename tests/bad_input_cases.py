@@ -1065,6 +1065,7 @@ def train_cases() -> list[Case]:
         "--lmo": [(("{case}/none",), "none")],
         "--method": [(("pvnet",), "")],
         "--aae-crop-box": [(("whole",), "whole")],
+        "--detector-backbone": [(("resnet50",), "resnet50")],
         "--out": [(("{world}/results.csv",), "results.csv")],
     })
     return found
@@ -1121,6 +1122,10 @@ TRAIN_HRNET = ("train", "hrnet", "--out", "{out}", "--mesh", "{world}/obj_000001
 TRAIN_PROBABILISTIC = ("train", "probabilistic-keypoints", "--out", "{out}", "--mesh", "{world}/obj_000001.ply",
                        "--no-progress")
 TRAIN_SEGMENTATION = ("train", "segmentation", "--dataset", "{world}/bop", "--out", "{out}", "--no-progress")
+#: One valid command line of every ``paz6d train <method>`` (its ``--out`` is ``{out}``).
+TRAINERS = {"ssd": replace_flag(TRAIN_SSD, "--dataset", "{world}/bop"), "stn": TRAIN_STN, "aae": TRAIN_AAE,
+            "keypointnet": TRAIN_KEYPOINTNET, "emotion": TRAIN_EMOTION, "hrnet": TRAIN_HRNET,
+            "probabilistic-keypoints": TRAIN_PROBABILISTIC, "segmentation": TRAIN_SEGMENTATION}
 #: Files that make a folder another command's output: ``{name: {relative path: content}}`` (see :func:`put`).
 FOREIGN_RUNS = {
     "emotion": {"classes.json": ["angry", "happy"], "model.keras": b"a trained model", "metrics.json": {}},
@@ -1189,10 +1194,7 @@ def output_rule_cases() -> list[Case]:
                                                             "{case}/ssd/model.keras"),
              detect_files, ("--out", "a file of --detector")),
     ]
-    trainers = {"ssd": replace_flag(TRAIN_SSD, "--dataset", "{world}/bop"), "stn": TRAIN_STN, "aae": TRAIN_AAE,
-                "keypointnet": TRAIN_KEYPOINTNET, "emotion": TRAIN_EMOTION, "hrnet": TRAIN_HRNET,
-                "probabilistic-keypoints": TRAIN_PROBABILISTIC, "segmentation": TRAIN_SEGMENTATION}
-    for method, base in trainers.items():
+    for method, base in TRAINERS.items():
         other = "ssd" if method == "emotion" else "emotion"
         found.append(Case(f"train-{method}-out-{other}-run", replace_flag(base, "--out", "{case}/run"),
                           files_setup({f"run/{name}": content for name, content in FOREIGN_RUNS[other].items()}),
@@ -1381,6 +1383,10 @@ def _one_pixel_image(world: World, folder: Path) -> None:
     save_image(folder / "coco" / "tiny2017" / "000003.png", np.zeros((1, 1, 3), np.uint8))
 
 
+TRAIN_SSD_BOP = replace_flag(TRAIN_SSD, "--dataset", "{case}/bop") + ("--split", "test")
+GENERATED_COCO = "test/000000/scene_gt_coco.json"
+
+
 def annotation_cases() -> list[Case]:
     """Boxes and sizes that cannot be, checked against the image's real size where every loader's
     samples pass (:func:`paz6d.datasets.sample.check_sample`): refused naming the file, record and field."""
@@ -1422,6 +1428,20 @@ def annotation_cases() -> list[Case]:
              coco_edit(lambda data: data["annotations"][0].update(image_id=[7])), ("annotations[0]", "'image_id'")),
         Case("train-ssd-coco-width-negative", TRAIN_SSD_COCO,
              coco_edit(lambda data: data["images"][0].update(width=-32)), ("images[0]", "'width'/'height'")),
+        Case("train-ssd-generated-coco-list", TRAIN_SSD_BOP, bop_file(GENERATED_COCO, []),
+             ("scene_gt_coco.json", "expected a JSON object")),
+        Case("train-ssd-generated-file-name-parent", TRAIN_SSD_BOP,
+             bop_file(GENERATED_COCO, lambda d: {**d, "images": [{**d["images"][0], "file_name": "../../../x.png"},
+                                                                *d["images"][1:]]}),
+             ("scene_gt_coco.json", "'file_name'", "expected a relative path inside")),
+        Case("train-ssd-generated-box-off-image", TRAIN_SSD_BOP,
+             bop_file(GENERATED_COCO, lambda d: {**d, "annotations": [{**d["annotations"][0], "bbox": [500, 5, 4, 4]},
+                                                                     *d["annotations"][1:]]}),
+             ("scene_gt_coco.json", "entirely outside the 64 x 48 px image")),
+        Case("train-ssd-generated-width-not-the-image", TRAIN_SSD_BOP,
+             bop_file(GENERATED_COCO, lambda d: {**d, "images": [{**d["images"][0], "width": 640},
+                                                                *d["images"][1:]]}),
+             ("scene_gt_coco.json", "says 640 x 48 px")),
         Case("train-ssd-openimages-box-inverted", TRAIN_SSD_OPENIMAGES, fixture_text(
             "openimages", "validation-annotations-bbox.csv", "1,0.25,0.5,0.25,0.5", "1,0.5,0.25,0.25,0.5"),
              ("validation-annotations-bbox.csv", "line 2", "XMax < XMin")),

@@ -273,7 +273,7 @@ def test_more_aae_steps_extend_the_aaes_and_score_them_again_and_fewer_are_refus
         run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=replace(TINY, images=7),
                                 progress=False, aae_steps=12))
     for bad in (0, -3, 2.5, True):
-        with pytest.raises(ValueError, match="aae_steps: expected a positive number"):
+        with pytest.raises(ValueError, match=r"aae_steps: expected a number of training steps in 1\.\."):
             Benchmark(out=tmp_path / "x", lmo=data, aae_steps=bad)
 
 
@@ -299,18 +299,34 @@ def test_aae_learning_rate_drop_reaches_the_aae_and_folders_from_before_it_resum
             Benchmark(out=tmp_path / "x", lmo=data, settings=TINY, aae_lr_drop_steps=bad)
 
 
+def test_the_detector_stage_trains_the_settings_backbone(tmp_path, monkeypatch):
+    from paz6d.ssd import train
+
+    data = _fake_lmo(tmp_path / "lmo")
+    seen = []
+    monkeypatch.setattr(train, "train_ssd", lambda training: seen.append(training) or {})
+    for backbone in ("efficientnet-lite0", "none"):
+        job = Benchmark(out=tmp_path / backbone, lmo=data, quick=True, settings=TINY, progress=False,
+                        detector_backbone=backbone)
+        lmo._stage_detector(job)
+        assert seen[-1].backbone == backbone and seen[-1].steps == TINY.detector_steps
+        assert seen[-1].input_size == TINY.detector_input_size
+    with pytest.raises(ValueError, match="detector_backbone: expected one of"):
+        replace(TINY, detector_backbone="resnet50")
+
+
 def test_a_folder_written_before_the_learning_rate_drop_resumes_with_none(mocked, tmp_path):
     data, calls = mocked
     run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=TINY, progress=False))
     path = tmp_path / "bench" / "benchmark.json"
     stored = json.loads(path.read_text())
     for key in ("aae_lr_drop_steps", "keypointnet_robust_steps", "keypointnet_robust_views", "validation_images",
-                "aae_crop_box"):
+                "aae_crop_box", "detector_backbone"):
         del stored["settings"][key]  # as written by the versions before these settings
     path.write_text(json.dumps(stored))
     calls.clear()
     settings = replace(TINY, keypointnet_robust_steps=None, keypointnet_robust_views=None, validation_images=60,
-                       aae_crop_box="obj")
+                       aae_crop_box="obj", detector_backbone="none")
     run_benchmark(Benchmark(out=tmp_path / "bench", lmo=data, quick=True, settings=settings, progress=False))
     assert calls == []
     with pytest.raises(ValueError, match=r"other settings \(settings differ"):
@@ -369,6 +385,9 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-crop-box", "visib",
                  "--quick", "--no-progress"]) == 0
     assert jobs[3].settings == replace(lmo.QUICK, aae_crop_box="visib")
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--detector-backbone",
+                 "none", "--quick", "--no-progress"]) == 0
+    assert jobs[4].settings == replace(lmo.QUICK, detector_backbone="none")
     for bad in ("5", "x=aae", "5=aae 5=keypointnet"):
         assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
                      *bad.split()]) == 2

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from paz6d.benchmark.lmo import DEFAULT_LMO, METHODS, Benchmark, run_benchmark
+from paz6d.ssd.config import BACKBONES
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.fields import BOX_FIELDS
 from paz6d.run_dirs import run_output
@@ -38,6 +39,9 @@ class LmoOptions:
     aae_crop_box: str | None = option(None, "the box the AAEs' scene crops are cut around: obj (whole object) or "
                                             "visib (visible part, as at test time) (default: the sizes' own, "
                                             "docs/real_photos.md)", choices=tuple(sorted(BOX_FIELDS)))
+    detector_backbone: str | None = option(None, "the detector's body: efficientnet-lite0 (pretrained on ImageNet, "
+                                                 "docs/backbones.md) or none (the light network from scratch) "
+                                                 "(default: the sizes' own)", choices=BACKBONES)
     jobs: int = option(2, "pose models trained side by side, each in its own process with its share of the CPU "
                           "cores (measured in docs/real_photos.md)")
     progress: bool = option(True, "progress bars")
@@ -68,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
                         progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
                         aae_lr_drop_steps=options.aae_lr_drop_steps, aae_crop_box=options.aae_crop_box,
+                        detector_backbone=options.detector_backbone,
                         object_methods=parse_object_methods(options.object_method), jobs=options.jobs)
         report = run_benchmark(job)
     print(f"wrote {Path(options.out) / 'report.json'} and {Path(options.out) / 'report.md'} "

@@ -52,12 +52,15 @@ from paz6d.benchmark.parallel import run_in_processes, threads_per_job
 from paz6d.cli import build_parser
 from paz6d.datasets.bop import read_pose_results
 from paz6d.datasets.bop.models import MODELS_INFO, load_models_info, model_meshes
+from paz6d.datasets.bop.units import units_per_mm
 from paz6d.estimate import estimate
 from paz6d.keypointnet.config import KeypointTraining
 from paz6d.keypointnet.orientation import is_single_half_turn
 from paz6d.keypointnet.train import train_keypointnet
-from paz6d.ssd.config import SSDTraining
+from paz6d.ssd.config import BACKBONES, SSDTraining
 
+#: Scale of the LM-O meshes (millimetres) to the library's metres.
+MESH_SCALE = units_per_mm("m")
 #: The LM-O data this repository's checkout shares (``../shared/data/bop_lmo``).
 DEFAULT_LMO = Path(__file__).resolve().parents[3] / "shared" / "data" / "bop_lmo"
 #: LM-O's camera (``camera.json`` of the BOP data set): fx, fy, cx, cy.
@@ -82,7 +85,9 @@ class BenchmarkSettings:
 
     Attributes:
         images: synthetic training images; backgrounds: photo collages.
-        detector_steps / detector_input_size: SSD steps and input side in pixels (quick network).
+        detector_steps / detector_input_size: SSD steps and input side in pixels (light network).
+        detector_backbone: the light SSD's body: ``"efficientnet-lite0"`` (pretrained on ImageNet,
+            ``docs/backbones.md``) or ``"none"`` (its own, trained from scratch).
         aae_steps / aae_views / aae_in_plane: AAE steps, view-sphere directions and codebook in-plane
             rotations per view.
         aae_lr_drop_steps: the last this many AAE steps train at a tenth of the learning rate.
@@ -112,9 +117,12 @@ class BenchmarkSettings:
     keypointnet_robust_views: int | None = None
     validation_images: int = 60
     aae_crop_box: str = "obj"
+    detector_backbone: str = "none"
 
     def __post_init__(self):
         check_crop_box(self.aae_crop_box)
+        if self.detector_backbone not in BACKBONES:
+            raise ValueError(f"detector_backbone: expected one of {BACKBONES}, got {self.detector_backbone!r}")
 
 
 #: Most AAE training steps a benchmark accepts (the full sizes train 5,000).
@@ -148,6 +156,7 @@ class Benchmark:
     aae_steps: int | None = None  # default: the settings'; a larger number on a finished run extends its AAEs
     aae_lr_drop_steps: int | None = None  # default: the settings'
     aae_crop_box: str | None = None  # default: the settings'
+    detector_backbone: str | None = None  # default: the settings'
     object_methods: dict[int, str] = field(default_factory=dict)
     jobs: int = 1  # pose models trained side by side, each in its own process
 
@@ -178,6 +187,8 @@ class Benchmark:
             self.settings = replace(self.settings, aae_lr_drop_steps=int(self.aae_lr_drop_steps))
         if self.aae_crop_box is not None:
             self.settings = replace(self.settings, aae_crop_box=self.aae_crop_box)
+        if self.detector_backbone is not None:
+            self.settings = replace(self.settings, detector_backbone=self.detector_backbone)
         if self.settings.aae_lr_drop_steps > self.settings.aae_steps:
             raise ValueError(f"aae_lr_drop_steps: expected at most aae_steps ({self.settings.aae_steps}), got "
                              f"{self.settings.aae_lr_drop_steps}")
@@ -245,7 +256,7 @@ def generation_config(job: Benchmark):
     from data_gen.config import GenerationConfig
 
     return GenerationConfig(meshes=tuple(job.mesh(obj_id) for obj_id in job.objects), out=job.out / "synthetic",
-                            num_images=job.settings.images, seed=job.seed, mesh_scale=0.001,
+                            num_images=job.settings.images, seed=job.seed, mesh_scale=MESH_SCALE,
                             intrinsics=LMO_INTRINSICS, rotation="view-sphere", elevation_degrees=(15.0, 80.0),
                             inplane_degrees=30.0,
                             objects_per_image=(min(4, len(job.objects)), min(8, len(job.objects))),
@@ -281,7 +292,7 @@ def _stage_detector(job: Benchmark) -> dict:
 
     return train_ssd(SSDTraining(dataset=job.out / "synthetic", out=job.out / "detector",
                                  steps=job.settings.detector_steps, input_size=job.settings.detector_input_size,
-                                 seed=job.seed, progress=job.progress))
+                                 backbone=job.settings.detector_backbone, seed=job.seed, progress=job.progress))
 
 
 def _train_aae(job: Benchmark, obj_id: int) -> dict:
@@ -294,7 +305,7 @@ def _train_aae(job: Benchmark, obj_id: int) -> dict:
                      views=job.settings.aae_views, lr_drop_steps=job.settings.aae_lr_drop_steps,
                      augmentation=Augmentation())
     crops = job.settings.scene_crops > 0
-    return train_aae(job.mesh(obj_id), job.pose_dir(obj_id), config, mesh_scale=0.001, seed=job.seed,
+    return train_aae(job.mesh(obj_id), job.pose_dir(obj_id), config, mesh_scale=MESH_SCALE, seed=job.seed,
                      workers=job.settings.workers, progress=job.progress,
                      dataset=job.out / "synthetic" if crops else None, object_id=obj_id,
                      pair_fraction=job.settings.scene_crops if crops else 0.5,
@@ -306,7 +317,7 @@ def _train_keypointnet(job: Benchmark, obj_id: int, preset: str, steps: int | No
     objects with one half-turn symmetry (LM-O's eggbox and glue) get the orientation network."""
     symmetries = load_models_info(job.mesh(obj_id).parent / MODELS_INFO)[obj_id].symmetries_discrete
     return train_keypointnet(KeypointTraining(
-        job.pose_dir(obj_id), job.mesh(obj_id), mesh_scale=0.001, config=preset, seed=job.seed,
+        job.pose_dir(obj_id), job.mesh(obj_id), mesh_scale=MESH_SCALE, config=preset, seed=job.seed,
         workers=job.settings.workers, steps=steps, progress=job.progress,
         overrides={} if views is None else {"views": views}, orientation_network=is_single_half_turn(symmetries)))
 
@@ -459,7 +470,7 @@ def stage_done(job: Benchmark, name: str, outputs: list[Path]) -> bool:
 
 #: settings newer than some benchmark folders, with the value the versions before them used
 _EARLIER_SETTINGS = {"aae_lr_drop_steps": 0, "keypointnet_robust_steps": None, "keypointnet_robust_views": None,
-                     "validation_images": 60, "aae_crop_box": "obj"}
+                     "validation_images": 60, "aae_crop_box": "obj", "detector_backbone": "none"}
 
 
 def _check_settings(job: Benchmark) -> None:
@@ -757,7 +768,7 @@ def _overlays(job: Benchmark, condition: str) -> list[Path]:
     results = read_pose_results(results_path, units="m")
     meshes = {}
     for obj_id in job.objects:
-        mesh = load_mesh(job.mesh(obj_id), 0.001)
+        mesh = load_mesh(job.mesh(obj_id), MESH_SCALE)
         meshes[f"obj_{obj_id:06d}"] = (np.asarray(mesh.vertices), np.asarray(mesh.faces))
     boxes = {}
     detections = job.result(condition, "_detections.json")
