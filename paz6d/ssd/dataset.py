@@ -19,10 +19,11 @@ import numpy as np
 
 from paz6d.abstract.processor import reseed
 from paz6d.backend import boxes as boxes_backend
-from paz6d.backend.files import load_json
+from paz6d.backend.files import load_json_object
+from paz6d.backend.paths import path_inside
 from paz6d.backend.image import load_image, resize
 from paz6d.datasets import coco, openimages, voc
-from paz6d.datasets.sample import SampleSequence
+from paz6d.datasets.sample import Sample, SampleSequence, check_sample
 from paz6d.ssd.config import DATASET_FORMATS
 from paz6d.ssd.encoding import encode_targets
 from paz6d.synthesis.box_augment import AnnotatedImage
@@ -84,8 +85,13 @@ def _load_generated(dataset: str | Path, split: str | None = None,
     files = sorted((dataset / split).glob(f"*/{COCO_FILE}"))
     if not files:
         raise ValueError(f"dataset: no {COCO_FILE} in {dataset / split}/<scene>/ (is it a `paz6d generate` output?)")
-    contents = [(path, load_json(path)) for path in files]
-    names = sorted({category["name"] for _, document in contents for category in document.get("categories", [])})
+    contents = [(path, load_json_object(path)) for path in files]
+    try:
+        names = sorted({str(category["name"]) for _, document in contents
+                        for category in document.get("categories", [])})
+    except (KeyError, TypeError) as error:
+        raise ValueError(f"dataset: {dataset / split}: a {COCO_FILE} holds a malformed 'categories' list "
+                         f"({type(error).__name__}: {error})") from error
     if class_names is None:
         class_names = tuple(names)
     index = {name: position + 1 for position, name in enumerate(class_names)}
@@ -101,13 +107,22 @@ def _load_generated(dataset: str | Path, split: str | None = None,
                 unknown = sorted({category_names[a["category_id"]] for a in rows} - set(index))
                 if unknown:
                     raise ValueError(f"{path}: unknown class(es) {unknown}; the classes are {list(class_names)}")
-                boxes = np.asarray([a["bbox"] for a in rows], dtype=np.float64).reshape(-1, 4)
-                boxes = boxes_backend.convert(boxes, "xywh", "xyxy")
+                where = f"{path}: image id {image['id']!r:.40}"
+                try:
+                    boxes = np.asarray([a["bbox"] for a in rows], dtype=np.float64).reshape(-1, 4)
+                except ValueError as error:
+                    raise ValueError(f"{where}, field 'bbox': expected [x, y, w, h] numbers ({error})") from None
+                with np.errstate(over="ignore", invalid="ignore"):
+                    boxes = boxes_backend.convert(boxes, "xywh", "xyxy")
                 ids = np.asarray([index[category_names[a["category_id"]]] for a in rows], dtype=np.int64)
+                file = path_inside(path.parent, image["file_name"], f"{where}, field 'file_name'")
+                size = (image["width"], image["height"]) if "width" in image and "height" in image else None
+                check_sample(Sample(file, boxes, ids, [category_names[a["category_id"]] for a in rows],
+                                    extras={"image_size": size}, source=where))
                 keep = np.all(boxes[:, 2:] > boxes[:, :2], axis=1)
                 if np.any(keep):
-                    samples.append(DetectionSample(path.parent / image["file_name"], boxes[keep], ids[keep]))
-        except (KeyError, TypeError) as error:
+                    samples.append(DetectionSample(file, boxes[keep], ids[keep]))
+        except (KeyError, TypeError, AttributeError) as error:
             raise ValueError(f"{path}: malformed COCO annotations ({type(error).__name__}: {error})") from error
     if not samples:
         raise ValueError(f"dataset: {dataset / split} holds no annotated image (empty data set)")
