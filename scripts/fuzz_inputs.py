@@ -20,7 +20,14 @@ two-image BOP data set, a results CSV, COCO and VOC files, run directories) and 
 * ``path``: an output path that is a folder, a symbolic link, a FIFO, a device, under a file, one of
   the command's inputs, or an output folder holding a symbolic link;
 * ``run``: an AAE or KeypointNet run directory with one file's JSON values or bytes mutated, given to
-  ``paz6d estimate``.
+  ``paz6d estimate``;
+* ``output``: an output of ``detect``, ``estimate``, any ``train <method>`` or ``benchmark lmo`` aimed at
+  one of the call's inputs (a data set's file or folder, an image, a run directory's file, another
+  method's run, a symbolic link): refused before anything is written;
+* ``sample``: a VOC, COCO, Open Images or YCB-Video fixture (``tests/data/datasets``) with one value
+  mutated (boxes, sizes, ids, file names, image-set ids), read through the loader's ``SampleSequence``
+  in this process: either refused with a ``ValueError`` naming the file, or every sample is sound
+  (finite, non-inverted boxes on the image, its image inside the data set).
 
 A case passes when the exit code is 0 or 2, no traceback is printed, it ends within ``--timeout``
 seconds, nothing outside its output is touched, an error (exit 2) is one ``paz6d ...: error:`` or
@@ -55,7 +62,7 @@ HOSTILE_FLAG_VALUES = ["-1", "0", "nan", "inf", "-inf", "1e308", "-1e308", "abc"
                        "\x01", "--", "0x10", " 1", "1e-320"]
 #: Output flags get no existing world file (replacing a regular file the user names is allowed, and
 #: would spoil the world for later cases) and no folder they could legitimately write into.
-OUTPUT_FLAGS = ("--out", "--errors", "--plots", "--targets-out")
+OUTPUT_FLAGS = ("--out", "--errors", "--plots", "--targets-out", "--ground-truth", "--detections-out")
 HOSTILE_OUTPUT_VALUES = ["-1", "0", "abc", "", "../..", "/dev/null", "{world}/bop", "{case}/missing/x.json",
                          "\x01", " 1", "{world}/results.csv/x"]
 BOP_JSON = ["camera.json", "models/models_info.json", "test/000000/scene_gt.json", "test/000000/scene_camera.json",
@@ -287,9 +294,146 @@ def run_case(world: cases.World, rng: random.Random, number: int):
     return cases.Case(f"fuzz-{number}-run-{method}-{name}-{what}", argv, setup)
 
 
+def output_case(world: cases.World, rng: random.Random, number: int):
+    """An output flag aimed at one of the call's own inputs, or an output folder of another kind."""
+    ssd_run = {f"ssd/{name}": content for name, content in cases.FOREIGN_RUNS["ssd"].items()}
+    image = {"images/a.png": cases.FOREIGN_RUNS["ssd"]["model.keras"]}
+    scene = "bop/test/000000/"
+    choice = rng.choice(["detect", "detect-bop", "estimate", "train", "benchmark"])
+    if choice in ("detect", "detect-bop"):
+        base = cases.DETECT if choice == "detect" else cases.DETECT_BOP
+        targets = ["{case}/ssd/model.keras", "{case}/ssd/detector.json"] + (
+            ["{case}/images/a.png"] if choice == "detect" else
+            ["{case}/" + scene + name for name in ("scene_gt.json", "scene_camera.json", "scene_gt_info.json",
+                                                    "rgb/000000.png", "depth/000000.png")] + ["{case}/bop/camera.json"])
+        flag = "--out" if choice == "detect" else rng.choice(["--out", "--ground-truth"])
+        argv = cases.replace_flag(base, flag, rng.choice(targets))
+        setup = cases.files_setup({**ssd_run, **(image if choice == "detect" else {})},
+                                  copy_dataset=choice == "detect-bop")
+    elif choice == "estimate":
+        targets = ["{world}/" + scene + name for name in ("scene_gt.json", "scene_camera.json", "scene_gt_info.json",
+                                                           "rgb/000000.png")]
+        targets += ["{world}/runs/aae/" + name for name in ("config.json", "codebook.npz", "object.npz", "model.keras")]
+        targets += ["{world}/bop/models/models_info.json", "{world}/bop/test_targets_bop19.json"]
+        argv = cases.replace_flag(cases.ESTIMATE, rng.choice(["--out", "--targets-out"]), rng.choice(targets))
+        setup = None
+    else:
+        method = rng.choice(sorted(cases.TRAINERS)) if choice == "train" else "benchmark lmo"
+        base = cases.TRAINERS[method] if choice == "train" else cases.BENCHMARK_LMO + ("--lmo", "{world}/bop")
+        others = [name for name in ("aae", "keypointnet") if name != method]
+        targets = ["{world}/bop", "{world}/bop/test", "{world}/bop/test/000000", "{case}/link", "{case}/foreign"]
+        targets += ["{world}/runs/" + name for name in others]
+        owner = rng.choice([name for name in cases.FOREIGN_RUNS if name != method])
+        setup = cases.files_setup({f"foreign/{name}": content for name, content in cases.FOREIGN_RUNS[owner].items()})
+        target = rng.choice(targets)
+        if target == "{case}/link":
+            setup = cases._symlink(rng.choice(["{world}/runs", "{world}/bop", "{case}"]), "link")
+        argv = cases.replace_flag(base, "--out", target)
+    return cases.Case(f"fuzz-{number}-output-{' '.join(argv[:2])}-{argv[argv.index('--out') + 1] if '--out' in argv else ''}",
+                      argv, setup)
+
+
+#: The fixtures of the ``sample`` kind: ``(fixture folder, file to mutate, reader of every sample)``.
+SAMPLE_FIXTURES = {
+    "voc": ("voc", "VOC2007/Annotations/000001.xml", lambda root: __import__(
+        "paz6d.datasets.voc", fromlist=["load"]).load(root / "VOC2007", "train")),
+    "voc-image-set": ("voc", "VOC2007/ImageSets/Main/train.txt", lambda root: __import__(
+        "paz6d.datasets.voc", fromlist=["load"]).load(root / "VOC2007", "train")),
+    "coco": ("coco", "annotations/instances_tiny2017.json", lambda root: __import__(
+        "paz6d.datasets.coco", fromlist=["load"]).load(root, "tiny2017", masks=False)),
+    "openimages": ("openimages", "validation-annotations-bbox.csv", lambda root: __import__(
+        "paz6d.datasets.openimages", fromlist=["load"]).load(root, "validation")),
+    "ycb-video": ("ycb_video", "data/0048/000001-box.txt", lambda root: __import__(
+        "paz6d.datasets.ycb_video", fromlist=["load"]).load(root, "train", masks=False)),
+}
+SAMPLE_VALUES = ["-1", "0", "1e9", "-1e6", "1e308", "-1e308", "nan", "inf", "abc", "", "../../../outside",
+                 "/etc/passwd", "9" * 30, "1.5", "100000", "-5", "\x00", "0x10"]
+
+
+def _mutate_text_number(text: str, rng: random.Random) -> tuple[str, str]:
+    """One number or word of ``text`` (an XML, CSV or text file) replaced by a hostile value."""
+    import re
+
+    tokens = [match for match in re.finditer(r"[^\s<>,/]+", text) if not match.group().startswith(("?", "!"))]
+    match = rng.choice(tokens)
+    value = rng.choice(SAMPLE_VALUES)
+    return text[:match.start()] + value + text[match.end():], f"{match.group()[:12]}->{value[:12]}"
+
+
+def _sound_samples(samples, root: Path) -> str | None:
+    """Why the samples a loader returned are unsound (``None``: sound)."""
+    import numpy as np
+
+    from paz6d.backend.image import image_size_from_header
+
+    for sample in samples:
+        boxes = np.asarray(sample.boxes, dtype=np.float64).reshape(-1, 4)
+        if not np.all(np.isfinite(boxes)) or np.any(boxes[:, 2:] < boxes[:, :2]):
+            return f"{sample.source}: box {boxes.tolist()} not finite or inverted"
+        image = Path(sample.image)
+        if root.resolve() not in image.resolve().parents:
+            return f"{sample.source}: image {image} outside the data set"
+        if image.is_file() and len(boxes):
+            width, height = image_size_from_header(image)
+            if np.any(boxes[:, 2] < 0) or np.any(boxes[:, 3] < 0) or np.any(boxes[:, 0] > width) \
+                    or np.any(boxes[:, 1] > height):
+                return f"{sample.source}: box {boxes.tolist()} off the {width} x {height} image"
+    return None
+
+
+def sample_case(world: cases.World, rng: random.Random, number: int):
+    """A data-set fixture with one value mutated, read through its loader (a Python API case)."""
+    name = rng.choice(sorted(SAMPLE_FIXTURES))
+    fixture, relative, read = SAMPLE_FIXTURES[name]
+    source = cases.POSE_DATA / fixture / relative
+    if relative.endswith(".json"):
+        data, what = mutate_json(json.loads(source.read_text()), rng)
+        content = _dumps(data).encode()
+    else:
+        text, what = _mutate_text_number(source.read_text(), rng)
+        content = text.encode("utf-8", "surrogatepass")
+    return ApiCase(f"fuzz-{number}-sample-{name}-{what}", fixture, relative, content, read)
+
+
+class ApiCase:
+    """A fixture copy with one file replaced by ``content``, read by ``read(root)`` in this process."""
+
+    def __init__(self, name, fixture, relative, content, read):
+        self.name, self.fixture, self.relative, self.content, self.read = name, fixture, relative, content, read
+
+    def judge(self, world: cases.World, timeout: float) -> tuple[str, str]:
+        import traceback
+
+        folder = world.root / cases.CASES_FOLDER / self.name.replace("/", "_")
+        shutil.rmtree(folder, ignore_errors=True)
+        root = folder / self.fixture
+        shutil.copytree(cases.POSE_DATA / self.fixture, root)
+        (root / self.relative).write_bytes(self.content)
+        outside = folder.parent / "outside.jpg"
+        outside.write_bytes((cases.POSE_DATA / "voc" / "VOC2007" / "JPEGImages" / "000001.jpg").read_bytes())
+        started = time.perf_counter()
+        try:
+            with cases.time_limit(timeout):
+                samples = list(self.read(root))
+        except cases.CaseTimeout:
+            return "hang", f"beyond {timeout:g} s"
+        except ValueError as error:
+            message = str(error)
+            if len(message) > 1100 or not any(mark in message for mark in (str(root), "split", "root")):
+                return "unclear", f"message names no file: {message[:300]!r}"
+            return "ok", "rejected"
+        except Exception:  # noqa: BLE001 - reported as the traceback it is
+            return "traceback", traceback.format_exc()[-1500:]
+        if time.perf_counter() - started > timeout:
+            return "hang", f"took {time.perf_counter() - started:.1f} s"
+        wrong = _sound_samples(samples, root)
+        return ("silent", wrong) if wrong else ("ok", "accepted")
+
+
 KINDS = {"json": json_case, "bytes": bytes_case, "csv": csv_case, "flag": flag_case, "path": path_case,
-         "run": run_case}
-WEIGHTS = {"json": 0.32, "bytes": 0.08, "csv": 0.22, "flag": 0.2, "path": 0.08, "run": 0.1}
+         "run": run_case, "output": output_case, "sample": sample_case}
+WEIGHTS = {"json": 0.22, "bytes": 0.06, "csv": 0.16, "flag": 0.14, "path": 0.06, "run": 0.08, "output": 0.12,
+           "sample": 0.16}
 
 
 # ------------------------------------------------------------------------------------------------ judging
@@ -329,13 +473,14 @@ def _output_paths(case: cases.Case, world: cases.World, folder: Path) -> list[Pa
     return found
 
 
-def judge(world: cases.World, case: cases.Case, timeout: float) -> tuple[str, str]:
-    """``(kind, detail)``: ``ok``, ``traceback``, ``hang``, ``wrong-code``, ``unclear``, ``silent`` or ``touched``."""
+def judge(world: cases.World, case: cases.Case, timeout: float, strict: bool = False) -> tuple[str, str]:
+    """``(kind, detail)``: ``ok``, ``traceback``, ``hang``, ``wrong-code``, ``unclear``, ``silent`` or ``touched``
+    (``strict``: the output flags name inputs, so only the case's own ``out`` folder may change)."""
     verdict = cases.run_case(world, cases.Case(case.name, case.argv, case.setup, (), 2, timeout))
     outcome, folder = verdict.outcome, world.root / cases.CASES_FOLDER / case.name
     if verdict.kind in ("traceback", "hang"):
         return verdict.kind, "; ".join(verdict.problems)[-1500:]
-    outputs = _output_paths(case, world, folder)
+    outputs = [folder / "out"] if strict else _output_paths(case, world, folder)
     touched = [path for path in verdict.touched  # an output, inside one, or a folder made to hold one
                if not any(world.root / path == output or output in (world.root / path).parents
                           or (world.root / path) in output.parents for output in outputs)]
@@ -379,8 +524,13 @@ def main(argv: list[str] | None = None) -> int:
         started = time.perf_counter()
         for number, kind in enumerate(kinds):
             case = KINDS[kind](world, rng, number)
-            case = cases.Case(case.name[:120].replace("/", "_").replace("\x00", "NUL"), case.argv, case.setup)
-            verdict, detail = judge(world, case, args.timeout)
+            name = case.name[:120].replace("/", "_").replace("\x00", "NUL")
+            if isinstance(case, ApiCase):
+                case.name = name
+                verdict, detail = case.judge(world, args.timeout)
+            else:
+                case = cases.Case(name, case.argv, case.setup)
+                verdict, detail = judge(world, case, args.timeout, strict=kind == "output")
             counts[verdict] += 1
             by_kind[(kind, detail if verdict == "ok" else verdict)] += 1
             report.append({"case": case.name, "kind": kind, "verdict": verdict, "detail": detail})
