@@ -22,13 +22,13 @@ from __future__ import annotations
 
 import math
 import re
-import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import read_input_bytes, read_input_text
+from paz6d.backend.files import read_input_text
+from paz6d.datasets.voc import read_annotation as read_xml_annotation
 
 METHODS = ("11point", "allpoint")
 BOX_FORMATS = ("xyxy", "xywh")
@@ -152,40 +152,6 @@ def read_class_names(path: str | Path) -> list[str]:
     return names
 
 
-def read_xml_annotation(path: str | Path) -> list[tuple[str, list[float], bool]]:
-    """Objects of one VOC XML annotation file.
-
-    Returns:
-        ``(class_name, [x_min, y_min, x_max, y_max], difficult)`` per ``<object>``.
-
-    Raises:
-        ValueError: naming the file for malformed XML or a missing ``name``/``bndbox`` field.
-    """
-    path = Path(path)
-    try:
-        root = ElementTree.fromstring(read_input_bytes(path, "XML annotation file"))
-    except ElementTree.ParseError as error:
-        raise ValueError(f"{path}: malformed XML ({error}); expected a VOC <annotation> file") from None
-    except RecursionError:
-        raise ValueError(f"{path}: XML nested too deeply; expected a VOC <annotation> file") from None
-    objects = []
-    for number, element in enumerate(root.iter("object")):
-        where = f"{path}: <object> #{number + 1}"
-        name = (element.findtext("name") or "").strip()
-        if not name:
-            raise ValueError(f"{where} has no <name>")
-        box_element = element.find("bndbox")
-        if box_element is None:
-            raise ValueError(f"{where} ({name}) has no <bndbox>")
-        tokens = [(box_element.findtext(tag) or "").strip() for tag in ("xmin", "ymin", "xmax", "ymax")]
-        box = _check_box(_parse_numbers(tokens, where, "<bndbox> with numeric xmin, ymin, xmax, ymax"), where)
-        difficult_text = (element.findtext("difficult") or "0").strip()
-        if difficult_text not in ("0", "1"):
-            raise ValueError(f"{where}: <difficult> must be 0 or 1, got {difficult_text!r}")
-        objects.append((name, box, difficult_text == "1"))
-    return objects
-
-
 def _read_lines(path: Path) -> list[tuple[int, list[str]]]:
     text = read_input_text(path, "text file")
     return [(number, line.split()) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]
@@ -196,7 +162,8 @@ def read_annotations(directory: str | Path, box_format: str = "xyxy",
     """Reads ground truth from a directory of VOC XML files or of text files (one per image).
 
     Text lines are ``<class> <a> <b> <c> <d>`` with the box in ``box_format`` (absolute pixels);
-    XML boxes are always ``xmin ymin xmax ymax``. The image id is the file stem.
+    XML files are read by :func:`paz6d.datasets.voc.read_annotation` with their raw ``xmin ymin xmax ymax``
+    numbers (any class name). The image id is the file stem.
 
     Args:
         directory: folder with ``*.xml`` or ``*.txt`` files (not both).
@@ -221,7 +188,8 @@ def read_annotations(directory: str | Path, box_format: str = "xyxy",
     for row, path in enumerate(xml_files or txt_files):
         image_ids.append(path.stem)
         if xml_files:
-            objects = read_xml_annotation(path)
+            parsed = read_xml_annotation(path, class_names=None, voc_coordinates=True)
+            objects = list(zip(parsed["names"], parsed["boxes"].tolist(), parsed["difficult"].tolist()))
         else:
             objects = []
             for number, tokens in _read_lines(path):

@@ -93,13 +93,13 @@ def _number(element: ElementTree.Element, tag: str, where: str) -> float:
     return value
 
 
-def read_annotation(path: str | Path, class_names: Sequence[str] = VOC_CLASSES,
+def read_annotation(path: str | Path, class_names: Sequence[str] | None = VOC_CLASSES,
                     voc_coordinates: bool = False) -> dict:
-    """Parses one VOC XML annotation.
+    """Parses one VOC XML annotation (the one VOC XML reader: data sets and ``evaluation.voc``).
 
     Args:
         path: the ``.xml`` file.
-        class_names: known classes; an object of another class is an error.
+        class_names: known classes; an object of another class is an error (``None``: any name).
         voc_coordinates: keep the XML's 1-based inclusive numbers instead of paz6d pixel boxes.
     Returns:
         dict with ``filename``, ``image_size`` (``(width, height)`` or ``None``), ``names`` (N),
@@ -127,14 +127,14 @@ def read_annotation(path: str | Path, class_names: Sequence[str] = VOC_CLASSES,
         except ValueError:
             raise ValueError(f"{where}, field <width>/<height>: expected integers, got "
                              f"{size.findtext('width')!r}, {size.findtext('height')!r}") from None
-    known = set(class_names)
+    known = None if class_names is None else set(class_names)
     names, boxes, difficult, truncated = [], [], [], []
     for number, element in enumerate(root.findall("object"), start=1):
         where = f"{path}, <object> #{number}"
         name = (element.findtext("name") or "").strip()
         if not name:
             raise ValueError(f"{where}, field <name>: missing; expected a class name")
-        if name not in known:
+        if known is not None and name not in known:
             raise ValueError(f"{where}, field <name>: unknown class {name!r}; expected one of {list(class_names)}")
         box_element = element.find("bndbox")
         if box_element is None:
