@@ -237,9 +237,9 @@ def test_an_empty_results_file_scores_zero_with_a_note(world, tmp_path):
 
 
 def test_estimate_fails_when_every_estimate_failed(world, tmp_path, monkeypatch):
-    from paz6d import estimate
+    from paz6d import split_estimation
 
-    monkeypatch.setattr(estimate, "_estimator",
+    monkeypatch.setattr(split_estimation, "_estimator",
                         lambda run_dir, **options: lambda image, box, camera: None)
     out = tmp_path / "results.csv"
     outcome = cases.run_cli(["estimate", "--run", str(world.aae_run), "--dataset", str(world.bop), "--split", "test",

@@ -416,7 +416,7 @@ def test_estimate_skips_images_without_rgb_and_fails_clearly_when_nothing_is_est
 
 
 def test_estimate_scores_an_object_whose_pose_model_cannot_estimate_as_misses(world, tmp_path, capsys, monkeypatch):
-    from paz6d import estimate as module
+    from paz6d import split_estimation as module
     from paz6d.backend.pnp import PnPError
     from paz6d.datasets.bop import read_pose_results
 

@@ -76,7 +76,7 @@ class TruthWithRGBError:
 
 @pytest.fixture
 def rgb_error_estimator(world, monkeypatch):
-    from paz6d import estimate as module
+    from paz6d import split_estimation as module
 
     real, truth = module._estimator, _truth(world / "set")
 
