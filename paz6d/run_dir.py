@@ -137,7 +137,13 @@ class RunDir:
         mesh_field, scale_field = cls.MESH_FIELDS
         if not config or not config.get(mesh_field):
             return None
-        return Path(config[mesh_field]), float(config.get(scale_field, 1.0))
+        mesh, scale = config[mesh_field], config.get(scale_field, 1.0)
+        where = Path(run_dir) / cls.CONFIG_FILE
+        if not isinstance(mesh, str):
+            raise ValueError(f"{where}: field {mesh_field!r} must be the path of a mesh, got {mesh!r:.60}")
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 < scale < float("inf"):
+            raise ValueError(f"{where}: field {scale_field!r} must be a positive number, got {scale!r:.60}")
+        return Path(mesh), float(scale)
 
     @classmethod
     def surface_points(cls, run_dir: str | Path, count: int = 2000, seed: int = 0) -> np.ndarray:

@@ -889,6 +889,7 @@ def estimate_cases() -> list[Case]:
         "model-garbage": ("model.keras", b"garbage", "model.keras"),
         "model-folder": ("model.keras", "<dir>", "model.keras"),
         "object-mismatch": ("config.json", lambda d: {**d, "mesh": "/data/models/obj_000005.ply"}, "5"),
+        "mesh-number": ("config.json", lambda d: {**d, "mesh": 1.5}, "'mesh'"),
     }
     for name, (relative, content, expect) in run_files.items():
         def setup(world, folder, relative=relative, content=content):
@@ -1426,6 +1427,8 @@ def annotation_cases() -> list[Case]:
              coco_edit(lambda data: data["categories"][0].update(id="64")), ("categories[0]", "'id'")),
         Case("train-ssd-coco-annotation-image-id-list", TRAIN_SSD_COCO,
              coco_edit(lambda data: data["annotations"][0].update(image_id=[7])), ("annotations[0]", "'image_id'")),
+        Case("train-ssd-coco-area-nested", TRAIN_SSD_COCO,
+             coco_edit(lambda data: data["annotations"][2].update(area=[[1], [2, 3]])), ("annotations[2]", "'area'")),
         Case("train-ssd-coco-width-negative", TRAIN_SSD_COCO,
              coco_edit(lambda data: data["images"][0].update(width=-32)), ("images[0]", "'width'/'height'")),
         Case("train-ssd-generated-coco-list", TRAIN_SSD_BOP, bop_file(GENERATED_COCO, []),

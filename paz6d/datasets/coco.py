@@ -96,6 +96,8 @@ def _check_annotation(annotation, number: int, path: Path, images: dict, categor
     if not isinstance(box, list) or len(box) != 4 or not all(_is_number(v) for v in box) or box[2] < 0 or box[3] < 0:
         raise ValueError(f"{where}, field 'bbox': expected [x, y, width, height] (finite numbers, sizes >= 0), "
                          f"got {box!r}")
+    if "area" in annotation and not _is_number(annotation["area"]):
+        raise ValueError(f"{where}, field 'area': expected a finite number, got {annotation['area']!r:.40}")
     if annotation.get("iscrowd", 0) not in (0, 1):
         raise ValueError(f"{where}, field 'iscrowd': expected 0 or 1, got {annotation['iscrowd']!r}")
     keypoints = annotation.get("keypoints")
