@@ -33,7 +33,7 @@ from tqdm import tqdm
 from evaluation import pose_errors
 from evaluation.bop_data import BopEvaluationData
 from paz6d.datasets.bop.results import PoseResults
-from paz6d.datasets.bop.units import MM_PER_M
+from paz6d.datasets.bop.units import lengths_from_mm, mm_from_lengths
 
 #: Error types with a BOP average recall, then the extra ADD(-S) group.
 AR_METRICS = ("vsd", "mssd", "mspd")
@@ -418,14 +418,15 @@ def compute_errors(data: BopEvaluationData, results: PoseResults, pairs: Evaluat
 
 def _render_depth_mm(renderer, data: BopEvaluationData, obj_id: int, T_mm: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Rendered depth (mm) of the error mesh; a rounded (not exactly orthonormal) rotation, as BOP
-    ground truth stores them, is rendered with its nearest rotation (the renderer needs a rigid pose)."""
+    ground truth stores them, is rendered with its nearest rotation (the renderer needs a rigid pose).
+    The renderer works in metres: the pose and the depth cross units here, through the BOP unit converters."""
     T = T_mm.copy()
-    T[:3, 3] /= MM_PER_M
+    T[:3, 3] = lengths_from_mm(T[:3, 3], "m")
     if np.abs(T[:3, :3].T @ T[:3, :3] - np.eye(3)).max() > 1e-9:
         left, _, right = np.linalg.svd(T[:3, :3])
         T[:3, :3] = left @ right
     depth = renderer.render(K, [(data.render_mesh(obj_id), T)], rgb=False, masks=False).depth
-    return depth.astype(np.float64) * MM_PER_M
+    return mm_from_lengths(depth, "m")
 
 
 def _vsd_errors(data: BopEvaluationData, results: PoseResults, pairs: EvaluationPairs, gt_keys: np.ndarray,
