@@ -11,6 +11,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from paz6d import methods as registry
+from paz6d.backend.files import load_json_object, write_json_atomically
+from paz6d.backend.paths import check_outputs
 
 #: Method name -> the module of its run directory class (file names, ``read_model``), for the methods
 #: registered when this module was imported.
@@ -27,8 +29,6 @@ def _owner(out: Path) -> str | None:
     """The owner recorded in ``out/OWNER_FILE``, else the one method whose marker files ``out`` holds."""
     stamp = out / OWNER_FILE
     if os.path.lexists(stamp):
-        from paz6d.backend.files import load_json_object
-
         method = load_json_object(stamp).get("method") if stamp.is_file() and not stamp.is_symlink() else None
         if not isinstance(method, str):
             raise ValueError(f'{stamp}: expected a regular file holding {{"method": "<name>"}}; remove it '
@@ -55,9 +55,6 @@ def prepare_run_output(out: str | Path, method: str, inputs: dict[str, str | Pat
     Raises:
         ValueError: naming the flag, the folder and its owner.
     """
-    from paz6d.backend.files import write_json_atomically
-    from paz6d.backend.paths import check_outputs
-
     out = Path(out)
     check_outputs({}, inputs or {}, {flag: out})
     if out.is_dir():
