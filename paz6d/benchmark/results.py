@@ -26,7 +26,8 @@ LMO_CONDITIONS = {
     "synthetic_detections": "held-out synthetic images, the detector's boxes",
 }
 #: Benchmark settings that have a ``paz6d benchmark lmo`` flag; they are spelled out in the command.
-LMO_FLAGS = {"aae_steps": "--aae-steps", "aae_lr_drop_steps": "--aae-lr-drop-steps", "aae_crop_box": "--aae-crop-box"}
+LMO_FLAGS = {"aae_steps": "--aae-steps", "aae_lr_drop_steps": "--aae-lr-drop-steps", "aae_crop_box": "--aae-crop-box",
+             "detector_backbone": "--detector-backbone"}
 
 
 class ReportError(ValueError):
