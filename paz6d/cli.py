@@ -21,14 +21,16 @@ COMMANDS = {
                "emotion": ("paz6d.faces.emotion_command", "mini-Xception emotion classifier"),
                "ssd": ("paz6d.ssd.command", "SSD single-shot object detector"),
                "hrnet": ("paz6d.hrnet.command", "HRNet 2D keypoint heatmaps (keypoints of one object in a box)"),
-               "segmentation": ("paz6d.segmentation.command", "instance masks inside detection boxes (crop-then-segment U-Net)"),
+               "segmentation": ("paz6d.segmentation.command",
+                                "instance masks inside detection boxes (crop-then-segment U-Net)"),
                "stn": ("paz6d.stn.command", "spatial transformer digit classifier (cluttered digits)"),
                "probabilistic-keypoints": ("paz6d.probabilistic_keypoints.command",
                                            "KeypointNet keypoints with 2D Gaussian uncertainty (NLL), weighted PnP")},
               "train a model"),
     "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
     "detect": ("paz6d.ssd.detect", "run a trained SSD over a BOP split or an image folder -> COCO detections JSON"),
-    "estimate": ("paz6d.estimate", "run trained pose models on a BOP data set (ground-truth boxes or --detector) -> BOP results CSV"),
+    "estimate": ("paz6d.estimate", "run trained pose models on a BOP data set (ground-truth boxes or --detector) "
+                                   "-> BOP results CSV"),
     "calibrate": ("paz6d.calibrate", "camera intrinsics and lens distortion from images of a chessboard or ChArUco "
                                      "board -> camera.json"),
     "export": ("paz6d.export.command", "a run's network as a TensorFlow SavedModel, TFLite or ONNX file, checked "

@@ -197,7 +197,8 @@ class Benchmark:
         if not models.is_dir():
             raise ValueError(f"lmo: {models} not found (expected the LM-O BOP folder with models/ and test/)")
         if not (self.lmo / "test").is_dir():
-            raise ValueError(f"lmo: {self.lmo / 'test'} not found (expected the LM-O BOP folder with models/ and test/)")
+            raise ValueError(f"lmo: {self.lmo / 'test'} not found "
+                             "(expected the LM-O BOP folder with models/ and test/)")
         found = sorted(model_meshes(models))
         if not found:
             raise ValueError(f"lmo: {models} holds no obj_XXXXXX.ply meshes")

@@ -119,7 +119,8 @@ def read_description(run_dir: str | Path) -> dict[str, Any]:
     for name in ("margin", "sigma"):
         _positive(data, name, path, integer=False)
     if data["input_size"] % data["stride"]:
-        raise ValueError(f"{path}: input_size: expected a multiple of stride={data['stride']}, got {data['input_size']}")
+        raise ValueError(f"{path}: input_size: expected a multiple of stride={data['stride']}, "
+                         f"got {data['input_size']}")
     if data["domain"] not in DOMAINS:
         raise ValueError(f"{path}: domain: expected one of {DOMAINS}, got {data['domain']!r}")
     try:

@@ -35,7 +35,7 @@ from paz6d.backend.boxes import prior_boxes
 from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.image import normalize
 from paz6d.backend.tensorflow_guard import compiled_inference, import_keras, import_tensorflow, load_keras_model
-from paz6d.ssd.config import ARCHITECTURES, BACKBONES, check_input_size, check_light_side
+from paz6d.ssd.config import BACKBONES, check_input_size, check_light_side
 
 tf = import_tensorflow()
 keras = import_keras()
