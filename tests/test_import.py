@@ -12,7 +12,7 @@ import pytest
 
 HEAVY = ("tensorflow", "keras", "pyrender", "OpenGL", "open3d")
 DOCUMENTED_MODULES = ["paz6d.backend.quaternion", "paz6d.backend.boxes", "paz6d.backend.image",
-                      "paz6d.backend.keypoints", "paz6d.abstract.processor", "paz6d.abstract.sequence",
+                      "paz6d.backend.keypoints", "paz6d.abstract.processor",
                       "paz6d.processors.image", "paz6d.synthesis.augment"]
 
 
@@ -40,11 +40,11 @@ def test_paz6d_alone_imports_in_well_under_a_second():
     assert report["heavy"] == [] and report["seconds"] < 1.0
 
 
-def test_backends_processors_and_dispatcher_do_not_import_tensorflow():
+def test_backends_and_processors_do_not_import_tensorflow():
     modules = ["paz6d.backend." + name for name in ("boxes", "camera", "checks", "image", "keypoints", "mesh", "pnp",
                                                      "quaternion", "tensorflow_guard", "transform")]
     modules += ["paz6d.processors." + name for name in ("boxes", "image", "keypoints", "pose")]
-    modules += ["paz6d.abstract.sequence"]
+    modules += ["paz6d.abstract.processor"]
     report = import_in_fresh_interpreter("; ".join(f"import {module}" for module in modules))
     assert report["heavy"] == []
 

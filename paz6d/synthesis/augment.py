@@ -2,8 +2,8 @@
 noise), mirroring, random similarity warps and compositing over background images. Images are ``uint8`` RGB
 ``(H, W, 3)``; augmentations of images with boxes (SSD) are in :mod:`paz6d.synthesis.box_augment`.
 
-Every class is a :class:`~paz6d.abstract.processor.RandomProcessor` (its own ``generator``; a
-:class:`~paz6d.abstract.sequence.BatchDispatcher` reseeds it per sample), so augmentations compose
+Every class is a :class:`~paz6d.abstract.processor.RandomProcessor` (its own ``generator``;
+:func:`~paz6d.abstract.processor.reseed` reseeds it per sample), so augmentations compose
 with :class:`~paz6d.abstract.processor.SequentialProcessor`. :func:`share_generator` makes a whole
 sequence draw from one caller's generator, in step order (how the trainers make a sample a pure
 function of its seed).
