@@ -1,4 +1,4 @@
-"""2D keypoints ``(..., 2)`` in pixels: normalization and left-right flipping.
+"""2D keypoints ``(..., 2)`` in pixels to normalized coordinates (the keypoint networks' losses).
 
 Pixel coordinates follow the camera convention (OpenCV): integer coordinates are pixel centres,
 so an image of width ``W`` spans ``u`` in ``[-0.5, W - 0.5]``. Normalization maps that extent
@@ -13,8 +13,6 @@ Example:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 
 from paz6d.backend.checks import as_array
@@ -22,7 +20,13 @@ from paz6d.backend.checks import as_array
 RANGES = ((-1.0, 1.0), (0.0, 1.0))
 
 
-def _scale_and_offset(image_size, value_range: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+def normalization(image_size, value_range: tuple[float, float] = (-1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """``(scale, offset)``, each ``(2,)`` float64 per ``(u, v)``: normalized = pixels * scale + offset, for
+    ``image_size = (width, height)`` (usable on arrays and tensors alike).
+
+    Raises:
+        ValueError: a non-positive size or another ``value_range`` than :data:`RANGES`.
+    """
     size = np.asarray(image_size, dtype=np.float64)
     if size.shape != (2,) or not np.all(np.isfinite(size)) or np.any(size <= 0):
         raise ValueError(f"image_size: expected positive (width, height), got {image_size!r}")
@@ -39,33 +43,5 @@ def normalize(keypoints, image_size, value_range: tuple[float, float] = (-1.0, 1
     ``value_range=(-1, 1)`` gives ``(2u + 1) / W - 1``; ``(0, 1)`` gives ``(u + 0.5) / W``.
     """
     keypoints = as_array(keypoints, "keypoints", (2,))
-    scale, offset = _scale_and_offset(image_size, value_range)
+    scale, offset = normalization(image_size, value_range)
     return keypoints * scale + offset
-
-
-def denormalize(keypoints, image_size, value_range: tuple[float, float] = (-1.0, 1.0)) -> np.ndarray:
-    """Inverse of :func:`normalize`: normalized ``(..., 2)`` back to pixels."""
-    keypoints = as_array(keypoints, "keypoints", (2,))
-    scale, offset = _scale_and_offset(image_size, value_range)
-    return (keypoints - offset) / scale
-
-
-def flip_left_right(keypoints, image_width: int, permutation: Sequence[int] | None = None) -> np.ndarray:
-    """Keypoints ``(..., N, 2)`` of an image mirrored left-right (``u -> W - 1 - u``).
-
-    Args:
-        image_width: ``W`` in pixels.
-        permutation: optional reordering applied after mirroring so that semantic names stay
-            right (e.g. swap left/right eyes): ``output[..., i, :] = mirrored[..., permutation[i], :]``.
-    """
-    keypoints = as_array(keypoints, "keypoints", (2,))
-    flipped = keypoints.copy()
-    flipped[..., 0] = image_width - 1.0 - keypoints[..., 0]
-    if permutation is None:
-        return flipped
-    permutation = np.asarray(permutation)
-    count = keypoints.shape[-2] if keypoints.ndim >= 2 else 0
-    if (permutation.shape != (count,) or not np.issubdtype(permutation.dtype, np.integer)
-            or sorted(permutation.tolist()) != list(range(count))):
-        raise ValueError(f"permutation: expected a permutation of range({count}), got {permutation.tolist()}")
-    return flipped[..., permutation, :]

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.backend import keypoints as keypoints_backend
 from paz6d.backend.farthest_points import farthest_point_sampling
 from paz6d.backend.files import finite_or_none, null_non_finite, read_cache, save_npz_atomically
 from paz6d.backend.transform import apply, compose, invert
@@ -111,10 +112,11 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
     size = float(settings["input_size"])
     stride = int(settings["downsample"])
     grid = kp.cell_centres(int(size) // stride, int(size) // stride, stride)
-    to_unit = tf.constant([[2.0 / size, 0.0, 1.0 / size - 1.0], [0.0, 2.0 / size, 1.0 / size - 1.0], [0.0, 0.0, 1.0]])
+    scale, offset = (terms.astype(np.float32) for terms in keypoints_backend.normalization((size, size)))
+    to_unit = tf.constant([[scale[0], 0.0, offset[0]], [0.0, scale[1], offset[1]], [0.0, 0.0, 1.0]], tf.float32)
 
-    def normalised(uv):
-        return uv * (2.0 / size) + (1.0 / size - 1.0)  # pixels -> [-1, 1], as paz6d.backend.keypoints.normalize
+    def normalised(uv):  # pixels -> [-1, 1]
+        return uv * scale + offset
 
     sigma = float(stride)  # one feature cell
 

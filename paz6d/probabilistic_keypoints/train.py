@@ -31,6 +31,7 @@ import numpy as np
 
 from evaluation.calibration import ellipse_coverage, mahalanobis_squared, plot_calibration
 from evaluation.pose_errors import add_error, rotation_error_deg, translation_error
+from paz6d.backend import keypoints as keypoints_backend
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
 from paz6d.training.precision import resolve_precision
 from paz6d.keypointnet.keypoints import triangulate_keypoints
@@ -92,9 +93,10 @@ def _loss_function(settings: dict, keypoints_model: np.ndarray, object_diameter:
     stride = int(settings["downsample"])
     grid = kp.cell_centres(int(size) // stride, int(size) // stride, stride)
     points = tf.constant(keypoints_model, tf.float32)
+    scale, offset = (terms.astype(np.float32) for terms in keypoints_backend.normalization((size, size)))
 
-    def normalised(uv):
-        return uv * (2.0 / size) + (1.0 / size - 1.0)
+    def normalised(uv):  # pixels -> [-1, 1]
+        return uv * scale + offset
 
     def loss_fn(model, batch):
         outputs = model(batch["images"], training=True)
