@@ -329,8 +329,8 @@ def output_case(world: cases.World, rng: random.Random, number: int):
         if target == "{case}/link":
             setup = cases._symlink(rng.choice(["{world}/runs", "{world}/bop", "{case}"]), "link")
         argv = cases.replace_flag(base, "--out", target)
-    return cases.Case(f"fuzz-{number}-output-{' '.join(argv[:2])}-{argv[argv.index('--out') + 1] if '--out' in argv else ''}",
-                      argv, setup)
+    target = argv[argv.index("--out") + 1] if "--out" in argv else ""
+    return cases.Case(f"fuzz-{number}-output-{' '.join(argv[:2])}-{target}", argv, setup)
 
 
 #: The fixtures of the ``sample`` kind: ``(fixture folder, file to mutate, reader of every sample)``.
