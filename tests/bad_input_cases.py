@@ -831,7 +831,7 @@ def evaluate_voc_cases() -> list[Case]:
         "annotation-not-utf8": ("--annotations", "{case}/ann", ("ann/a.txt", NOT_UTF8), "a.txt"),
         "annotation-nan-box": ("--annotations", "{case}/ann", ("ann/a.txt", "box nan 10 30 30\n"), "a.txt"),
         "annotation-xml-deep": ("--annotations", "{case}/ann", ("ann/a.xml", "<a>" * 100_000 + "</a>" * 100_000),
-                                "b.txt"),  # well-formed, so no ground truth for the detections of image b
+                                "a.xml"),  # well-formed, but its root is <a>, not a VOC <annotation>
         "detections-missing": ("--detections", "{case}/none", None, "none"),
         "detection-bad-score": ("--detections", "{case}/det", ("det/a.txt", "box high 1 2 3 4\n"), "a.txt"),
         "detection-short": ("--detections", "{case}/det", ("det/a.txt", "box 0.5 1 2\n"), "a.txt"),

@@ -55,6 +55,7 @@ def test_a_benchmark_stage_runs_in_a_spawned_process_and_leaves_its_marker(tmp_p
 
     (tmp_path / "lmo" / "models").mkdir(parents=True)
     (tmp_path / "lmo" / "models" / "obj_000001.ply").write_text("ply\n")
+    (tmp_path / "lmo" / "test").mkdir()
     settings = BenchmarkSettings(images=2, backgrounds=2, detector_steps=1, aae_steps=1, aae_in_plane=1,
                                  keypointnet_steps=1, keypointnet_views=1, detector_input_size=64)
     job = Benchmark(out=tmp_path / "bench", lmo=tmp_path / "lmo", settings=settings, progress=False, jobs=2)

@@ -62,7 +62,7 @@ def test_folder_with_both_files(tmp_path):
     (lambda lines: lines[:4] + [lines[4].replace(",4,0,0,0,0,0,2,0", ",4,0,0,x,0,0,2,0")] + lines[5:],
      r"fer2013new\.csv, line 4, field disgust: expected a vote count \(integer >= 0\), got 'x'"),
     (lambda lines: lines[:2] + [lines[2].replace(",10,", ",-1,")] + lines[3:],
-     r"line 2, field happiness: expected a vote count >= 0, got -1"),
+     r"line 2, field happiness: expected a vote count in 0..1000, got .-1."),
     (lambda lines: lines[:1] + [lines[1].replace("contempt", "contempts")] + lines[2:], r"expected the FERPlus header"),
     (lambda lines: lines[:2] + ["Training,fer0000000.png,1,2"] + lines[3:], r"line 2: expected 12 fields, got 4"),
 ])
