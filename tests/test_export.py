@@ -112,6 +112,23 @@ def test_export_command_writes_files_and_the_differences(aae_run, tmp_path, caps
     assert "tflite: " in capsys.readouterr().out
 
 
+def test_a_bfloat16_network_exports_as_its_float32_copy(tmp_path):
+    from paz6d.aae.model import build_encoder
+    from paz6d.export.command import TOLERANCE, check_exported
+    from paz6d.export.formats import export, load_exported
+    from paz6d.export.networks import INPUT_RANGES, Network, float32_copy
+
+    encoder = build_encoder(16, 8, filters=(8, 16), compute_dtype="bfloat16")
+    assert {layer.compute_dtype for layer in encoder.layers} >= {"bfloat16"}
+    copy = float32_copy(encoder)
+    assert {layer.compute_dtype for layer in copy.layers} == {"float32"} and float32_copy(copy) is copy
+    crops = np.random.default_rng(0).uniform(0, 1, (4, 16, 16, 3)).astype(np.float32)
+    np.testing.assert_allclose(copy(crops), encoder(crops), rtol=0.05, atol=0.05)  # bfloat16 rounding only
+    network = Network("aae", copy, (16, 16, 3), INPUT_RANGES["aae"], "encode")
+    found = check_exported(network, load_exported(export(copy, tmp_path, "tflite", tmp_path), "tflite"), 20, seed=0)
+    assert max(value["scaled"] for value in found.values()) < TOLERANCE
+
+
 def test_a_failing_comparison_is_reported(aae_run, tmp_path, monkeypatch, capsys):
     """An exported model whose outputs are off fails the command, and export.json says by how much."""
     from paz6d.export import formats

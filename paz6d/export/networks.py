@@ -97,4 +97,22 @@ def network_of(run_dir: str | Path) -> Network:
     elif method == "segmentation":
         model = keras.Model(model.input, keras.layers.Activation("sigmoid")(model.output), name="segmenter")
     shape = tuple(input_size if side is None else int(side) for side in model.input_shape[1:])
-    return Network(method, model, shape, INPUT_RANGES[method], STEP_NAMES.get(method, "predict"))
+    return Network(method, float32_copy(model), shape, INPUT_RANGES[method], STEP_NAMES.get(method, "predict"))
+
+
+def float32_copy(model):
+    """``model`` when every layer computes in float32, else a copy of it whose layers all compute in float32,
+    with the same weights. A network trained with bfloat16 compute (the AAE's ``precision``) exports this way:
+    TFLite has no bfloat16 kernels, and the copy's outputs differ from the bfloat16 network's only by its
+    rounding."""
+    from paz6d.backend.tensorflow_guard import import_keras
+
+    if all(getattr(layer, "compute_dtype", "float32") == "float32" for layer in model.layers):
+        return model
+
+    def as_float32(layer):
+        return layer.__class__.from_config({**layer.get_config(), "dtype": "float32"})
+
+    copy = import_keras().models.clone_model(model, clone_function=as_float32)
+    copy.set_weights(model.get_weights())
+    return copy
