@@ -6,7 +6,8 @@ From the 8 LM-O meshes (``<lmo>/models``) only:
    (:mod:`paz6d.synthesis.photo_backgrounds`);
 2. ``synthetic``: ``paz6d generate`` of floating multi-object scenes over those collages at LM-O's camera,
    distances and viewpoints (the settings of ``docs/ssd.md``'s commands);
-3. ``detector``: ``paz6d train ssd`` (quick network) -> ``DIR/detector/``;
+3. ``detector``: ``paz6d train ssd`` (the light network on the settings' ``detector_backbone``: EfficientNet-Lite0
+   pretrained on ImageNet in the quick sizes, its own body in the full ones) -> ``DIR/detector/``;
 4. ``pose/obj_XXXXXX``: one pose model per object (AAE by default, KeypointNet with ``method="keypointnet"``
    or ``"keypointnet_robust"``, and per object with ``object_methods``) -> ``DIR/pose/obj_XXXXXX/``
    (KeypointNet: ``DIR/pose_<method>/obj_XXXXXX/``); the AAE also trains on crops of the synthetic scenes
