@@ -42,6 +42,9 @@ class LmoOptions:
     detector_backbone: str | None = option(None, "the detector's body: efficientnet-lite0 (pretrained on ImageNet, "
                                                  "docs/backbones.md) or none (the light network from scratch) "
                                                  "(default: the sizes' own)", choices=BACKBONES)
+    neutral_distractors: float | None = option(None, "share of the synthetic images' distractors coloured white "
+                                                     "to mid grey, hard negatives for the white objects (default: "
+                                                     "the sizes' own, 0)")
     jobs: int = option(2, "pose models trained side by side, each in its own process with its share of the CPU "
                           "cores (measured in docs/real_photos.md)")
     progress: bool = option(True, "progress bars")
@@ -72,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
                         progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
                         aae_lr_drop_steps=options.aae_lr_drop_steps, aae_crop_box=options.aae_crop_box,
-                        detector_backbone=options.detector_backbone,
+                        detector_backbone=options.detector_backbone, neutral_distractors=options.neutral_distractors,
                         object_methods=parse_object_methods(options.object_method), jobs=options.jobs)
         report = run_benchmark(job)
     print(f"wrote {Path(options.out) / 'report.json'} and {Path(options.out) / 'report.md'} "

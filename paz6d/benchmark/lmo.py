@@ -46,7 +46,7 @@ import numpy as np
 
 from paz6d.aae.config import check_crop_box
 from paz6d.abstract import Box2D, Pose6D
-from paz6d.backend.checks import is_whole_number
+from paz6d.backend.checks import is_whole_number, number_field
 from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
 from paz6d.backend.viewpoints import ViewpointRange
 from paz6d.benchmark.parallel import run_in_processes, threads_per_job
@@ -99,6 +99,8 @@ class BenchmarkSettings:
         aae_crop_box: the box those scene crops are cut around: ``"obj"`` (the whole object's) or ``"visib"``
             (its visible part's, as the benchmark's boxes are at test time).
         validation_images: held-out synthetic images the pose models are also scored on.
+        neutral_distractors: share of the synthetic images' distractor primitives coloured white to mid grey
+            (hard negatives for the white objects: ``paz6d generate --neutral-distractors``).
         workers: rendering processes.
     """
 
@@ -119,9 +121,11 @@ class BenchmarkSettings:
     validation_images: int = 60
     aae_crop_box: str = "obj"
     detector_backbone: str = "none"
+    neutral_distractors: float = 0.0
 
     def __post_init__(self):
         check_crop_box(self.aae_crop_box)
+        number_field(asdict(self), "neutral_distractors", "settings", minimum=0, maximum=1)
         if self.detector_backbone not in BACKBONES:
             raise ValueError(f"detector_backbone: expected one of {BACKBONES}, got {self.detector_backbone!r}")
 
@@ -159,6 +163,7 @@ class Benchmark:
     aae_lr_drop_steps: int | None = None  # default: the settings'
     aae_crop_box: str | None = None  # default: the settings'
     detector_backbone: str | None = None  # default: the settings'
+    neutral_distractors: float | None = None  # default: the settings'
     object_methods: dict[int, str] = field(default_factory=dict)
     jobs: int = 1  # pose models trained side by side, each in its own process
 
@@ -191,6 +196,8 @@ class Benchmark:
             self.settings = replace(self.settings, aae_crop_box=self.aae_crop_box)
         if self.detector_backbone is not None:
             self.settings = replace(self.settings, detector_backbone=self.detector_backbone)
+        if self.neutral_distractors is not None:
+            self.settings = replace(self.settings, neutral_distractors=self.neutral_distractors)
         if self.settings.aae_lr_drop_steps > self.settings.aae_steps:
             raise ValueError(f"aae_lr_drop_steps: expected at most aae_steps ({self.settings.aae_steps}), got "
                              f"{self.settings.aae_lr_drop_steps}")
@@ -264,6 +271,7 @@ def generation_config(job: Benchmark):
                             inplane_degrees=30.0,
                             objects_per_image=(min(4, len(job.objects)), min(8, len(job.objects))),
                             distance=(0.75, 1.35), distractors=8, occluder_probability=0.3,
+                            neutral_distractors=job.settings.neutral_distractors,
                             backgrounds=job.out / "backgrounds", rgb_format="jpg")
 
 
@@ -473,7 +481,8 @@ def stage_done(job: Benchmark, name: str, outputs: list[Path]) -> bool:
 
 #: settings newer than some benchmark folders, with the value the versions before them used
 _EARLIER_SETTINGS = {"aae_lr_drop_steps": 0, "keypointnet_robust_steps": None, "keypointnet_robust_views": None,
-                     "validation_images": 60, "aae_crop_box": "obj", "detector_backbone": "none"}
+                     "validation_images": 60, "aae_crop_box": "obj", "detector_backbone": "none",
+                     "neutral_distractors": 0.0}
 
 
 def _check_settings(job: Benchmark) -> None:
