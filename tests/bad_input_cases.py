@@ -1067,6 +1067,7 @@ def train_cases() -> list[Case]:
         "--method": [(("pvnet",), "")],
         "--aae-crop-box": [(("whole",), "whole")],
         "--detector-backbone": [(("resnet50",), "resnet50")],
+        "--neutral-distractors": [(("1.5",), "1.5"), (("nan",), "nan")],
         "--out": [(("{world}/results.csv",), "results.csv")],
     })
     return found

@@ -321,7 +321,7 @@ def test_a_folder_written_before_the_learning_rate_drop_resumes_with_none(mocked
     path = tmp_path / "bench" / "benchmark.json"
     stored = json.loads(path.read_text())
     for key in ("aae_lr_drop_steps", "keypointnet_robust_steps", "keypointnet_robust_views", "validation_images",
-                "aae_crop_box", "detector_backbone"):
+                "aae_crop_box", "detector_backbone", "neutral_distractors"):
         del stored["settings"][key]  # as written by the versions before these settings
     path.write_text(json.dumps(stored))
     calls.clear()
@@ -340,6 +340,12 @@ def test_quick_and_full_sizes_and_the_generator_settings(tmp_path, shared_data):
     config = lmo.generation_config(job)
     assert config.backgrounds == tmp_path / "b" / "backgrounds" and config.num_images == lmo.QUICK.images
     assert config.intrinsics == lmo.LMO_INTRINSICS and config.mesh_scale == 0.001 and len(config.meshes) == 8
+    assert config.neutral_distractors == lmo.QUICK.neutral_distractors
+    white = Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo", quick=True, neutral_distractors=0.3)
+    assert lmo.generation_config(white).neutral_distractors == 0.3 == white.settings.neutral_distractors
+    for bad in (1.5, -0.1, float("nan"), "0.3"):
+        with pytest.raises(ValueError, match="neutral_distractors"):
+            Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo", quick=True, neutral_distractors=bad)
     assert Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo").settings == lmo.FULL
 
 
@@ -388,6 +394,9 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--detector-backbone",
                  "none", "--quick", "--no-progress"]) == 0
     assert jobs[4].settings == replace(lmo.QUICK, detector_backbone="none")
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--neutral-distractors",
+                 "0.25", "--quick", "--no-progress"]) == 0
+    assert jobs[5].settings == replace(lmo.QUICK, neutral_distractors=0.25)
     for bad in ("5", "x=aae", "5=aae 5=keypointnet"):
         assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
                      *bad.split()]) == 2

@@ -46,7 +46,7 @@ import numpy as np
 
 from paz6d.aae.config import check_crop_box
 from paz6d.abstract import Box2D, Pose6D
-from paz6d.backend.checks import is_whole_number, number_field
+from paz6d.backend.checks import is_whole_number
 from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
 from paz6d.backend.viewpoints import ViewpointRange
 from paz6d.benchmark.parallel import run_in_processes, threads_per_job
@@ -125,7 +125,9 @@ class BenchmarkSettings:
 
     def __post_init__(self):
         check_crop_box(self.aae_crop_box)
-        number_field(asdict(self), "neutral_distractors", "settings", minimum=0, maximum=1)
+        share = self.neutral_distractors
+        if isinstance(share, bool) or not isinstance(share, (int, float)) or not 0 <= share <= 1:
+            raise ValueError(f"neutral_distractors: expected a share in [0, 1], got {share!r:.40}")
         if self.detector_backbone not in BACKBONES:
             raise ValueError(f"detector_backbone: expected one of {BACKBONES}, got {self.detector_backbone!r}")
 
