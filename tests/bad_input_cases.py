@@ -976,6 +976,7 @@ def train_cases() -> list[Case]:
         "--pair-fraction": [(("2",), ""), (("nan",), ""), (("-0.5",), "")],
         "--crop-box": [(("whole",), "whole")],
         "--precision": [(("half",), "half")],
+        "--encoder-backbone": [(("resnet50",), "resnet50")],
         "--seed": [(("-1",), "")],
         "--config": [(("huge",), "")],
         "--out": [(("{world}/results.csv",), "results.csv"), (("/dev/null",), "/dev/null")],
@@ -1068,6 +1069,7 @@ def train_cases() -> list[Case]:
         "--aae-crop-box": [(("whole",), "whole")],
         "--detector-backbone": [(("resnet50",), "resnet50")],
         "--neutral-distractors": [(("1.5",), "1.5"), (("nan",), "nan")],
+        "--aae-encoder-backbone": [(("resnet50",), "resnet50")],
         "--out": [(("{world}/results.csv",), "results.csv")],
     })
     return found

@@ -115,3 +115,29 @@ def test_bfloat16_body_keeps_the_code_and_reconstruction_float32(tmp_path):
     np.testing.assert_array_equal(np.asarray(loaded(x)), np.asarray(output))
     with pytest.raises(ValueError, match="compute_dtype: expected one of"):
         aae.build_encoder(**TINY, compute_dtype="float16")
+
+
+def test_pretrained_encoder_reads_the_frozen_imagenet_stride_16_map_of_the_upsampled_crop(tmp_path):
+    """The encoder's body equals EfficientNet-Lite0's stride-16 features of the crop at twice its size
+    (resized and scaled to the network's range outside the model, as an oracle), stays frozen, and the
+    whole autoencoder round-trips through .keras in safe mode."""
+    import tensorflow as tf
+
+    from paz6d.backbones import efficientnet_lite0 as lite0
+
+    model = aae.build_autoencoder(32, 8, (4, 8), 3, backbone="efficientnet-lite0")
+    encoder = aae.encoder_of(model)
+    assert encoder.output.shape[-1] == 8
+    body = encoder.get_layer("encoder_backbone_stride16")
+    assert not body.trainable_weights and body.output.shape[1:] == (4, 4, 112)  # 64 px / 16, 112 channels
+    trainable = {weight.path.split("/")[0] for weight in model.trainable_weights}
+    assert not any(name.startswith(("stem", "block")) for name in trainable)
+    crops = np.random.default_rng(2).random((2, 32, 32, 3), dtype=np.float32)
+    upsampled = tf.image.resize(crops * 255.0, (64, 64), method="bilinear").numpy()
+    expected = lite0.build_features((64, 64, 3))(lite0.preprocess(upsampled))[1]
+    inside = tf.keras.Model(encoder.input, encoder.get_layer("encoder_flatten").input)
+    np.testing.assert_allclose(np.asarray(inside(crops)), np.asarray(expected), atol=2e-4)
+    loaded = aae.load_model(aae.save_model(model, tmp_path / "model.keras"))
+    np.testing.assert_array_equal(np.asarray(loaded(crops)), np.asarray(model(crops)))
+    with pytest.raises(ValueError, match="backbone: expected one of"):
+        aae.build_encoder(**TINY, backbone="resnet50")

@@ -434,6 +434,38 @@ def test_precision_is_resolved_once_recorded_and_kept_on_resume(toy_run, monkeyp
         replace(TOY, precision="half")
 
 
+def test_pretrained_encoder_trains_records_its_body_and_loads_as_a_pose_model(toy_run):
+    """``encoder_backbone="efficientnet-lite0"``: the loss falls, config.json records the body (runs from before
+    the setting read as ``"none"``), and the run answers as an ImplicitPose6D with its codebook."""
+    from paz6d.aae.config import AAEConfig, AAETraining
+    from paz6d.aae.model import encoder_of, load_model
+    from paz6d.pipelines import ImplicitPose6D
+
+    root, mesh, _ = toy_run
+    run = root / "pretrained"
+    run.mkdir()
+    for name in ("object.npz", "views.npz"):  # cached: no rendering
+        shutil.copy(root / "run" / name, run / name)
+    summary = train_aae(mesh, run, replace(TOY, encoder_backbone="efficientnet-lite0"), mesh_scale=0.001, seed=3,
+                        workers=0, progress=False)
+    losses = _losses(run)
+    assert summary["codebook_size"] == 24 * 6 and losses[-1] < 0.8 * losses[0]
+    stored = json.loads((run / "config.json").read_text())["config"]
+    assert stored["encoder_backbone"] == "efficientnet-lite0"
+    assert encoder_of(load_model(run / "model.keras")).get_layer("encoder_backbone_stride16") is not None
+    legacy = {key: value for key, value in stored.items() if key != "encoder_backbone"}
+    assert AAEConfig.from_dict(legacy).encoder_backbone == "none"
+    assert AAETraining(out=root / "x", mesh=mesh, encoder_backbone="efficientnet-lite0").model_config \
+        .encoder_backbone == "efficientnet-lite0"
+    assert AAETraining(out=root / "x", mesh=mesh).model_config.encoder_backbone == "none"
+    with pytest.raises(ValueError, match="AAEConfig.encoder_backbone: expected one of"):
+        replace(TOY, encoder_backbone="resnet50")
+    views = np.load(run / "views.npz")
+    estimator = ImplicitPose6D(run, Camera(views["K"], TOY.render_size, TOY.render_size))
+    pose = estimator(views["rgb"][1], (8.0, 9.0, 30.0, 31.0))
+    assert isinstance(pose, Pose6D) and np.isfinite(pose.to_matrix()).all()
+
+
 def test_config_json_round_trip_and_unknown_fields_at_either_level_are_named():
     from dataclasses import asdict
 

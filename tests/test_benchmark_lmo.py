@@ -286,11 +286,16 @@ def test_aae_learning_rate_drop_reaches_the_aae_and_folders_from_before_it_resum
 
     seen = {}
     monkeypatch.setattr(paz6d.aae.train, "train_aae", lambda mesh, run_dir, config, **kwargs: seen.update(
-        steps=config.steps, lr_drop_steps=config.lr_drop_steps, crop_box=kwargs["crop_box"]))
+        steps=config.steps, lr_drop_steps=config.lr_drop_steps, crop_box=kwargs["crop_box"],
+        encoder=config.encoder_backbone))
     lmo._stage_pose(job, 5)
-    assert seen == {"steps": 4, "lr_drop_steps": 3, "crop_box": TINY.aae_crop_box}
+    assert seen == {"steps": 4, "lr_drop_steps": 3, "crop_box": TINY.aae_crop_box, "encoder": "none"}
     lmo._stage_pose(replace(job, settings=replace(TINY, aae_crop_box="visib")), 5)
     assert seen["crop_box"] == "visib"
+    lmo._stage_pose(replace(job, settings=replace(TINY, aae_encoder_backbone="efficientnet-lite0")), 5)
+    assert seen["encoder"] == "efficientnet-lite0"
+    with pytest.raises(ValueError, match="aae_encoder_backbone: expected one of"):
+        replace(TINY, aae_encoder_backbone="resnet50")
     with pytest.raises(ValueError, match="crop_box: expected one of"):
         replace(TINY, aae_crop_box="whole")
     for bad, match in ((-1, "expected 0 or a number of steps"), (2.5, "expected 0 or a number of steps"),
@@ -321,7 +326,7 @@ def test_a_folder_written_before_the_learning_rate_drop_resumes_with_none(mocked
     path = tmp_path / "bench" / "benchmark.json"
     stored = json.loads(path.read_text())
     for key in ("aae_lr_drop_steps", "keypointnet_robust_steps", "keypointnet_robust_views", "validation_images",
-                "aae_crop_box", "detector_backbone", "neutral_distractors"):
+                "aae_crop_box", "detector_backbone", "neutral_distractors", "aae_encoder_backbone"):
         del stored["settings"][key]  # as written by the versions before these settings
     path.write_text(json.dumps(stored))
     calls.clear()
@@ -397,6 +402,9 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--neutral-distractors",
                  "0.25", "--quick", "--no-progress"]) == 0
     assert jobs[5].settings == replace(lmo.QUICK, neutral_distractors=0.25)
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-encoder-backbone",
+                 "efficientnet-lite0", "--quick", "--no-progress"]) == 0
+    assert jobs[6].settings == replace(lmo.QUICK, aae_encoder_backbone="efficientnet-lite0")
     for bad in ("5", "x=aae", "5=aae 5=keypointnet"):
         assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
                      *bad.split()]) == 2

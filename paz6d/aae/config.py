@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+from paz6d.backbones import BACKBONES, check_backbone
 from paz6d.backend.checks import is_whole_number, unknown_fields
 from paz6d.cli_options import option
 from paz6d.datasets.bop.fields import BOX_FIELDS, box_field
@@ -104,6 +105,9 @@ class AAEConfig:
             natively, :mod:`paz6d.training.precision`). A new run directory records the resolved value;
             runs from before the setting are float32.
         augmentation: input augmentation strengths.
+        encoder_backbone: the encoder's body: ``"none"`` (strided convolutions trained from scratch, the paper's)
+            or ``"efficientnet-lite0"`` (the ImageNet network of :mod:`paz6d.backbones`, frozen, read at twice
+            the crop size up to its stride-16 map; :func:`paz6d.aae.model.build_encoder`).
         checkpoint_every / sample_every / log_every: Trainer intervals in steps.
     """
 
@@ -124,6 +128,7 @@ class AAEConfig:
     bootstrap_fraction: float = 0.25
     precision: str = "float32"
     augmentation: Augmentation = field(default_factory=Augmentation)
+    encoder_backbone: str = "none"
     checkpoint_every: int = 500
     sample_every: int = 500
     log_every: int = 25
@@ -135,6 +140,7 @@ class AAEConfig:
         if not 0.0 < self.lr_drop_factor <= 1.0:
             raise ValueError(f"AAEConfig.lr_drop_factor: expected a factor in (0, 1], got {self.lr_drop_factor!r}")
         precision_setting.check_setting(self.precision, "AAEConfig.precision")
+        check_backbone(self.encoder_backbone, "AAEConfig.encoder_backbone")
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -205,6 +211,9 @@ class AAETraining:
     precision: str | None = option(None, "compute dtype of the convolutions (default: the config's, auto: bfloat16 "
                                          "on CPUs that compute it natively, else float32); a resumed run keeps its "
                                          "own", choices=precision_setting.SETTINGS)
+    encoder_backbone: str | None = option(None, "the encoder's body: none (its own convolutions, trained from "
+                                                "scratch) or efficientnet-lite0 (pretrained on ImageNet, frozen; "
+                                                "docs/aae.md) (default: the config's, none)", choices=BACKBONES)
     seed: int = option(0, "seed of the model initialisation and of the data stream")
     mesh_scale: float | None = option(None, "mesh units to metres (default: 1 with --mesh, --dataset-mesh or a "
                                             "YCB-Video model; 0.001 for BOP models, which are millimetres)")
@@ -228,8 +237,10 @@ class AAETraining:
 
     @property
     def model_config(self) -> AAEConfig:
-        """The preset :attr:`config` with :attr:`steps` and :attr:`precision` applied."""
+        """The preset :attr:`config` with :attr:`steps`, :attr:`precision` and :attr:`encoder_backbone` applied."""
         preset = CONFIGS[self.config]
         if self.precision is not None:
             preset = replace(preset, precision=self.precision)
+        if self.encoder_backbone is not None:
+            preset = replace(preset, encoder_backbone=self.encoder_backbone)
         return preset if self.steps is None else replace(preset, steps=self.steps)

@@ -20,12 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.backbones import check_backbone
 from paz6d.backend.square_crop import crop_square, square_window
 from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.tensorflow_guard import import_keras, load_keras_model
 from paz6d.training.precision import body_policy
 
 ENCODER_NAME = "encoder"
+#: The EfficientNet-Lite0 map a pretrained encoder reads (:data:`paz6d.backbones.efficientnet_lite0.FEATURES`).
+STRIDE_16_FEATURES = "block10_out"
 DECODER_NAME = "decoder"
 
 
@@ -50,26 +53,53 @@ def _activate(keras, x, batch_norm: bool, name: str, body: str):
 
 
 def build_encoder(input_size: int = 64, latent_size: int = 64, filters: Sequence[int] = (32, 64, 64, 128),
-                  kernel_size: int = 5, batch_norm: bool = False, compute_dtype: str = "float32"):
+                  kernel_size: int = 5, batch_norm: bool = False, compute_dtype: str = "float32",
+                  backbone: str = "none"):
     """Encoder ``(B, S, S, 3) -> (B, latent_size)``: strided convolutions (ReLU, optional batch
     normalisation), then a linear dense layer.
 
     The paper's architecture is ``input_size=128, latent_size=128, filters=(128, 256, 256, 512)``, 5×5 kernels.
     With ``compute_dtype="bfloat16"`` the convolutions compute in bfloat16 (float32 weights); the latent
     code, which the codebook compares by cosine similarity, is always float32.
+
+    With ``backbone="efficientnet-lite0"`` the convolutions are the ImageNet EfficientNet-Lite0 instead
+    (:mod:`paz6d.backbones`): the crop is resized to ``2 S`` (bilinear), scaled to the network's input range
+    and read up to its stride-16 map (``S / 8`` squared positions, 112 channels), which stays frozen
+    (float32, ImageNet batch-norm statistics); only the dense layer to the code trains. ``filters``,
+    ``kernel_size`` and ``batch_norm`` then shape the decoder only.
     """
     _check_architecture(input_size, latent_size, filters, kernel_size)
-    body = body_policy(compute_dtype)
+    check_backbone(backbone)
     keras = import_keras()
     inputs = keras.Input((input_size, input_size, 3), name="crop")
-    x = inputs
-    for index, channels in enumerate(filters):
-        x = keras.layers.Conv2D(int(channels), kernel_size, strides=2, padding="same", use_bias=not batch_norm,
-                                name=f"encoder_conv{index}", dtype=body)(x)
-        x = _activate(keras, x, batch_norm, f"encoder_conv{index}", body)
+    if backbone == "none":
+        body = body_policy(compute_dtype)
+        x = inputs
+        for index, channels in enumerate(filters):
+            x = keras.layers.Conv2D(int(channels), kernel_size, strides=2, padding="same", use_bias=not batch_norm,
+                                    name=f"encoder_conv{index}", dtype=body)(x)
+            x = _activate(keras, x, batch_norm, f"encoder_conv{index}", body)
+    else:
+        x = _pretrained_features(keras, inputs, int(input_size))
+        body = "float32"
     x = keras.layers.Flatten(name="encoder_flatten", dtype=body)(x)
     code = keras.layers.Dense(int(latent_size), name="latent", dtype="float32")(x)
     return keras.Model(inputs, code, name=ENCODER_NAME)
+
+
+def _pretrained_features(keras, crops, input_size: int):
+    """The frozen EfficientNet-Lite0 stride-16 map of ``crops`` (RGB in [0, 1]) read at twice their size."""
+    from paz6d.backbones import efficientnet_lite0 as lite0
+
+    side = 2 * input_size
+    x = keras.layers.Resizing(side, side, interpolation="bilinear", name="encoder_upsample")(crops)
+    x = keras.layers.Rescaling(255.0 / lite0.PIXEL_SCALE, offset=-lite0.PIXEL_MEAN / lite0.PIXEL_SCALE,
+                               name="encoder_preprocess")(x)
+    features = lite0.build_features((side, side, 3), frozen_stages=len(lite0.STAGES), name="encoder_backbone")
+    stride_16 = [name for name, stride, _ in lite0.FEATURES].index(STRIDE_16_FEATURES)
+    body = keras.Model(features.input, features.outputs[stride_16], name="encoder_backbone_stride16")
+    body.trainable = False
+    return body(x, training=False)
 
 
 def build_decoder(input_size: int = 64, latent_size: int = 64, filters: Sequence[int] = (32, 64, 64, 128),
@@ -95,12 +125,13 @@ def build_decoder(input_size: int = 64, latent_size: int = 64, filters: Sequence
 
 
 def build_autoencoder(input_size: int = 64, latent_size: int = 64, filters: Sequence[int] = (32, 64, 64, 128),
-                      kernel_size: int = 5, batch_norm: bool = False, compute_dtype: str = "float32"):
+                      kernel_size: int = 5, batch_norm: bool = False, compute_dtype: str = "float32",
+                      backbone: str = "none"):
     """Autoencoder ``(B, S, S, 3) -> (B, S, S, 3)`` made of the nested models ``encoder`` and ``decoder``
     (reach them with :func:`encoder_of` / ``model.get_layer("decoder")``); ``compute_dtype`` as in
-    :func:`build_encoder`."""
+    :func:`build_encoder` (and ``backbone``, the encoder's body)."""
     keras = import_keras()
-    encoder = build_encoder(input_size, latent_size, filters, kernel_size, batch_norm, compute_dtype)
+    encoder = build_encoder(input_size, latent_size, filters, kernel_size, batch_norm, compute_dtype, backbone)
     decoder = build_decoder(input_size, latent_size, filters, kernel_size, batch_norm, compute_dtype)
     inputs = keras.Input((input_size, input_size, 3), name="augmented_crop")
     return keras.Model(inputs, decoder(encoder(inputs)), name="augmented_autoencoder")

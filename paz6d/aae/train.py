@@ -188,7 +188,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     loader_speed = measure_loader(sampler, config.batch_size)
     keras.utils.set_random_seed(seed)
     model = build_autoencoder(config.crop_size, config.latent_size, config.filters, config.kernel_size,
-                              config.batch_norm, config.precision)
+                              config.batch_norm, config.precision, config.encoder_backbone)
     optimizer = keras.optimizers.Adam(config.learning_rate)
 
     def loss_fn(model, batch):

@@ -45,6 +45,9 @@ class LmoOptions:
     neutral_distractors: float | None = option(None, "share of the synthetic images' distractors coloured white "
                                                      "to mid grey, hard negatives for the white objects (default: "
                                                      "the sizes' own, 0)")
+    aae_encoder_backbone: str | None = option(None, "the AAEs' encoder body: none (trained from scratch) or "
+                                                    "efficientnet-lite0 (pretrained on ImageNet, frozen; "
+                                                    "docs/aae.md) (default: the sizes' own)", choices=BACKBONES)
     jobs: int = option(2, "pose models trained side by side, each in its own process with its share of the CPU "
                           "cores (measured in docs/real_photos.md)")
     progress: bool = option(True, "progress bars")
@@ -76,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
                         progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
                         aae_lr_drop_steps=options.aae_lr_drop_steps, aae_crop_box=options.aae_crop_box,
                         detector_backbone=options.detector_backbone, neutral_distractors=options.neutral_distractors,
+                        aae_encoder_backbone=options.aae_encoder_backbone,
                         object_methods=parse_object_methods(options.object_method), jobs=options.jobs)
         report = run_benchmark(job)
     print(f"wrote {Path(options.out) / 'report.json'} and {Path(options.out) / 'report.md'} "

@@ -46,6 +46,7 @@ import numpy as np
 
 from paz6d.aae.config import check_crop_box
 from paz6d.abstract import Box2D, Pose6D
+from paz6d.backbones import check_backbone
 from paz6d.backend.checks import is_whole_number
 from paz6d.backend.files import load_json_object, write_json_atomically, write_text_atomically
 from paz6d.backend.viewpoints import ViewpointRange
@@ -99,6 +100,8 @@ class BenchmarkSettings:
         aae_crop_box: the box those scene crops are cut around: ``"obj"`` (the whole object's) or ``"visib"``
             (its visible part's, as the benchmark's boxes are at test time).
         validation_images: held-out synthetic images the pose models are also scored on.
+        aae_encoder_backbone: the AAEs' encoder body (``AAEConfig.encoder_backbone``): ``"none"`` or
+            ``"efficientnet-lite0"`` (pretrained, frozen).
         neutral_distractors: share of the synthetic images' distractor primitives coloured white to mid grey
             (hard negatives for the white objects: ``paz6d generate --neutral-distractors``).
         workers: rendering processes.
@@ -122,9 +125,11 @@ class BenchmarkSettings:
     aae_crop_box: str = "obj"
     detector_backbone: str = "none"
     neutral_distractors: float = 0.0
+    aae_encoder_backbone: str = "none"
 
     def __post_init__(self):
         check_crop_box(self.aae_crop_box)
+        check_backbone(self.aae_encoder_backbone, "aae_encoder_backbone")
         share = self.neutral_distractors
         if isinstance(share, bool) or not isinstance(share, (int, float)) or not 0 <= share <= 1:
             raise ValueError(f"neutral_distractors: expected a share in [0, 1], got {share!r:.40}")
@@ -166,6 +171,7 @@ class Benchmark:
     aae_crop_box: str | None = None  # default: the settings'
     detector_backbone: str | None = None  # default: the settings'
     neutral_distractors: float | None = None  # default: the settings'
+    aae_encoder_backbone: str | None = None  # default: the settings'
     object_methods: dict[int, str] = field(default_factory=dict)
     jobs: int = 1  # pose models trained side by side, each in its own process
 
@@ -200,6 +206,8 @@ class Benchmark:
             self.settings = replace(self.settings, detector_backbone=self.detector_backbone)
         if self.neutral_distractors is not None:
             self.settings = replace(self.settings, neutral_distractors=self.neutral_distractors)
+        if self.aae_encoder_backbone is not None:
+            self.settings = replace(self.settings, aae_encoder_backbone=self.aae_encoder_backbone)
         if self.settings.aae_lr_drop_steps > self.settings.aae_steps:
             raise ValueError(f"aae_lr_drop_steps: expected at most aae_steps ({self.settings.aae_steps}), got "
                              f"{self.settings.aae_lr_drop_steps}")
@@ -316,7 +324,7 @@ def _train_aae(job: Benchmark, obj_id: int) -> dict:
     # paper-sized crop shifts/scales: the boxes come from a detector or from visible parts
     config = replace(AAE_QUICK, steps=job.settings.aae_steps, in_plane=job.settings.aae_in_plane,
                      views=job.settings.aae_views, lr_drop_steps=job.settings.aae_lr_drop_steps,
-                     augmentation=Augmentation())
+                     augmentation=Augmentation(), encoder_backbone=job.settings.aae_encoder_backbone)
     crops = job.settings.scene_crops > 0
     return train_aae(job.mesh(obj_id), job.pose_dir(obj_id), config, mesh_scale=MESH_SCALE, seed=job.seed,
                      workers=job.settings.workers, progress=job.progress,
@@ -484,7 +492,7 @@ def stage_done(job: Benchmark, name: str, outputs: list[Path]) -> bool:
 #: settings newer than some benchmark folders, with the value the versions before them used
 _EARLIER_SETTINGS = {"aae_lr_drop_steps": 0, "keypointnet_robust_steps": None, "keypointnet_robust_views": None,
                      "validation_images": 60, "aae_crop_box": "obj", "detector_backbone": "none",
-                     "neutral_distractors": 0.0}
+                     "neutral_distractors": 0.0, "aae_encoder_backbone": "none"}
 
 
 def _check_settings(job: Benchmark) -> None:
