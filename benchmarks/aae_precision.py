@@ -19,15 +19,15 @@ import numpy as np
 from timing import median_seconds
 
 
-def measure(config, compute_dtype: str, repeats: int) -> dict:
-    """Median seconds of one training step and of encoding 256 crops."""
+def measure(config, compute_dtype: str, repeats: int, backbone: str = "none") -> dict:
+    """Median seconds of one training step and of encoding 256 crops (``backbone``: the encoder's body)."""
     from paz6d.backend.tensorflow_guard import import_keras, import_tensorflow
     from paz6d.aae.model import build_autoencoder, encode_function, encoder_of, reconstruction_loss
 
     tf, keras = import_tensorflow(), import_keras()
     keras.utils.set_random_seed(0)
     model = build_autoencoder(config.crop_size, config.latent_size, config.filters, config.kernel_size,
-                              config.batch_norm, compute_dtype)
+                              config.batch_norm, compute_dtype, backbone)
     optimizer = keras.optimizers.Adam(config.learning_rate)
     rng = np.random.default_rng(0)
     shape = (config.batch_size, config.crop_size, config.crop_size, 3)
