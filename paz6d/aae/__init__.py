@@ -3,7 +3,7 @@ run directory and the ``ImplicitPose6D`` pipeline. Importing this package loads 
 
 from __future__ import annotations
 
-from paz6d.aae.run_dir import AAERunDir
+from paz6d.aae.run_dir import AAERunDir, read_model
 from paz6d.method import Method, NetworkSpec
 
 
@@ -18,7 +18,6 @@ def load_network(run_dir):
     """The run's encoder (crops in 0..1 -> latent codes), the network of ``ImplicitPose6D``'s ``encode`` step
     (imports TensorFlow)."""
     from paz6d.aae.model import encoder_of
-    from paz6d.aae.run_dir import read_model
 
     return encoder_of(read_model(run_dir))
 

@@ -3,7 +3,7 @@ package loads nothing heavy; it exports the emotion classifier's record ``METHOD
 
 from __future__ import annotations
 
-from paz6d.faces.emotion_run_dir import EmotionRunDir
+from paz6d.faces.emotion_run_dir import EmotionRunDir, read_model
 from paz6d.method import Method, NetworkSpec
 
 
@@ -15,14 +15,7 @@ def load_pipeline(run_dir):
     return DetectEmotion(EmotionRunDir.model_path(EmotionRunDir.validate(run_dir)))
 
 
-def load_network(run_dir):
-    """The run's mini-Xception, which :class:`~paz6d.faces.emotion.EmotionClassifier` calls itself (imports
-    TensorFlow)."""
-    from paz6d.faces.emotion_run_dir import read_model
-
-    return read_model(run_dir)
-
-
-#: The emotion classifier's record in :mod:`paz6d.methods`.
+#: The emotion classifier's record in :mod:`paz6d.methods`; its network is the mini-Xception (grey faces in
+#: -1..1 -> class probabilities), which :class:`~paz6d.faces.emotion.EmotionClassifier` calls itself.
 METHOD = Method("emotion", "emotion", EmotionRunDir, load_pipeline, task="classification", options=(),
-                network=NetworkSpec(load_network, (-1.0, 1.0), step=None))
+                network=NetworkSpec(read_model, (-1.0, 1.0), step=None))

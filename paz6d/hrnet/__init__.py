@@ -4,7 +4,7 @@ pipeline (see docs/hrnet.md)."""
 
 from __future__ import annotations
 
-from paz6d.hrnet.run_dir import HRNetRunDir
+from paz6d.hrnet.run_dir import HRNetRunDir, read_model
 from paz6d.method import Method, NetworkSpec
 
 
@@ -20,7 +20,6 @@ def load_network(run_dir):
     ``HRNetPose6D``'s ``predict`` step (imports TensorFlow)."""
     from paz6d.backend.tensorflow_guard import import_keras
     from paz6d.hrnet.model import OUTPUT_NAME
-    from paz6d.hrnet.run_dir import read_model
 
     model = read_model(run_dir)
     return import_keras().Model(model.input, model.output[OUTPUT_NAME], name="hrnet_heatmaps")

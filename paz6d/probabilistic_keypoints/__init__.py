@@ -5,7 +5,7 @@ see docs/probabilistic_keypoints.md)."""
 from __future__ import annotations
 
 from paz6d.method import Method, NetworkSpec
-from paz6d.probabilistic_keypoints.run_dir import ProbabilisticKeypointsRunDir
+from paz6d.probabilistic_keypoints.run_dir import ProbabilisticKeypointsRunDir, read_model
 
 
 def load_pipeline(run_dir, camera=None, class_name=None):
@@ -16,14 +16,8 @@ def load_pipeline(run_dir, camera=None, class_name=None):
     return ProbabilisticKeypointPose6D(run_dir, camera, class_name=class_name)
 
 
-def load_network(run_dir):
-    """The run's whole network (crops in 0..255 -> ``uv``, ``depth``, ``probabilities``, ``cholesky``), the
-    network of ``ProbabilisticKeypointPose6D``'s ``predict`` step (imports TensorFlow)."""
-    from paz6d.probabilistic_keypoints.run_dir import read_model
-
-    return read_model(run_dir)
-
-
-#: The probabilistic keypoints' record in :mod:`paz6d.methods`.
+#: The probabilistic keypoints' record in :mod:`paz6d.methods`; its network is the whole network (crops in
+#: 0..255 -> ``uv``, ``depth``, ``probabilities``, ``cholesky``), what ``ProbabilisticKeypointPose6D``'s
+#: ``predict`` step runs.
 METHOD = Method("probabilistic-keypoints", "probabilistic-keypoints", ProbabilisticKeypointsRunDir, load_pipeline,
-                network=NetworkSpec(load_network, (0.0, 255.0)))
+                network=NetworkSpec(read_model, (0.0, 255.0)))

@@ -4,7 +4,7 @@ detection boxes), trained on ``paz6d generate`` data sets (``paz6d train segment
 from __future__ import annotations
 
 from paz6d.method import Method, NetworkSpec
-from paz6d.segmentation.run_dir import SegmentationRunDir
+from paz6d.segmentation.run_dir import SegmentationRunDir, read_model
 
 
 def load_pipeline(run_dir, threshold: float | None = None):
@@ -18,7 +18,6 @@ def load_network(run_dir):
     """The run's U-Net followed by a sigmoid (crops in 0..255 -> mask probabilities), what the ``predict`` step
     of ``SegmentInstances`` computes (imports TensorFlow)."""
     from paz6d.backend.tensorflow_guard import import_keras
-    from paz6d.segmentation.run_dir import read_model
 
     keras = import_keras()
     model, _ = read_model(run_dir)

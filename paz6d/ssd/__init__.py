@@ -6,7 +6,7 @@
 from __future__ import annotations
 
 from paz6d.method import Method, NetworkSpec
-from paz6d.ssd.run_dir import SSDRunDir
+from paz6d.ssd.run_dir import SSDRunDir, read_detector, read_model
 
 
 def load_pipeline(run_dir, score_threshold: float = 0.3, flip: bool = False):
@@ -19,15 +19,11 @@ def load_pipeline(run_dir, score_threshold: float = 0.3, flip: bool = False):
 def load_network(run_dir):
     """The run's whole network (normalised images -> ``(P, 4 + C)`` box offsets and class scores), the network
     of ``DetectSingleShot``'s ``predict`` step (imports TensorFlow)."""
-    from paz6d.ssd.run_dir import read_model
-
     return read_model(run_dir)[0]
 
 
 def training_input_size(run_dir) -> int:
     """The input side (pixels) the run's network was trained at (``detector.json``)."""
-    from paz6d.ssd.run_dir import read_detector
-
     return int(read_detector(run_dir)["priors"]["input_size"])
 
 

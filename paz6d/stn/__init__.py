@@ -4,7 +4,7 @@ a digit classifier with and without them (``paz6d train stn``; see docs/stn.md).
 from __future__ import annotations
 
 from paz6d.method import Method, NetworkSpec
-from paz6d.stn.run_dir import STNRunDir
+from paz6d.stn.run_dir import STNRunDir, read_model
 
 
 def load_pipeline(run_dir):
@@ -17,8 +17,6 @@ def load_pipeline(run_dir):
 def load_network(run_dir):
     """The run's whole network (grey canvases in 0..1 -> ``logits``, ``probabilities``, ``theta``, ``crop``),
     the network of ``ClassifyDigit``'s ``predict`` step (imports TensorFlow)."""
-    from paz6d.stn.run_dir import read_model
-
     return read_model(run_dir)[0]
 
 
