@@ -56,14 +56,15 @@ def default_networks() -> list:
     from paz6d.aae.config import QUICK
     from paz6d.aae.model import build_encoder
     from paz6d.backend.tensorflow_guard import import_keras
-    from paz6d.export.networks import INPUT_RANGES, Network
+    from paz6d.export.networks import Network
+    from paz6d.methods import get
     from paz6d.ssd.model import build_ssd
 
     import_keras().utils.set_random_seed(0)
     ssd, _ = build_ssd(9, "light", input_size=320)
     encoder = build_encoder(64, QUICK.latent_size, QUICK.filters, QUICK.kernel_size, QUICK.batch_norm, "float32")
-    return [Network("ssd", ssd, (320, 320, 3), INPUT_RANGES["ssd"], "predict"),
-            Network("aae", encoder, (64, 64, 3), INPUT_RANGES["aae"], "encode")]
+    return [Network("ssd", ssd, (320, 320, 3), get("ssd").network.input_range, "predict"),
+            Network("aae", encoder, (64, 64, 3), get("aae").network.input_range, "encode")]
 
 
 def measure(network, folder: Path, threads: int, batch: int, repeats: int, onnx: bool) -> dict[str, float]:

@@ -1,8 +1,9 @@
 """The registry of methods: the one list of paz6d's methods, name -> :class:`~paz6d.method.Method`.
 
-``paz6d estimate``, :class:`~paz6d.detect_and_estimate.DetectAndEstimatePose6D` and
-:func:`paz6d.run_dirs.method_of` loop over it and never name a method. Adding a method is one
-package that exports ``METHOD`` and one line below (or :func:`register` at run time, e.g. in a test)::
+``paz6d estimate``, :class:`~paz6d.detect_and_estimate.DetectAndEstimatePose6D`, ``paz6d export``
+(:mod:`paz6d.export.networks`) and :func:`paz6d.run_dirs.method_of` loop over it and never name a method.
+Adding a method is one package that exports ``METHOD`` and one line below (or :func:`register` at run time,
+e.g. in a test)::
 
     from paz6d.methods import method_of
     method = method_of("runs/aae_5")              # the record whose marker files the folder holds
@@ -17,7 +18,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from paz6d import aae, hrnet, keypointnet, probabilistic_keypoints, segmentation, ssd, stn
+from paz6d import aae, faces, hrnet, keypointnet, probabilistic_keypoints, segmentation, ssd, stn
 from paz6d.method import TASKS, Method
 
 _METHODS: dict[str, Method] = {}
@@ -92,5 +93,5 @@ def method_of(run_dir: str | Path) -> Method:
 
 
 for _method in (aae.METHOD, keypointnet.METHOD, ssd.METHOD, hrnet.METHOD, probabilistic_keypoints.METHOD,
-                stn.METHOD, segmentation.METHOD):
+                stn.METHOD, segmentation.METHOD, faces.METHOD):
     register(_method)

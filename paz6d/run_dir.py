@@ -164,9 +164,12 @@ class RunDir:
 
 
 class CropRunDir(RunDir):
-    """A run directory whose ``config.json`` must hold the crop settings its pipeline reads:
-    ``input_size`` (crop side, pixels), ``margin`` (crop side / longer box side) and ``downsample``
-    (crop pixels per output cell)."""
+    """The run directory of a keypoint network on box crops: its ``config.json`` must hold the crop settings
+    its pipeline reads, ``input_size`` (crop side, pixels), ``margin`` (crop side / longer box side) and
+    ``downsample`` (crop pixels per output cell), and a keypoints file holds the 3D keypoints PnP uses.
+
+    Subclasses set the class attributes of :class:`RunDir` and provide :meth:`read_keypoints`.
+    """
 
     #: Keys of ``config.json`` that the pipeline reads.
     PIPELINE_CONFIG_KEYS: ClassVar[tuple[str, ...]] = ("input_size", "margin", "downsample")
@@ -188,3 +191,18 @@ class CropRunDir(RunDir):
             integer_field(data, name, str(path), minimum=1)
         number_field(data, "margin", str(path), positive=True)
         return data
+
+    @classmethod
+    def read_keypoints(cls, run_dir: str | Path) -> tuple[np.ndarray, Any]:
+        """``points_model (N, 3)`` metres (object frame) and what the method keeps with them, from the run's
+        keypoints file (``ValueError`` naming the file when it is missing or malformed)."""
+        raise NotImplementedError(f"{cls.__name__} does not read its keypoints file")
+
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> Path:
+        """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable
+        configuration and keypoints; returns it as a Path."""
+        run_dir = cls.check_files(run_dir)
+        cls.read_config(run_dir)
+        cls.read_keypoints(run_dir)
+        return run_dir

@@ -19,7 +19,7 @@ from paz6d.backend.paths import check_outputs
 RUN_DIR_MODULES = {method.name: importlib.import_module(method.run_dir.__module__) for method in registry.methods()}
 
 #: Marker files of the other commands that own an output folder (no ``run_dir`` module of their own).
-OTHER_MARKER_FILES = {"emotion": ("classes.json",), "benchmark lmo": ("report.json",)}
+OTHER_MARKER_FILES = {"benchmark lmo": ("report.json",)}
 
 #: The file naming the command that owns an output folder, written by :func:`prepare_run_output`.
 OWNER_FILE = ".paz6d-run.json"

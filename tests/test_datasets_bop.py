@@ -108,6 +108,7 @@ def test_scene_camera_and_gt_info_parsers(lmo):
 @pytest.mark.parametrize("content, pattern", [
     ("{not json", "scene_gt.json: invalid JSON"),
     ('{"a": []}', "key 'a' is not an image id"),
+    ('{"3": {"obj_id": 1}}', "scene_gt.json: image 3: expected a list of instances"),
     ('{"3": [{"cam_R_m2c": [1, 0, 0, 0, 1, 0, 0, 0, 1], "obj_id": 1}]}',
      "image 3, instance 0: missing field 'cam_t_m2c'"),
     ('{"3": [{"cam_R_m2c": [1, 0, 0], "cam_t_m2c": [0, 0, 1], "obj_id": 1}]}', "field 'cam_R_m2c' must hold 9"),
@@ -131,7 +132,10 @@ def test_missing_files_and_fields_are_named(tmp_path):
     with pytest.raises(ValueError, match="object 1: missing field 'diameter'"):
         load_models_info(tmp_path / "models_info.json")
     (tmp_path / "info.json").write_text('{"0": [{"bbox_obj": [1, 2, 3, 4]}]}')
-    with pytest.raises(ValueError, match="instance 0: missing field 'bbox_visib'"):
+    with pytest.raises(ValueError, match="info.json: image 0, instance 0: missing field 'bbox_visib'"):
+        load_scene_gt_info(tmp_path / "info.json")
+    (tmp_path / "info.json").write_text('{"0": [], "2": {"bbox_obj": [1, 2, 3, 4]}}')
+    with pytest.raises(ValueError, match="info.json: image 2: expected a list of instances"):
         load_scene_gt_info(tmp_path / "info.json")
     with pytest.raises(ValueError, match="split folder not found"):
         BOPDataset(tmp_path, split="test")

@@ -116,7 +116,8 @@ def test_a_bfloat16_network_exports_as_its_float32_copy(tmp_path):
     from paz6d.aae.model import build_encoder
     from paz6d.export.command import TOLERANCE, check_exported
     from paz6d.export.formats import export, load_exported
-    from paz6d.export.networks import INPUT_RANGES, Network, float32_copy
+    from paz6d.export.networks import Network, float32_copy
+    from paz6d.methods import get
 
     encoder = build_encoder(16, 8, filters=(8, 16), compute_dtype="bfloat16")
     assert {layer.compute_dtype for layer in encoder.layers} >= {"bfloat16"}
@@ -124,7 +125,7 @@ def test_a_bfloat16_network_exports_as_its_float32_copy(tmp_path):
     assert {layer.compute_dtype for layer in copy.layers} == {"float32"} and float32_copy(copy) is copy
     crops = np.random.default_rng(0).uniform(0, 1, (4, 16, 16, 3)).astype(np.float32)
     np.testing.assert_allclose(copy(crops), encoder(crops), rtol=0.05, atol=0.05)  # bfloat16 rounding only
-    network = Network("aae", copy, (16, 16, 3), INPUT_RANGES["aae"], "encode")
+    network = Network("aae", copy, (16, 16, 3), get("aae").network.input_range, "encode")
     found = check_exported(network, load_exported(export(copy, tmp_path, "tflite", tmp_path), "tflite"), 20, seed=0)
     assert max(value["scaled"] for value in found.values()) < TOLERANCE
 
@@ -215,10 +216,11 @@ def test_bad_input_exits_2_with_one_line(argv, expect, aae_run, tmp_path, capsys
 def tiny_network(method: str):
     """A small network of ``method`` as its pipeline runs it (random weights), and one input's shape."""
     from paz6d.backend.tensorflow_guard import import_keras
-    from paz6d.export.networks import INPUT_RANGES, Network
+    from paz6d.export.networks import Network
     from paz6d.faces.xception import mini_xception
     from paz6d.hrnet.model import OUTPUT_NAME, build_hrnet
     from paz6d.keypointnet.model import build_keypointnet
+    from paz6d.methods import get
     from paz6d.probabilistic_keypoints.model import build_probabilistic_keypointnet
     from paz6d.segmentation.model import build_segmenter
     from paz6d.stn.model import build_classifier
@@ -239,7 +241,7 @@ def tiny_network(method: str):
         model, shape = build_classifier(10, 48, True, filters=8), (48, 48, 1)
     else:
         model, shape = mini_xception((48, 48, 1), 7), (48, 48, 1)
-    return Network(method, model, shape, INPUT_RANGES[method], None)
+    return Network(method, model, shape, get(method).network.input_range, None)
 
 
 @pytest.mark.slow  # six networks, two conversions each: about a minute
@@ -264,9 +266,10 @@ def test_an_emotion_run_is_recognised_and_its_network_loaded(tmp_path):
 
     network = tiny_network("emotion")
     save_keras_model_atomically(network.model, tmp_path / "model.keras")
-    with pytest.raises(ValueError, match="or emotion: model.keras \\+ classes.json"):
+    with pytest.raises(ValueError, match="--run: .* is not a run directory of any method .*emotion: classes.json"):
         run_method(tmp_path)
     write_json_atomically(tmp_path / "classes.json", ["a", "b", "c", "d", "e", "f", "g"])
+    assert run_method(tmp_path).name == "emotion"
     loaded = network_of(tmp_path)
     assert (loaded.method, loaded.input_shape, loaded.input_range, loaded.step) == ("emotion", (48, 48, 1),
                                                                                    (-1.0, 1.0), None)

@@ -1,11 +1,12 @@
 """The method seam: a method is one record (paz6d.method.Method) in one registry (paz6d.methods).
 
 The test writes a small pose method and a small detector in this file (their RunDir subclasses, their
-pipelines and their records), registers them, and runs them through ``paz6d estimate`` (the CLI's main)
-and ``DetectAndEstimatePose6D`` without any other file knowing them. The pose method's rule: the object
-sits on the ray through the box centre at the distance its run directory names (or the depth image's value
-there), with the rotation its run directory names; so every expected pose is computed here from the
-ground-truth boxes and K alone.
+pipelines and their records), registers them, and runs them through ``paz6d estimate`` (the CLI's main),
+``DetectAndEstimatePose6D`` and ``paz6d export`` without any other file knowing them. The pose method's
+rule: the object sits on the ray through the box centre at the distance its run directory names (or the
+depth image's value there), with the rotation its run directory names; so every expected pose is computed
+here from the ground-truth boxes and K alone. Its run directory holds a network (a Keras model) that its
+pipeline runs: normalised image coordinates ``(x, y)`` to the translation ``distance * (x, y, 1)``.
 """
 
 from __future__ import annotations
@@ -20,8 +21,8 @@ from scipy.spatial.transform import Rotation
 
 from paz6d.abstract import Box2D, Pose6D
 from paz6d.backend.camera import as_camera
-from paz6d.backend.files import load_run_json
-from paz6d.method import Method
+from paz6d.backend.files import load_run_json, save_keras_model_atomically
+from paz6d.method import Method, NetworkSpec
 from paz6d.methods import get, method_of, methods, register, registered
 from paz6d.run_dir import RunDir
 
@@ -36,15 +37,22 @@ BOXES = {0: [30, 20, 40, 30], 1: [90, 50, 50, 44]}
 # ------------------------------------------------------------------------------------------ the new method
 class BoxRayRunDir(RunDir):
     """Run directory of the ``box-ray`` method: ``box_ray.json`` holds ``rotation_vector`` (3,) and
-    ``distance`` (metres); ``config.json`` the training mesh (``mesh_path``)."""
+    ``distance`` (metres); ``model.keras`` the network ``(B, 2) -> (B, 3)`` translations (metres);
+    ``config.json`` the training mesh (``mesh_path``)."""
 
     KIND = "a box-ray"
     MARKER_FILES = ("box_ray.json",)
-    REQUIRED_FILES = ("box_ray.json",)
+    REQUIRED_FILES = ("box_ray.json", RunDir.MODEL_FILE)
 
     @classmethod
     def read_rule(cls, run_dir) -> dict:
         return load_run_json(Path(run_dir) / "box_ray.json", ("rotation_vector", "distance"), cls.KIND)
+
+    @classmethod
+    def read_network(cls, run_dir):
+        from paz6d.backend.tensorflow_guard import load_keras_model
+
+        return load_keras_model(cls.model_path(cls.check_files(run_dir)))
 
     @classmethod
     def validate(cls, run_dir) -> Path:
@@ -59,23 +67,38 @@ class BoxRayPose6D:
     def __init__(self, run_dir, camera=None, class_name: str | None = None):
         rule = BoxRayRunDir.read_rule(run_dir)
         self.rotation = Rotation.from_rotvec(rule["rotation_vector"]).as_matrix()
-        self.distance, self.camera, self.class_name = float(rule["distance"]), camera, class_name
+        self.network = BoxRayRunDir.read_network(run_dir)
+        self.camera, self.class_name = camera, class_name
         self.model_points = np.zeros((1, 3))
 
     def __call__(self, image, box, *, camera=None, depth=None) -> Pose6D:
         camera = as_camera(self.camera if camera is None else camera, image.shape[1], image.shape[0])
         x_min, y_min, x_max, y_max = Box2D.coordinates_of(box)
         u, v = (x_min + x_max) / 2 - 0.5, (y_min + y_max) / 2 - 0.5  # pixel-centre coordinates
-        distance = self.distance if depth is None else float(depth[int(round(v)), int(round(u))])
-        ray = np.linalg.solve(camera.K, [u, v, 1.0])
-        return Pose6D.from_rotation_matrix(self.rotation, distance * ray, class_name=self.class_name)
+        x, y, _ = np.linalg.solve(camera.K, [u, v, 1.0])
+        translation = np.asarray(self.network(np.array([[x, y]], np.float32)), np.float64)[0]
+        if depth is not None:
+            translation *= float(depth[int(round(v)), int(round(u))]) / translation[2]
+        return Pose6D.from_rotation_matrix(self.rotation, translation, class_name=self.class_name)
 
 
 def load_box_ray(run_dir, camera=None, class_name=None):
     return BoxRayPose6D(run_dir, camera, class_name)
 
 
-BOX_RAY = Method("box-ray", "box-ray", BoxRayRunDir, load_box_ray)
+BOX_RAY = Method("box-ray", "box-ray", BoxRayRunDir, load_box_ray,
+                 network=NetworkSpec(BoxRayRunDir.read_network, (-1.0, 1.0), step=None))
+
+
+def translation_network(distance: float):
+    """The box-ray network: ``(B, 2)`` normalised image coordinates -> ``(B, 3)`` translations at ``distance``."""
+    from paz6d.backend.tensorflow_guard import import_keras
+
+    keras = import_keras()
+    inputs, layer = keras.Input((2,)), keras.layers.Dense(3, name="translation")
+    model = keras.Model(inputs, layer(inputs))
+    layer.set_weights([np.array([[distance, 0, 0], [0, distance, 0]]), np.array([0, 0, distance])])
+    return model
 
 
 # ------------------------------------------------------------------------------------------ a new detector
@@ -140,6 +163,7 @@ def runs(tmp_path):
     pose = tmp_path / "box_ray_run"
     pose.mkdir()
     (pose / "box_ray.json").write_text(json.dumps({"rotation_vector": ROTATION_VECTOR, "distance": DISTANCE}))
+    save_keras_model_atomically(translation_network(DISTANCE), BoxRayRunDir.model_path(pose))
     BoxRayRunDir.write_config(pose, {"mesh_path": str(tmp_path / "obj_000005.ply"), "mesh_scale": 0.001})
     detector = tmp_path / "listed_boxes_run"
     detector.mkdir()
@@ -175,6 +199,28 @@ def test_a_method_record_is_checked_where_it_is_made():
         Method("x", "x", dict, load_box_ray)
     with pytest.raises(ValueError, match="names no MARKER_FILES"):
         Method("x", "x", RunDir, load_box_ray)
+    with pytest.raises(ValueError, match="network: expected a paz6d.method.NetworkSpec"):
+        Method("x", "x", BoxRayRunDir, load_box_ray, network=BoxRayRunDir.read_network)
+    with pytest.raises(ValueError, match="input_range: expected .low, high. with low < high"):
+        NetworkSpec(BoxRayRunDir.read_network, (1.0, 0.0))
+
+
+def test_a_network_of_any_input_size_needs_the_size_to_export_at(tmp_path):
+    from paz6d.backend.tensorflow_guard import import_keras
+    from paz6d.export.networks import network_of
+
+    keras = import_keras()
+    inputs = keras.Input((None, None, 3))
+    save_keras_model_atomically(keras.Model(inputs, keras.layers.Conv2D(2, 3)(inputs)), tmp_path / "model.keras")
+    (tmp_path / "box_ray.json").write_text("{}")
+    free = Method("box-ray", "box-ray", BoxRayRunDir, load_box_ray,
+                  network=NetworkSpec(BoxRayRunDir.read_network, (0.0, 1.0)))
+    with registered(free), pytest.raises(ValueError, match="takes inputs of any size .* gives no input_size"):
+        network_of(tmp_path)
+    sized = Method("box-ray", "box-ray", BoxRayRunDir, load_box_ray,
+                   network=NetworkSpec(BoxRayRunDir.read_network, (0.0, 1.0), input_size=lambda run_dir: 24))
+    with registered(sized):
+        assert network_of(tmp_path).input_shape == (24, 24, 3)
 
 
 def test_paz6d_estimate_runs_a_registered_method_with_ground_truth_and_detector_boxes(runs, tmp_path):
@@ -208,12 +254,31 @@ def test_detect_and_estimate_loads_registered_methods_from_their_run_directories
     with pytest.warns(MissingPoseModelWarning, match="class 'obj_000009' has no pose model"):
         (box, pose), = pipeline(image)
     assert box.class_name == pose.class_name == "obj_000005"
-    np.testing.assert_allclose(pose.to_matrix(), expected_pose(BOXES[1]), atol=1e-12)
+    np.testing.assert_allclose(pose.to_matrix(), expected_pose(BOXES[1]), atol=1e-6)  # a float32 network
     depth = np.full((HEIGHT, WIDTH), 0.9, np.float32)  # the depth image reaches the pose pipeline
     with pytest.warns(MissingPoseModelWarning):
         (_, pose), = pipeline(image, depth=depth)
     np.testing.assert_allclose(pose.to_matrix(), expected_pose(BOXES[1], distance=0.9), atol=1e-6)
     assert pipeline.draw(image, [(box, pose)]).shape == image.shape
+
+
+def test_paz6d_export_writes_the_network_of_a_registered_method(runs, tmp_path, capsys):
+    from paz6d.cli import main
+    from paz6d.export.formats import TFLiteFunction
+
+    out = tmp_path / "export"
+    with registered(BOX_RAY), registered(LISTED_BOXES):
+        assert main(["export", "--run", str(runs["pose"]), "--format", "tflite", "--out", str(out)]) == 0
+        assert main(["export", "--run", str(runs["detector"]), "--format", "tflite",
+                     "--out", str(tmp_path / "none")]) == 2
+    assert "is a listed-boxes run directory, whose method has no network to export" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()
+    report = json.loads((out / "export.json").read_text())
+    assert (report["method"], report["pipeline_step"], report["input_shape"], report["input_range"]) == \
+        ("box-ray", None, [2], [-1.0, 1.0])
+    assert report["formats"]["tflite"]["passed"] and report["formats"]["tflite"]["outputs"]["output"]["magnitude"] > 0.5
+    xy = np.array([[0.1, -0.2], [0.0, 0.3]], np.float32)
+    np.testing.assert_allclose(TFLiteFunction(out / "model.tflite")(xy), DISTANCE * np.c_[xy, [1, 1]], atol=1e-6)
 
 
 def test_the_benchmark_trains_pose_models_of_registered_pose_methods():

@@ -11,6 +11,7 @@ from paz6d.aae import run_dir as aae_run
 from paz6d.aae.codebook import Codebook
 from paz6d.keypointnet import run_dir as keypointnet_run
 from paz6d.methods import get, methods
+from paz6d.probabilistic_keypoints import run_dir as probabilistic_run
 from paz6d.run_dir import RunDir
 from paz6d.run_dirs import RUN_DIR_MODULES, is_run_dir, method_of
 
@@ -33,6 +34,13 @@ def write_keypointnet_run(folder):
     keypointnet_run.write_keypoints(folder, HULL, np.ones(8, bool), "farthest-point")
     keypointnet_run.write_object(folder, 0.1, HULL)
     keypointnet_run.model_path(folder).write_bytes(b"model")
+    return folder
+
+
+def write_probabilistic_run(folder):
+    probabilistic_run.write_config(folder, {"input_size": 32, "margin": 1.25, "downsample": 2})
+    probabilistic_run.write_keypoints(folder, HULL, 1.5, HULL)
+    probabilistic_run.path_of(folder, probabilistic_run.MODEL_FILE).write_bytes(b"model")
     return folder
 
 
@@ -109,6 +117,33 @@ def test_method_of_tells_the_run_directories_apart(tmp_path):
     both = write_keypointnet_run(tmp_path / "aae")
     with pytest.raises(ValueError, match="matches several methods"):
         method_of(both)
+
+
+def test_keypointnet_and_probabilistic_keypoints_runs_are_told_apart_and_refused_by_the_other(tmp_path, capsys):
+    """Both keep the same crop settings in config.json; their keypoints files (keypoints.json,
+    gaussian_keypoints.json) tell them apart, and each refuses a run of the other."""
+    from paz6d.cli import main
+
+    keypointnet = write_keypointnet_run(tmp_path / "keypointnet")
+    probabilistic = write_probabilistic_run(tmp_path / "probabilistic")
+    assert keypointnet_run.read_config(probabilistic) == probabilistic_run.read_config(probabilistic)
+    assert method_of(keypointnet) == "keypointnet" and method_of(probabilistic) == "probabilistic-keypoints"
+    assert keypointnet_run.validate(keypointnet) == keypointnet
+    assert probabilistic_run.validate(probabilistic) == probabilistic
+    assert probabilistic_run.read_keypoints(probabilistic)[1] == 1.5
+    with pytest.raises(ValueError, match=r"gaussian_keypoints.json: file not found \(is .* a probabilistic-keypoints "):
+        probabilistic_run.validate(keypointnet)
+    with pytest.raises(ValueError, match=r"/keypoints.json: file not found \(is .* a KeypointNet run directory"):
+        keypointnet_run.validate(probabilistic)
+    (tmp_path / "set").mkdir()
+    for run, other in ((keypointnet, "probabilistic-keypoints"), (probabilistic, "keypointnet")):
+        assert main(["estimate", "--run", f"1={run}", "--method", other, "--dataset", str(tmp_path / "set"),
+                     "--out", str(tmp_path / "out.csv"), "--no-progress"]) == 2
+        assert f"--method: {run} is a {method_of(run)} run directory" in capsys.readouterr().err
+    (keypointnet / probabilistic_run.KEYPOINTS_FILE).write_bytes((probabilistic / probabilistic_run.KEYPOINTS_FILE)
+                                                                  .read_bytes())
+    with pytest.raises(ValueError, match="matches several methods"):  # both keypoints files: neither is assumed
+        method_of(keypointnet)
 
 
 @pytest.mark.parametrize("method", sorted(RUN_DIR_MODULES))

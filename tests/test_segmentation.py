@@ -163,6 +163,19 @@ def test_pipelines_segment_inside_the_boxes_and_score(trained, generated, tmp_pa
     assert {result["score"] for result in json.loads(Path(detected["results"]).read_text())} == {0.5}
 
 
+def test_training_refuses_a_folder_of_a_different_run(trained, generated):
+    from paz6d.segmentation.train import train_segmentation
+
+    before = (trained / run_files.CONFIG_FILE).read_text()
+    for change, differ in (({"seed": 1}, "seed"), ({"overrides": {**TINY, "input_size": 48}}, "input_size")):
+        job = SegmentationTraining(**{"dataset": generated, "out": trained, "steps": 40, "progress": False,
+                                      "overrides": TINY, **change})
+        with pytest.raises(ValueError, match=rf"out: .*config.json holds a different run \({differ} differ\); "
+                                             r"choose another --out"):
+            train_segmentation(job)
+    assert (trained / run_files.CONFIG_FILE).read_text() == before
+
+
 def test_corrupt_run_directories_are_named(trained, tmp_path):
     import shutil
 

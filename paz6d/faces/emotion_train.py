@@ -36,6 +36,7 @@ from paz6d.backend.files import (save_figure_atomically, save_keras_model_atomic
                                  write_text_atomically)
 from paz6d.datasets import ferplus as ferplus_data
 from paz6d.datasets.fer2013 import CSV_FILE, FER2013_CLASSES, load_fer2013_csv, load_image_folder
+from paz6d.faces import emotion_run_dir as run_files
 from paz6d.faces.emotion_config import EmotionTraining
 from paz6d.processors.image import ConvertColorSpace
 from paz6d.synthesis.augment import RandomAffine, RandomBrightness, RandomContrast, RandomFlipLeftRight
@@ -298,13 +299,13 @@ def train_emotion(job: EmotionTraining) -> dict:
                       sample_callback=validate if job.validate_every > 0 else None,
                       progress=job.progress, compile_step=not job.eager)
     summary = trainer.fit()
-    matrix = validate(model, summary.final_step, run_dir / "confusion_matrix.png")
-    save_keras_model_atomically(model, run_dir / "model.keras")
-    write_json_atomically(run_dir / "classes.json", list(class_names))
+    matrix = validate(model, summary.final_step, run_dir / run_files.CONFUSION_PNG)
+    save_keras_model_atomically(model, run_files.model_path(run_dir))
+    write_json_atomically(run_dir / run_files.CLASSES_FILE, list(class_names))
     metrics = {"step": summary.final_step, "validation_accuracy": float(np.trace(matrix) / matrix.sum()),
                "validation_count": int(matrix.sum()), "confusion_matrix": matrix.tolist(),
                "class_names": list(class_names), "train_metrics": summary.metrics}
-    write_json_atomically(run_dir / "metrics.json", metrics, indent=2)
+    write_json_atomically(run_dir / run_files.METRICS_FILE, metrics, indent=2)
     print(f"emotion: step {summary.final_step}, validation accuracy {metrics['validation_accuracy']:.3f} "
-          f"on {metrics['validation_count']} faces; model in {run_dir / 'model.keras'}")
+          f"on {metrics['validation_count']} faces; model in {run_files.model_path(run_dir)}")
     return metrics

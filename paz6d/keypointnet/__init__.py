@@ -3,8 +3,8 @@ directory and the ``KeypointPose6D`` pipeline. Importing this package loads noth
 
 from __future__ import annotations
 
-from paz6d.keypointnet.run_dir import KeypointNetRunDir
-from paz6d.method import Method
+from paz6d.keypointnet.run_dir import KeypointNetRunDir, read_model
+from paz6d.method import Method, NetworkSpec
 
 
 def load_pipeline(run_dir, camera=None, class_name=None, keypoint_crops: int = 1):
@@ -15,6 +15,8 @@ def load_pipeline(run_dir, camera=None, class_name=None, keypoint_crops: int = 1
     return KeypointPose6D(run_dir, camera, crops=keypoint_crops, class_name=class_name)
 
 
-#: KeypointNet's record in :mod:`paz6d.methods`.
+#: KeypointNet's record in :mod:`paz6d.methods`; its network is the whole KeypointNet (crops in 0..255 ->
+#: ``uv``, ``depth``, ``probabilities``), what ``KeypointPose6D``'s ``predict`` step runs.
 METHOD = Method("keypointnet", "KeypointNet", KeypointNetRunDir, load_pipeline,
-                options=("camera", "class_name", "keypoint_crops"), aliases=("keypoints",))
+                options=("camera", "class_name", "keypoint_crops"), aliases=("keypoints",),
+                network=NetworkSpec(read_model, (0.0, 255.0)))

@@ -38,13 +38,17 @@ class KeypointNetRunDir(CropRunDir):
     REQUIRED_FILES = (RunDir.CONFIG_FILE, RunDir.MODEL_FILE, KEYPOINTS_FILE)
 
     @classmethod
-    def validate(cls, run_dir: str | Path) -> Path:
-        """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable
-        configuration and keypoints; returns it as a Path."""
-        run_dir = cls.check_files(run_dir)
-        cls.read_config(run_dir)
-        read_keypoints(run_dir)
-        return run_dir
+    def read_keypoints(cls, run_dir: str | Path) -> tuple[np.ndarray, np.ndarray]:
+        """``points_model (N, 3)`` metres and ``usable (N,)`` flags from a run's ``keypoints.json``."""
+        path = Path(run_dir) / KEYPOINTS_FILE
+        data = load_run_json(path, ("points_model", "usable"), cls.KIND)
+        points = _numeric_array(data["points_model"], path, "points_model")
+        if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+            raise ValueError(f"{path}: points_model: expected finite (N, 3) metres, got shape {points.shape}")
+        usable = np.asarray(data["usable"])
+        if usable.shape != (len(points),) or usable.dtype != bool:
+            raise ValueError(f"{path}: usable: expected {len(points)} true/false flags, got shape {usable.shape}")
+        return points, usable
 
 
 # the module's functions, as its callers use them
@@ -55,6 +59,7 @@ config_path, model_path, views_path = (KeypointNetRunDir.config_path, KeypointNe
                                        KeypointNetRunDir.views_path)
 read_config, write_config, validate = (KeypointNetRunDir.read_config, KeypointNetRunDir.write_config,
                                        KeypointNetRunDir.validate)
+read_keypoints = KeypointNetRunDir.read_keypoints
 write_metrics = KeypointNetRunDir.write_metrics
 
 
@@ -82,19 +87,6 @@ def write_keypoints(run_dir: str | Path, points_model, usable, method: str, erro
             "error": None if error is None else null_non_finite(np.asarray(error, dtype=np.float64).tolist()),
             "targets": None if targets is None else as_array(targets, "targets", (3,)).tolist()}
     return write_json_atomically(Path(run_dir) / KEYPOINTS_FILE, data, indent=2)
-
-
-def read_keypoints(run_dir: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """``points_model (N, 3)`` metres and ``usable (N,)`` flags from a run's ``keypoints.json``."""
-    path = Path(run_dir) / KEYPOINTS_FILE
-    data = load_run_json(path, ("points_model", "usable"), KIND)
-    points = _numeric_array(data["points_model"], path, "points_model")
-    if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
-        raise ValueError(f"{path}: points_model: expected finite (N, 3) metres, got shape {points.shape}")
-    usable = np.asarray(data["usable"])
-    if usable.shape != (len(points),) or usable.dtype != bool:
-        raise ValueError(f"{path}: usable: expected {len(points)} true/false flags, got shape {usable.shape}")
-    return points, usable
 
 
 def write_object(run_dir: str | Path, diameter: float, hull_points) -> Path:

@@ -4,8 +4,8 @@ see docs/probabilistic_keypoints.md)."""
 
 from __future__ import annotations
 
-from paz6d.method import Method
-from paz6d.probabilistic_keypoints.run_dir import ProbabilisticKeypointsRunDir
+from paz6d.method import Method, NetworkSpec
+from paz6d.probabilistic_keypoints.run_dir import ProbabilisticKeypointsRunDir, read_model
 
 
 def load_pipeline(run_dir, camera=None, class_name=None):
@@ -16,5 +16,8 @@ def load_pipeline(run_dir, camera=None, class_name=None):
     return ProbabilisticKeypointPose6D(run_dir, camera, class_name=class_name)
 
 
-#: The probabilistic keypoints' record in :mod:`paz6d.methods`.
-METHOD = Method("probabilistic-keypoints", "probabilistic-keypoints", ProbabilisticKeypointsRunDir, load_pipeline)
+#: The probabilistic keypoints' record in :mod:`paz6d.methods`; its network is the whole network (crops in
+#: 0..255 -> ``uv``, ``depth``, ``probabilities``, ``cholesky``), what ``ProbabilisticKeypointPose6D``'s
+#: ``predict`` step runs.
+METHOD = Method("probabilistic-keypoints", "probabilistic-keypoints", ProbabilisticKeypointsRunDir, load_pipeline,
+                network=NetworkSpec(read_model, (0.0, 255.0)))

@@ -43,13 +43,17 @@ class ProbabilisticKeypointsRunDir(CropRunDir):
     REQUIRED_FILES = (RunDir.CONFIG_FILE, RunDir.MODEL_FILE, KEYPOINTS_FILE)
 
     @classmethod
-    def validate(cls, run_dir: str | Path) -> Path:
-        """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable
-        configuration and keypoints; returns it as a Path."""
-        run_dir = cls.check_files(run_dir)
-        cls.read_config(run_dir)
-        read_keypoints(run_dir)
-        return run_dir
+    def read_keypoints(cls, run_dir: str | Path) -> tuple[np.ndarray, float]:
+        """``points_model (N, 3)`` metres and ``covariance_scale`` from ``gaussian_keypoints.json``."""
+        path = cls.path_of(run_dir, KEYPOINTS_FILE)
+        data = load_run_json(path, ("points_model", "covariance_scale"), cls.KIND)
+        try:
+            points = np.asarray(data["points_model"], dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"{path}: points_model: expected a list of [x, y, z] rows (metres)") from None
+        if points.ndim != 2 or points.shape[1] != 3 or len(points) < 4 or not np.all(np.isfinite(points)):
+            raise ValueError(f"{path}: points_model: expected finite (N >= 4, 3) metres, got shape {points.shape}")
+        return points, number_field(data, "covariance_scale", str(path), positive=True)
 
 
 # the module's functions, as its callers use them
@@ -58,7 +62,7 @@ KIND, MARKER_FILES, REQUIRED_FILES = _RUN_DIR.KIND, _RUN_DIR.MARKER_FILES, _RUN_
 CONFIG_FILE, MODEL_FILE, METRICS_FILE = _RUN_DIR.CONFIG_FILE, _RUN_DIR.MODEL_FILE, _RUN_DIR.METRICS_FILE
 path_of, views_path = _RUN_DIR.path_of, _RUN_DIR.views_path
 read_config, write_config, validate = _RUN_DIR.read_config, _RUN_DIR.write_config, _RUN_DIR.validate
-read_metrics = _RUN_DIR.read_metrics
+read_metrics, read_keypoints = _RUN_DIR.read_metrics, _RUN_DIR.read_keypoints
 
 
 def write_keypoints(run_dir: str | Path, points_model, covariance_scale: float = 1.0, targets=None,
@@ -71,19 +75,6 @@ def write_keypoints(run_dir: str | Path, points_model, covariance_scale: float =
     data = {"points_model": points_model.tolist(), "units": "metres", "covariance_scale": float(covariance_scale),
             "method": str(method), "targets": None if targets is None else as_array(targets, "targets", (3,)).tolist()}
     return write_json_atomically(path_of(run_dir, KEYPOINTS_FILE), data, indent=2)
-
-
-def read_keypoints(run_dir: str | Path) -> tuple[np.ndarray, float]:
-    """``points_model (N, 3)`` metres and ``covariance_scale`` from ``gaussian_keypoints.json``."""
-    path = path_of(run_dir, KEYPOINTS_FILE)
-    data = load_run_json(path, ("points_model", "covariance_scale"), KIND)
-    try:
-        points = np.asarray(data["points_model"], dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{path}: points_model: expected a list of [x, y, z] rows (metres)") from None
-    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 4 or not np.all(np.isfinite(points)):
-        raise ValueError(f"{path}: points_model: expected finite (N >= 4, 3) metres, got shape {points.shape}")
-    return points, number_field(data, "covariance_scale", str(path), positive=True)
 
 
 def write_json(run_dir: str | Path, name: str, data: dict[str, Any]) -> Path:

@@ -21,6 +21,7 @@ from paz6d.backend.image import save_image
 from paz6d.segmentation import run_dir as run_files
 from paz6d.segmentation.config import FIXED_SETTINGS, SegmentationTraining
 from paz6d.segmentation.dataset import MaskSet, crop_batch, cut_instance, load_mask_set
+from paz6d.training.presets import check_same_run
 
 
 def _jsonable(settings: dict) -> dict:
@@ -31,15 +32,8 @@ def _prepare_run_dir(job: SegmentationTraining, settings: dict, class_names: tup
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"dataset": str(job.dataset.resolve()), "split": job.split, "config": job.config, "seed": job.seed,
               "class_names": list(class_names), "settings": _jsonable(settings)}
-    previous = run_files.read_config(job.out)
-    if previous is not None:
-        changed = [key for key in ("dataset", "split", "config", "seed",
-                                   "class_names") if previous.get(key) != config[key]]
-        changed += [key for key in FIXED_SETTINGS
-                    if previous.get("settings", {}).get(key) != config["settings"].get(key)]
-        if changed:
-            raise ValueError(f"out: {job.out / run_files.CONFIG_FILE} holds a different run ({', '.join(changed)} "
-                             f"differ); choose another --out")
+    check_same_run(job.out / run_files.CONFIG_FILE, run_files.read_config(job.out), config,
+                   ("dataset", "split", "config", "seed", "class_names"), FIXED_SETTINGS)
     run_files.write_config(job.out, config)
 
 

@@ -5,8 +5,8 @@
 
 from __future__ import annotations
 
-from paz6d.method import Method
-from paz6d.ssd.run_dir import SSDRunDir
+from paz6d.method import Method, NetworkSpec
+from paz6d.ssd.run_dir import SSDRunDir, read_detector, read_model
 
 
 def load_pipeline(run_dir, score_threshold: float = 0.3, flip: bool = False):
@@ -16,5 +16,18 @@ def load_pipeline(run_dir, score_threshold: float = 0.3, flip: bool = False):
     return DetectSingleShot(run_dir, score_threshold=score_threshold, flip=flip)
 
 
-#: The SSD's record in :mod:`paz6d.methods`.
-METHOD = Method("ssd", "SSD", SSDRunDir, load_pipeline, task="detection", options=("score_threshold", "flip"))
+def load_network(run_dir):
+    """The run's whole network (normalised images -> ``(P, 4 + C)`` box offsets and class scores), the network
+    of ``DetectSingleShot``'s ``predict`` step (imports TensorFlow)."""
+    return read_model(run_dir)[0]
+
+
+def training_input_size(run_dir) -> int:
+    """The input side (pixels) the run's network was trained at (``detector.json``)."""
+    return int(read_detector(run_dir)["priors"]["input_size"])
+
+
+#: The SSD's record in :mod:`paz6d.methods`: a detector built for any image size is exported with free sides
+#: and checked at its training input size.
+METHOD = Method("ssd", "SSD", SSDRunDir, load_pipeline, task="detection", options=("score_threshold", "flip"),
+                network=NetworkSpec(load_network, (-2.5, 2.5), input_size=training_input_size))

@@ -3,8 +3,8 @@ a digit classifier with and without them (``paz6d train stn``; see docs/stn.md).
 
 from __future__ import annotations
 
-from paz6d.method import Method
-from paz6d.stn.run_dir import STNRunDir
+from paz6d.method import Method, NetworkSpec
+from paz6d.stn.run_dir import STNRunDir, read_model
 
 
 def load_pipeline(run_dir):
@@ -14,5 +14,12 @@ def load_pipeline(run_dir):
     return ClassifyDigit(run_dir)
 
 
+def load_network(run_dir):
+    """The run's whole network (grey canvases in 0..1 -> ``logits``, ``probabilities``, ``theta``, ``crop``),
+    the network of ``ClassifyDigit``'s ``predict`` step (imports TensorFlow)."""
+    return read_model(run_dir)[0]
+
+
 #: The spatial transformer's record in :mod:`paz6d.methods`.
-METHOD = Method("stn", "spatial-transformer", STNRunDir, load_pipeline, task="classification", options=())
+METHOD = Method("stn", "spatial-transformer", STNRunDir, load_pipeline, task="classification", options=(),
+                network=NetworkSpec(load_network, (0.0, 1.0)))

@@ -4,8 +4,10 @@ RGB, depth and mask images. Lengths come back in the units the caller asks for (
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
@@ -16,6 +18,7 @@ from paz6d.datasets.bop.units import Units, lengths_from_mm
 RGB_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif")
 DEPTH_SUFFIXES = (".png", ".tif", ".tiff")
 GT_INFO_FIELDS = ("bbox_obj", "bbox_visib", "px_count_all", "px_count_valid", "px_count_visib", "visib_fract")
+Instance = TypeVar("Instance")
 #: Real BOP ground truth is not exactly orthonormal (LM-O: max |R^T R - I| up to ~2e-3).
 ROTATION_ROUNDING_TOLERANCE = 1e-2
 
@@ -58,6 +61,23 @@ class GroundTruthPose:
     T_model2cam: np.ndarray
 
 
+def instances_by_id(path: Path, read_instance: Callable[[Any, str], Instance]) -> dict[int, list[Instance]]:
+    """``{im_id: [read_instance(entry, where), ...]}`` of a file holding one list of instances per image
+    (``scene_gt.json``, ``scene_gt_info.json``), instance order kept; ``where`` names the file, the image and
+    the instance for ``read_instance``'s messages.
+
+    Raises:
+        ValueError: naming the file and image whose value is not a list, or what ``read_instance`` raises.
+    """
+    result = {}
+    for im_id, entries in entries_by_id(path).items():
+        if not isinstance(entries, list):
+            raise ValueError(f"{path}: image {im_id}: expected a list of instances")
+        result[im_id] = [read_instance(entry, f"{path}: image {im_id}, instance {index}")
+                         for index, entry in enumerate(entries)]
+    return result
+
+
 def load_scene_gt(path: str | Path, snap_rotations: bool = True,
                   units: Units = "m") -> dict[int, list[GroundTruthPose]]:
     """``scene_gt.json`` → ``{im_id: [GroundTruthPose, ...]}`` (instance order kept).
@@ -67,38 +87,26 @@ def load_scene_gt(path: str | Path, snap_rotations: bool = True,
         snap_rotations: see :func:`pose_from_bop` (``False`` keeps the stored matrices).
         units: units of the returned translations (``"m"`` or ``"mm"``, the file's).
     """
-    path = Path(path)
-    result = {}
-    for im_id, entries in entries_by_id(path).items():
-        if not isinstance(entries, list):
-            raise ValueError(f"{path}: image {im_id}: expected a list of instances")
-        poses = []
-        for index, entry in enumerate(entries):
-            where = f"{path}: image {im_id}, instance {index}"
-            R = required_field(entry, "cam_R_m2c", where, 9)
-            t = required_field(entry, "cam_t_m2c", where, 3)
-            T = pose_from_bop(R, t, f"{where}, field 'cam_R_m2c'", snap_rotations, units)
-            poses.append(GroundTruthPose(integer_field(entry, "obj_id", where), T))
-        result[im_id] = poses
-    return result
+
+    def read_pose(entry, where: str) -> GroundTruthPose:
+        R = required_field(entry, "cam_R_m2c", where, 9)
+        t = required_field(entry, "cam_t_m2c", where, 3)
+        T = pose_from_bop(R, t, f"{where}, field 'cam_R_m2c'", snap_rotations, units)
+        return GroundTruthPose(integer_field(entry, "obj_id", where), T)
+
+    return instances_by_id(Path(path), read_pose)
 
 
 def load_scene_gt_info(path: str | Path) -> dict[int, list[dict]]:
     """``scene_gt_info.json`` → ``{im_id: [info, ...]}`` with the six BOP fields checked (pixels)."""
-    path = Path(path)
-    result = {}
-    for im_id, entries in entries_by_id(path).items():
-        if not isinstance(entries, list):
-            raise ValueError(f"{path}: image {im_id}: expected a list of instances")
-        infos = []
-        for index, entry in enumerate(entries):
-            where = f"{path}: image {im_id}, instance {index}"
-            for name in GT_INFO_FIELDS:
-                required_field(entry, name, where, 4 if name.startswith("bbox") else 1)
-            number_field(entry, "visib_fract", where, minimum=0.0, maximum=1.0)
-            infos.append(entry)
-        result[im_id] = infos
-    return result
+
+    def read_info(entry, where: str) -> dict:
+        for name in GT_INFO_FIELDS:
+            required_field(entry, name, where, 4 if name.startswith("bbox") else 1)
+        number_field(entry, "visib_fract", where, minimum=0.0, maximum=1.0)
+        return entry
+
+    return instances_by_id(Path(path), read_info)
 
 
 def find_image(folder: Path, im_id: int, suffixes: tuple[str, ...] = RGB_SUFFIXES) -> Path | None:
