@@ -49,6 +49,7 @@ from paz6d.datasets.bop import write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION
 from paz6d.datasets.bop.fields import BOX_FIELDS
 from paz6d.methods import get, method_of, methods
+from paz6d.video.records import record_line
 from paz6d.split_estimation import (DEFAULT_SCORE_THRESHOLD, DetectorBoxes, FolderFrames, GroundTruthBoxes,
                                     SplitFrames, detector_targets, estimate_frames, refinement_statistics)
 
@@ -352,8 +353,6 @@ def box_source(args: argparse.Namespace, runs, viewpoints: ViewpointRange | None
 def write_folder_outputs(args: argparse.Namespace, frames: FolderFrames, found: dict, summary: dict) -> None:
     """With ``--images``: the JSON lines of every image and the summary JSON (:func:`folder_outputs`); adds
     their paths and the folder's description to ``summary``."""
-    from paz6d.video.records import record_line
-
     paths = folder_outputs(args)
     write_bytes_atomically(paths["records"], "".join(record_line(record) + "\n"
                                                      for record in found["records"]).encode())

@@ -28,6 +28,7 @@ from paz6d.datasets.bop import Target
 from paz6d.datasets.bop.fields import box_field
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION, read_targets
 from paz6d.processors.crops import BoxVariants
+from paz6d.video.records import FrameRecord, result_entries
 
 #: Detections scoring below this are dropped (``paz6d estimate --score-threshold``).
 DEFAULT_SCORE_THRESHOLD = 0.1
@@ -331,7 +332,6 @@ def estimate_frames(frames, boxes, object_ids, progress: bool = True) -> dict:
 
     from paz6d.datasets.bop.coco_ground_truth import coco_image_id
     from paz6d.detect_and_estimate import bop_object_id
-    from paz6d.video.records import FrameRecord, result_entries
 
     estimates, detections, images, records = Estimates(), [], [], []
     failed, without_model, total = {obj_id: 0 for obj_id in object_ids}, {}, 0.0
