@@ -131,6 +131,7 @@ class SplitFrames:
             :func:`~paz6d.datasets.bop.fields.box_field`): frames only of images with an instance of
             ``object_ids`` whose visible fraction is at least ``min_visible``, each with those instances'
             boxes. ``None``: every image, no ground truth read.
+        min_visible: with ``box``, the least visible fraction of an instance estimated.
         depth: read each frame's depth image (:func:`checked_depth`).
     Attributes:
         skipped: images without an RGB file (of those that would be frames).
@@ -199,6 +200,7 @@ class FolderFrames:
     Attributes:
         skipped: always 0 (every file of the folder is an image).
         count: the number of images.
+        undistorted: whether the camera's distortion is removed from the images.
     Raises:
         ValueError: a missing or empty folder, an image that does not decode or whose size is not the
             camera's (naming the file; a later image when it is read).

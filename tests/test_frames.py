@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -101,7 +103,7 @@ def test_device_index_and_writer_errors(tmp_path):
     assert list(tmp_path.iterdir()) == []  # nothing left behind
 
 
-def test_estimate_folder_frames_number_the_sorted_images_and_undistort_them_with_the_camera(tmp_path):
+def test_estimate_folder_frames_number_the_sorted_images_and_undistort_them_with_the_camera(tmp_path, monkeypatch):
     from paz6d.backend.camera import Camera
     from paz6d.split_estimation import FolderFrames
 
@@ -122,3 +124,6 @@ def test_estimate_folder_frames_number_the_sorted_images_and_undistort_them_with
     np.testing.assert_array_equal(plain[1].image, second)
     with pytest.raises(FrameSizeError, match="a.png: frame 0 is 64x48 pixels, expected 32x24"):
         FolderFrames(tmp_path, Camera(K, 32, 24))
+    save_image(tmp_path / "7" / "c.png", first)  # a folder named with digits is a folder, not camera device 7
+    monkeypatch.chdir(tmp_path)
+    assert [frame.name for frame in FolderFrames(Path("7"), Camera(K, 64, 48))] == ["c.png"]
