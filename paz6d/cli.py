@@ -30,7 +30,7 @@ COMMANDS = {
     "evaluate": ("evaluation.cli", "score results against ground truth (bop, coco, voc)"),
     "detect": ("paz6d.ssd.detect", "run a trained SSD over a BOP split or an image folder -> COCO detections JSON"),
     "estimate": ("paz6d.estimate", "run trained pose models on a BOP data set (ground-truth boxes or --detector) "
-                                   "-> BOP results CSV"),
+                                   "or an image folder (--images, --detector) -> BOP results CSV"),
     "calibrate": ("paz6d.calibrate", "camera intrinsics and lens distortion from images of a chessboard or ChArUco "
                                      "board -> camera.json"),
     "export": ("paz6d.export.command", "a run's network as a TensorFlow SavedModel, TFLite or ONNX file, checked "

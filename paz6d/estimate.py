@@ -1,4 +1,5 @@
-"""``paz6d estimate``: run trained pose models on a BOP data set and write one BOP results CSV.
+"""``paz6d estimate``: run trained pose models on a BOP data set or a folder of images and write one BOP
+results CSV.
 
 One or more pose run directories (``--run OBJ_ID=RUN_DIR``, repeatable; the method of each, one of the pose
 methods of :mod:`paz6d.methods`, is found from its files) get every image of a split, either with each annotated
@@ -12,6 +13,13 @@ the per-image time (seconds, the same on every row of an image, as BOP asks)::
         --out det.csv             # also writes det_detections.json (COCO results of the detector)
     paz6d evaluate bop --dataset ../shared/data/bop_lmo --results det.csv --metrics mssd,mspd,add --out det.json
 
+``--images DIR --camera camera.json`` (with ``--detector``) estimates the images of a plain folder instead
+(sorted by name, as ``paz6d run`` reads a folder; scene 0, ``im_id`` each image's position): besides the CSV
+and the detections it writes ``<out stem>_frames.jsonl`` (one line per image, the records of ``paz6d run``,
+:mod:`paz6d.video.records`, with the image's file name) and ``<out stem>_summary.json``::
+
+    paz6d estimate --images photos/ --camera camera.json --detector runs/ssd --run 5=runs/aae_5 --out photos.csv
+
 With ``--depth`` every pose is refined by ICP against the image's depth image (BOP ``depth/`` files in
 millimetres times ``depth_scale``, read in metres; :class:`paz6d.processors.refine.RefineWithDepth`), and
 the summary counts the refinements accepted and rejected.
@@ -21,7 +29,8 @@ Images without an RGB file are skipped (reported), as are, with ground-truth box
 ``--min-visible``. Nothing estimated is an error (exit 2).
 
 This module handles the flags and checks every run directory, the detector and the outputs before any
-image is read; the loops over the split are :mod:`paz6d.split_estimation`'s.
+image is read; the loop over the images is :mod:`paz6d.split_estimation`'s (a frame source for a split or
+a folder, a box source for ground-truth boxes or a detector).
 """
 
 from __future__ import annotations
@@ -32,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import write_json_atomically
+from paz6d.backend.files import write_bytes_atomically, write_json_atomically
 from paz6d.backend.paths import check_outputs, check_outputs_apart, check_plain_name
 from paz6d.keypointnet.config import CROP_JITTERS, check_crops
 from paz6d.backend.viewpoints import ViewpointRange
@@ -40,8 +49,9 @@ from paz6d.datasets.bop import write_pose_results, write_targets
 from paz6d.datasets.bop.targets import TARGET_MIN_VISIBLE_FRACTION
 from paz6d.datasets.bop.fields import BOX_FIELDS
 from paz6d.methods import get, method_of, methods
-from paz6d.split_estimation import (DEFAULT_SCORE_THRESHOLD, detector_targets, estimate_with_detector,
-                                    estimate_with_ground_truth, refinement_statistics)
+from paz6d.video.records import record_line
+from paz6d.split_estimation import (DEFAULT_SCORE_THRESHOLD, DetectorBoxes, FolderFrames, GroundTruthBoxes,
+                                    SplitFrames, detector_targets, estimate_frames, refinement_statistics)
 
 _OBJECT_MESH = re.compile(r"^obj_(\d+)$")
 
@@ -55,7 +65,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", choices=sorted({name for method in pose_methods
                                                     for name in (method.name, *method.aliases)}), default=None,
                         help="optional check: every --run must be of this method (found from the files anyway)")
-    parser.add_argument("--dataset", type=Path, required=True, help="BOP data set folder")
+    parser.add_argument("--dataset", type=Path, default=None, help="BOP data set folder (or --images)")
+    parser.add_argument("--images", type=Path, default=None, metavar="DIR",
+                        help="instead of --dataset, a folder of images (png/jpg, sorted by name; scene 0, im_id each "
+                             "image's position) with --camera and --detector; also writes <out stem>_frames.jsonl "
+                             "(one line per image, as `paz6d run`) and <out stem>_summary.json")
+    parser.add_argument("--camera", type=Path, default=None,
+                        help="with --images: the camera JSON file of the images (BOP camera.json fields, optional "
+                             "distortion 'dist', as `paz6d calibrate` writes; with 'dist' the images are undistorted "
+                             "first)")
     parser.add_argument("--split", default="test", help="split folder of --dataset")
     parser.add_argument("--object-id", type=int, default=None, help="object of a bare --run RUN_DIR")
     parser.add_argument("--out", type=Path, required=True, help="results CSV to write (all objects)")
@@ -217,6 +235,39 @@ def detections_path(args: argparse.Namespace) -> Path | None:
     return args.out.with_name(f"{args.out.stem}_detections.json")
 
 
+def folder_outputs(args: argparse.Namespace) -> dict[str, Path]:
+    """With ``--images``, the files written beside ``--out``: ``{"records": <out stem>_frames.jsonl,
+    "summary": <out stem>_summary.json}``; else ``{}``."""
+    if args.images is None:
+        return {}
+    return {name: args.out.with_name(f"{args.out.stem}_{suffix}")
+            for name, suffix in (("records", "frames.jsonl"), ("summary", "summary.json"))}
+
+
+def check_source(args: argparse.Namespace) -> None:
+    """Checks that the images come from one place, ``--dataset`` or ``--images`` (with ``--camera`` and
+    ``--detector``, and none of the flags that need a data set's ground truth or depth)."""
+    if args.images is None:
+        if args.dataset is None:
+            raise ValueError("--dataset or --images: give the images to estimate (a BOP data set folder, or a folder "
+                             "of images with --camera and --detector)")
+        if args.camera is not None:
+            raise ValueError("--camera: only with --images (a BOP data set's images have their cameras in "
+                             "scene_camera.json)")
+        return
+    if args.dataset is not None:
+        raise ValueError("--images: not with --dataset (give a BOP data set or a folder of images, not both)")
+    if args.detector is None:
+        raise ValueError("--images: needs --detector (a folder of images has no ground-truth boxes)")
+    if args.camera is None:
+        raise ValueError("--camera: --images needs the camera's intrinsics (a camera JSON file, as `paz6d calibrate` "
+                         "writes; a BOP camera.json is one)")
+    for flag, given, reason in (("--targets-out", args.targets_out is not None, "no ground truth to score against"),
+                                ("--depth", args.depth, "no depth images")):
+        if given:
+            raise ValueError(f"{flag}: not with --images (a folder of images has {reason})")
+
+
 # ------------------------------------------------------------------------------------------ command
 def viewpoint_range(args: argparse.Namespace) -> ViewpointRange | None:
     """The AAE runs' :class:`~paz6d.backend.viewpoints.ViewpointRange` of ``--elevation-degrees`` and
@@ -235,6 +286,7 @@ def check_arguments(args: argparse.Namespace) -> tuple[dict[int, tuple[Path, str
     """Checks every flag, the run directories (method, files, object), the detector and the output paths
     before any image is read; returns ``({obj_id: (run_dir, method)}, viewpoint_range(args))``. Bad input
     raises ``ValueError`` naming the flag or file."""
+    check_source(args)
     check_plain_name(args.split, "--split")
     if not 0.0 <= args.min_visible <= 1.0:
         raise ValueError(f"--min-visible: expected a visible fraction in [0, 1], got {args.min_visible}")
@@ -259,10 +311,14 @@ def check_arguments(args: argparse.Namespace) -> tuple[dict[int, tuple[Path, str
                              "so every detection needs a pose)")
     viewpoints = viewpoint_range(args)
     detections = detections_path(args)
-    outputs = {"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections}
-    check_outputs(outputs, {"--dataset": args.dataset, "--detector": args.detector})
-    if not args.dataset.is_dir():
+    outputs = {"--out": args.out, "--targets-out": args.targets_out, "--detections-out": detections,
+               **{f"--out ({path.name})": path for path in folder_outputs(args).values()}}
+    check_outputs(outputs, {"--dataset": args.dataset, "--images": args.images, "--camera": args.camera,
+                            "--detector": args.detector})
+    if args.dataset is not None and not args.dataset.is_dir():
         raise ValueError(f"--dataset: {args.dataset} is not a directory")
+    if args.images is not None and not args.images.is_dir():
+        raise ValueError(f"--images: {args.images} is not a folder (expected a folder of .png/.jpg images)")
     runs = resolve_runs(args.run, args.object_id, args.method)
     check_outputs_apart(outputs, {f"--run {obj_id}": run_dir for obj_id, (run_dir, _) in runs.items()})
     if viewpoints is not None and not any("viewpoints" in get(method).options for _, method in runs.values()):
@@ -272,6 +328,38 @@ def check_arguments(args: argparse.Namespace) -> tuple[dict[int, tuple[Path, str
     if args.detector is not None:
         check_detector(args.detector, runs)
     return runs, viewpoints
+
+
+def frame_source(args: argparse.Namespace, runs) -> SplitFrames | FolderFrames:
+    """The frames of ``--images`` (with ``--camera``) or of ``--split`` of ``--dataset`` (with ground-truth
+    boxes unless ``--detector``); a folder is opened and its first image checked now."""
+    if args.images is not None:
+        from paz6d.backend.camera_file import read_camera_json
+
+        return FolderFrames(args.images, read_camera_json(args.camera))
+    return SplitFrames(args.dataset, args.split, runs, None if args.detector is not None else args.box,
+                       args.min_visible, args.depth)
+
+
+def box_source(args: argparse.Namespace, runs, viewpoints: ViewpointRange | None) -> GroundTruthBoxes | DetectorBoxes:
+    """The boxes the pose models get: ``--detector``'s (its models loaded now), else the ground truth's."""
+    options = {"keypoint_crops": args.keypoint_crops, "viewpoints": viewpoints}
+    if args.detector is None:
+        return GroundTruthBoxes(runs, **options)
+    return DetectorBoxes(runs, args.detector, args.score_threshold, args.flip, args.verify, args.poses_per_class,
+                         args.box_search, **options)
+
+
+def write_folder_outputs(args: argparse.Namespace, frames: FolderFrames, found: dict, summary: dict) -> None:
+    """With ``--images``: the JSON lines of every image and the summary JSON (:func:`folder_outputs`); adds
+    their paths and the folder's description to ``summary``."""
+    paths = folder_outputs(args)
+    write_bytes_atomically(paths["records"], "".join(record_line(record) + "\n"
+                                                     for record in found["records"]).encode())
+    summary.update(images=str(args.images), camera=str(args.camera), undistorted=frames.undistorted,
+                   frames=len(found["records"]), records_out=str(paths["records"]),
+                   summary_out=str(paths["summary"]))
+    write_json_atomically(paths["summary"], summary, indent=2)
 
 
 def estimate(args: argparse.Namespace) -> dict:
@@ -285,21 +373,14 @@ def estimate(args: argparse.Namespace) -> dict:
     runs, viewpoints = check_arguments(args)
     import_tensorflow()
     objects = sorted(runs)
-    if args.detector is None:
-        found = estimate_with_ground_truth(runs, args.dataset, args.split, args.box, args.min_visible, args.progress,
-                                           args.depth, args.keypoint_crops, viewpoints)
-        targets = found["targets"]
-        if not found["images"]:
-            raise ValueError(f"{args.dataset}: no instance of objects {objects} with an RGB image and visible "
-                             f"fraction >= {args.min_visible} in split {args.split!r}")
-    else:
-        found = estimate_with_detector(runs, args.detector, args.dataset, args.split, args.score_threshold,
-                                       args.progress, args.depth, args.keypoint_crops, args.verify,
-                                       args.flip, args.box_search, args.poses_per_class, viewpoints)
-        targets = detector_targets(args.dataset, found["images"], runs)
-        if not found["images"]:
-            raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "
-                             f"({found['skipped_images']} listed in scene_camera.json)")
+    frames = frame_source(args, runs)
+    found = estimate_frames(frames, box_source(args, runs, viewpoints), runs, args.progress)
+    if not found["images"] and args.detector is None:
+        raise ValueError(f"{args.dataset}: no instance of objects {objects} with an RGB image and visible "
+                         f"fraction >= {args.min_visible} in split {args.split!r}")
+    if not found["images"]:
+        raise ValueError(f"{args.dataset}: no image of split {args.split!r} has an RGB file "
+                         f"({frames.skipped} listed in scene_camera.json)")
     estimates = found["estimates"]
     failed = sum(found["failed"].values())
     if len(estimates) == 0:
@@ -313,24 +394,25 @@ def estimate(args: argparse.Namespace) -> dict:
     summary = {"out": str(args.out), "estimates": len(estimates),
                "per_object": {str(obj_id): int(np.sum(rows["obj_ids"] == obj_id)) for obj_id in objects},
                "failed": {str(key): value for key, value in found["failed"].items()},
-               "images_without_rgb_skipped": found["skipped_images"],
+               "images_without_rgb_skipped": frames.skipped,
                "unusable": {str(key): reason for key, reason in found["unusable"].items()},
                "methods": {str(obj_id): method for obj_id, (_, method) in runs.items()},
-               "mean_seconds_per_image": float(np.mean(list(dict(zip(zip(rows["scene_ids"], rows["im_ids"]),
-                                                                        rows["times"])).values())))}
+               "mean_seconds_per_image": found["seconds_per_image"]}
     if args.detector is not None:
         path = detections_path(args)
         write_json_atomically(path, found["detections"])
         summary.update(detections_out=str(path), detections=len(found["detections"]),
-                       detections_without_pose_model=found["without_model"],
-                       mean_seconds_per_image=found["seconds_per_image"])
+                       detections_without_pose_model=found["without_model"])
     if viewpoints is not None:
         summary["viewpoints"] = viewpoints.describe()
     if args.targets_out is not None:
+        targets = frames.targets if args.detector is None else detector_targets(args.dataset, found["images"], runs)
         write_targets(args.targets_out, targets)
         summary["targets_out"] = str(args.targets_out)
     if args.depth:
         summary["depth_refinement"] = refinement_statistics(found["estimators"])
+    if args.images is not None:
+        write_folder_outputs(args, frames, found, summary)
     return summary
 
 
@@ -341,9 +423,13 @@ def run(args: argparse.Namespace) -> int:
              if "detections_out" in summary else "")
     if summary["unusable"]:
         extra += f"; objects {sorted(map(int, summary['unusable']))} not estimated (unusable pose model)"
+    if "records_out" in summary:
+        extra += f"; one line per image -> {summary['records_out']}, summary -> {summary['summary_out']}"
+        images = f"{summary['frames']} images of {summary['images']}"
+    else:
+        images = f"{summary['images_without_rgb_skipped']} images without RGB skipped"
     print(f"wrote {args.out}: {summary['estimates']} estimates of objects {sorted(map(int, summary['per_object']))} "
-          f"({failed} failed, {summary['images_without_rgb_skipped']} images without RGB skipped{extra}; "
-          f"{summary['mean_seconds_per_image']:.3f} s per image)")
+          f"({failed} failed, {images}{extra}; {summary['mean_seconds_per_image']:.3f} s per image)")
     if "depth_refinement" in summary:
         refined = summary["depth_refinement"]
         seconds = "" if refined["mean_cpu_seconds"] is None else f", {refined['mean_cpu_seconds']:.3f} CPU s each"

@@ -914,6 +914,66 @@ def estimate_cases() -> list[Case]:
                       bop_file("test/000000/scene_gt_info.json",
                                lambda d: {k: [{**e, "bbox_obj": [0, 0, -5, "x"]} for e in v] for k, v in d.items()}),
                       ("bbox_obj",)))
+    found += [
+        Case("estimate-neither-dataset-nor-images", replace_flag(ESTIMATE, "--dataset"), None,
+             ("--dataset or --images",)),
+        Case("estimate-camera-without-images", ESTIMATE + ("--camera", "{world}/bop/camera.json"), None,
+             ("--camera: only with --images",)),
+    ]
+    return found
+
+
+#: ``paz6d estimate --images``: the world's RGB folder and camera, a stand-in detector (:func:`detector_stand_in`).
+ESTIMATE_IMAGES = ("estimate", "--images", "{world}/bop/test/000000/rgb", "--camera", "{world}/bop/camera.json",
+                   "--detector", "{case}/ssd", "--run", "1={world}/runs/aae", "--out", "{out}/results.csv",
+                   "--no-progress")
+
+
+def detector_stand_in(*more: Callable[[World, Path], None]) -> Callable[[World, Path], None]:
+    """Setup: ``<case>/ssd``, an SSD run directory of class ``obj_000001`` with valid files (an untrained
+    stand-in model), then each of ``more``."""
+
+    def setup(world: World, folder: Path) -> None:
+        from paz6d.ssd.run_dir import model_path, write_detector
+
+        write_detector(folder / "ssd", "light", ["obj_000001"], {})
+        model_path(folder / "ssd").write_bytes(b"not a keras model")
+        for step in more:
+            step(world, folder)
+
+    return setup
+
+
+def estimate_images_cases() -> list[Case]:
+    """``paz6d estimate --images``: the flags it needs and refuses, the camera file and the image folder, all
+    refused before a model loads."""
+    found = _flag_cases("estimate-images-", ESTIMATE_IMAGES, {
+        "--detector": [((), "--images: needs --detector")],
+        "--camera": [((), "--camera: --images needs"), (("{case}/none.json",), "none.json"),
+                     (("{world}/results.csv",), "results.csv")],
+        "--images": [(("{case}/none",), "none"), (("{world}/results.csv",), "not a folder")],
+        "--dataset": [(("{world}/bop",), "--images: not with --dataset")],
+        "--targets-out": [(("{out}/targets.json",), "--targets-out: not with --images")],
+    }, detector_stand_in())
+    found += [
+        Case("estimate-images-depth", ESTIMATE_IMAGES + ("--depth",), detector_stand_in(),
+             ("--depth: not with --images",)),
+        Case("estimate-images-camera-size-mismatch", replace_flag(ESTIMATE_IMAGES, "--camera", "{case}/camera.json"),
+             detector_stand_in(_camera_file(lambda d: {**d, "width": 640, "height": 480})),
+             ("000000.png", "expected 640x480")),
+        Case("estimate-images-camera-garbage", replace_flag(ESTIMATE_IMAGES, "--camera", "{case}/camera.json"),
+             detector_stand_in(case_file("camera.json", "{")), ("camera.json",)),
+        Case("estimate-images-camera-no-fx", replace_flag(ESTIMATE_IMAGES, "--camera", "{case}/camera.json"),
+             detector_stand_in(_camera_file(lambda d: {k: v for k, v in d.items() if k != "fx"})),
+             ("camera.json", "'fx'")),
+        Case("estimate-images-folder-empty", replace_flag(ESTIMATE_IMAGES, "--images", "{case}/frames"),
+             detector_stand_in(case_file("frames", "<dir>")), ("frames", "no image file")),
+        Case("estimate-images-image-garbage", replace_flag(ESTIMATE_IMAGES, "--images", "{case}/frames"),
+             detector_stand_in(case_file("frames/000000.png", b"\x89PNG\r\n\x1a\nbroken")), ("000000.png",)),
+        Case("estimate-images-out-is-an-image",
+             replace_flag(ESTIMATE_IMAGES, "--out", "{world}/bop/test/000000/rgb/000000.png"), detector_stand_in(),
+             ("--out", "000000.png", "a file of --images")),
+    ]
     return found
 
 
@@ -1575,8 +1635,8 @@ def calibrate_and_export_cases() -> list[Case]:
 def all_cases() -> list[Case]:
     """The table: every case, names unique."""
     found = generate_cases() + evaluate_bop_cases() + evaluate_coco_cases() + evaluate_voc_cases() + \
-        estimate_cases() + train_cases() + output_rule_cases() + dataset_path_cases() + annotation_cases() + \
-        late_validation_cases() + run_cases() + calibrate_and_export_cases()
+        estimate_cases() + estimate_images_cases() + train_cases() + output_rule_cases() + dataset_path_cases() + \
+        annotation_cases() + late_validation_cases() + run_cases() + calibrate_and_export_cases()
     names = [case.name for case in found]
     duplicated = {name for name in names if names.count(name) > 1}
     if duplicated:

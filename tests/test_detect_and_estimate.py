@@ -394,6 +394,56 @@ def test_estimate_with_several_runs_and_with_the_detector_through_evaluate_bop(w
     assert set(read_pose_results(tmp_path / "bare.csv").obj_ids.tolist()) == {5}
 
 
+def _rows_without_time(path) -> list[dict]:
+    with path.open() as handle:
+        return [{key: value for key, value in row.items() if key != "time"} for row in csv.DictReader(handle)]
+
+
+def test_estimate_images_of_a_folder_gives_the_poses_of_the_split_with_the_detector(world, tmp_path, capsys):
+    """The split's RGB files as a plain folder with its camera.json: the detections and poses of `--dataset`
+    with the detector (scene 0, im_id each image's position), one JSON line per image and a summary."""
+    from paz6d.datasets.bop import read_pose_results
+    from paz6d.video.records import read_records
+
+    runs = [f"--run={obj_id}={world / f'aae_{obj_id}'}" for obj_id in OBJECTS]
+    flags = ["estimate", "--detector", str(world / "ssd"), *runs, "--score-threshold", "0", "--poses-per-class", "1",
+             "--no-progress"]
+    assert main([*flags, "--dataset", str(world / "set"), "--out", str(tmp_path / "split.csv")]) == 0
+    photos, camera = tmp_path / "photos", world / "set" / "camera.json"
+    shutil.copytree(world / "set" / "test" / "000000" / "rgb", photos)
+    out = tmp_path / "photos.csv"
+    capsys.readouterr()
+    assert main([*flags, "--images", str(photos), "--camera", str(camera), "--out", str(out)]) == 0
+    assert f"4 images of {photos}" in capsys.readouterr().out
+    rows = _rows_without_time(out)
+    assert rows == _rows_without_time(tmp_path / "split.csv") and len(rows) >= 4
+    detections = json.loads((tmp_path / "photos_detections.json").read_text())
+    assert detections == json.loads((tmp_path / "split_detections.json").read_text()) and len(detections) >= 4
+    records = list(read_records(tmp_path / "photos_frames.jsonl"))
+    assert [(record.frame, record.file) for record in records] == list(enumerate(sorted(
+        path.name for path in photos.iterdir())))
+    estimates = read_pose_results(out)
+    for record in records:  # the records hold the rows of their image, box and pose
+        mine = np.flatnonzero(estimates.im_ids == record.frame)
+        assert len(record.results) == len(mine) and record.latency_ms > 0
+        assert [entry["box"].class_name for entry in record.results] == [f"obj_{obj_id:06d}"
+                                                                         for obj_id in estimates.obj_ids[mine]]
+        np.testing.assert_allclose([entry["box"].score for entry in record.results], estimates.scores[mine],
+                                   atol=1e-6)
+        np.testing.assert_allclose([entry["pose"].translation for entry in record.results],
+                                   estimates.translations[mine], atol=1e-6)
+    summary = json.loads((tmp_path / "photos_summary.json").read_text())
+    assert (summary["frames"], summary["estimates"], summary["undistorted"]) == (4, len(rows), False)
+    assert summary["records_out"] == str(tmp_path / "photos_frames.jsonl") and summary["images"] == str(photos)
+    # an image of another size than the camera's, after the first: refused naming it, nothing written
+    from paz6d.backend.image import load_image, save_image
+
+    save_image(photos / "000002.png", load_image(photos / "000002.png")[:60, :80])
+    assert main([*flags, "--images", str(photos), "--camera", str(camera), "--out", str(tmp_path / "bad.csv")]) == 2
+    assert "000002.png: frame 2 is 80x60 pixels, expected 160x120" in capsys.readouterr().err
+    assert not list(tmp_path.glob("bad*"))
+
+
 def test_estimate_skips_images_without_rgb_and_fails_clearly_when_nothing_is_estimated(world, tmp_path, capsys):
     dataset = tmp_path / "set"
     shutil.copytree(world / "set", dataset)

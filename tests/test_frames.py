@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -99,3 +101,29 @@ def test_device_index_and_writer_errors(tmp_path):
         with VideoFileWriter(tmp_path / "clip.mp4", 10, (64, 48)) as writer:
             writer.write(np.zeros((10, 10, 3), np.uint8))
     assert list(tmp_path.iterdir()) == []  # nothing left behind
+
+
+def test_estimate_folder_frames_number_the_sorted_images_and_undistort_them_with_the_camera(tmp_path, monkeypatch):
+    from paz6d.backend.camera import Camera
+    from paz6d.split_estimation import FolderFrames
+
+    first, second = random_frames(2)
+    save_image(tmp_path / "b.png", second)
+    save_image(tmp_path / "a.png", first)
+    K = np.array([[60.0, 0.0, 31.5], [0.0, 60.0, 23.5], [0.0, 0.0, 1.0]])
+    dist = np.array([0.3, -0.1, 0.01, 0.0, 0.0])
+    frames = FolderFrames(tmp_path, Camera(K, 64, 48, dist))
+    found = list(frames)
+    assert [(frame.scene_id, frame.im_id, frame.name) for frame in found] == [(0, 0, "a.png"), (0, 1, "b.png")]
+    assert frames.undistorted and frames.count == 2 and frames.skipped == 0
+    assert all(frame.camera.distortion is None and np.array_equal(frame.camera.K, K) for frame in found)
+    for frame, image in zip(found, (first, second)):
+        np.testing.assert_array_equal(frame.image, cv2.undistort(image, K, dist))
+        assert not np.array_equal(frame.image, image)
+    plain = list(FolderFrames(tmp_path, Camera(K, 64, 48)))
+    np.testing.assert_array_equal(plain[1].image, second)
+    with pytest.raises(FrameSizeError, match="a.png: frame 0 is 64x48 pixels, expected 32x24"):
+        FolderFrames(tmp_path, Camera(K, 32, 24))
+    save_image(tmp_path / "7" / "c.png", first)  # a folder named with digits is a folder, not camera device 7
+    monkeypatch.chdir(tmp_path)
+    assert [frame.name for frame in FolderFrames(Path("7"), Camera(K, 64, 48))] == ["c.png"]
