@@ -41,8 +41,7 @@ class KeypointNetRunDir(CropRunDir):
     def validate(cls, run_dir: str | Path) -> Path:
         """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable
         configuration and keypoints; returns it as a Path."""
-        run_dir = cls.check_files(run_dir)
-        cls.read_config(run_dir)
+        run_dir = super().validate(run_dir)
         read_keypoints(run_dir)
         return run_dir
 
