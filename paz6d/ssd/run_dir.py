@@ -127,18 +127,18 @@ def _check_priors(priors, where: str, architecture: str) -> None:
     if not (isinstance(maps, list) and maps and all(type(side) is int and 0 < side <= size for side in maps)):
         raise ValueError(f"{where}: feature_map_sizes: expected a non-empty list of sides from 1 to input_size "
                          f"({size}), got {short_repr(maps)}")
-    count = len(maps)
-    _numbers(priors, "steps", where, count, "positive steps in pixels (one per feature map)", lambda v: v > 0)
-    minimum = _numbers(priors, "min_sizes", where, count, "positive prior sides in pixels", lambda v: v > 0)
-    maximum = _numbers(priors, "max_sizes", where, count, "positive prior sides in pixels", lambda v: v > 0)
+    count, per_map = len(maps), "(one per entry of feature_map_sizes)"
+    _numbers(priors, "steps", where, count, f"positive steps in pixels {per_map}", lambda v: v > 0)
+    minimum = _numbers(priors, "min_sizes", where, count, f"positive prior sides in pixels {per_map}", lambda v: v > 0)
+    maximum = _numbers(priors, "max_sizes", where, count, f"positive prior sides in pixels {per_map}", lambda v: v > 0)
     if any(low > high for low, high in zip(minimum, maximum)):
         raise ValueError(f"{where}: max_sizes: expected each at least its min_sizes entry, got {maximum} for "
                          f"{minimum}")
     ratios = priors["aspect_ratios"]
     if not (isinstance(ratios, list) and len(ratios) == count
             and all(isinstance(entry, list) and all(_is_number(r) and r > 0 for r in entry) for entry in ratios)):
-        raise ValueError(f"{where}: aspect_ratios: expected {count} lists (one per feature map) of positive "
-                         f"ratios, got {short_repr(ratios)}")
+        raise ValueError(f"{where}: aspect_ratios: expected {count} lists of positive ratios {per_map}, got "
+                         f"{short_repr(ratios)}")
 
 
 def check_detector(data: dict, where: str | Path) -> dict:
