@@ -14,6 +14,11 @@ Every method is a set of class methods taking the run directory (a ``str`` or ``
 method's ``run_dir`` module can export them as plain functions (``read_config = AAERunDir.read_config``).
 Every reader raises ``ValueError`` naming the file and what is missing or malformed.
 
+Each file has one validator, run when the run directory is opened: :meth:`RunDir.validate` (a pipeline
+opens the run: every file it needs, ``config.json`` through :meth:`RunDir.check_config`, then the
+method's own files) and :func:`paz6d.run_dirs.prepare_run_output` (``paz6d train <method>`` opens its
+``--out`` to resume: ``config.json`` and the trainer's files, :func:`paz6d.training.checkpoints.check_training_files`).
+
 Example:
     >>> class TinyRunDir(RunDir):
     ...     KIND = "a tiny"
@@ -37,8 +42,9 @@ from paz6d.backend.files import check_run_files, load_json_object, load_run_json
 class RunDir:
     """One method's run directory: file names and the readers and writers every method shares.
 
-    Subclasses set :attr:`KIND`, :attr:`MARKER_FILES` and :attr:`REQUIRED_FILES`, and extend
-    :meth:`validate` (and :meth:`read_config` where ``config.json`` has fields a pipeline needs).
+    Subclasses set :attr:`KIND`, :attr:`MARKER_FILES` and :attr:`REQUIRED_FILES`, extend :meth:`validate`
+    with the checks of their own files and implement :meth:`check_config` for the fields of their
+    ``config.json``.
     """
 
     #: How messages name these run directories ("is DIR an AAE run directory?": ``"an AAE"``).
@@ -91,9 +97,12 @@ class RunDir:
 
     @classmethod
     def validate(cls, run_dir: str | Path) -> Any:
-        """Checks that ``run_dir`` has every file the pipeline needs (subclasses also read them);
-        returns ``run_dir`` as a Path."""
-        return cls.check_files(run_dir)
+        """Opens ``run_dir`` for a pipeline: checks that it has every file the pipeline needs and that its
+        ``config.json``, when it has one, passes :meth:`check_config`; returns ``run_dir`` as a Path.
+        Subclasses call it first, then check their own files (and may return what they read)."""
+        run_dir = cls.check_files(run_dir)
+        cls.read_config(run_dir)
+        return run_dir
 
     @classmethod
     def class_names(cls, run_dir: str | Path) -> tuple[str, ...] | None:
@@ -108,11 +117,21 @@ class RunDir:
         return write_json_atomically(cls.config_path(run_dir), config, indent=2)
 
     @classmethod
+    def check_config(cls, config: dict[str, Any], path: Path) -> dict[str, Any]:
+        """The validator of ``config.json``: ``config`` (the file's JSON object) checked field by field;
+        returns it. A method implements it with its settings' own check; the base accepts any object.
+
+        Raises:
+            ValueError: naming ``path``, the field and what was expected.
+        """
+        return config
+
+    @classmethod
     def read_config(cls, run_dir: str | Path) -> dict[str, Any] | None:
-        """The run's settings, ``None`` when the run has none yet (``ValueError`` naming the file when it
-        is not a JSON object)."""
+        """The run's settings (checked by :meth:`check_config`), ``None`` when the run has none yet
+        (``ValueError`` naming the file when it is not a JSON object or fails the check)."""
         path = cls.config_path(run_dir)
-        return load_json_object(path) if path.is_file() else None
+        return cls.check_config(load_json_object(path), path) if path.is_file() else None
 
     @classmethod
     def write_metrics(cls, run_dir: str | Path, metrics: dict[str, Any]) -> Path:
@@ -183,14 +202,18 @@ class CropRunDir(RunDir):
         return super().write_config(run_dir, config)
 
     @classmethod
-    def read_config(cls, run_dir: str | Path) -> dict[str, Any]:
-        """``config.json``, checked for ``input_size``, ``margin`` and ``downsample``."""
-        path = cls.config_path(run_dir)
-        data = load_run_json(path, cls.PIPELINE_CONFIG_KEYS, cls.KIND)
+    def check_config(cls, config: dict[str, Any], path: Path) -> dict[str, Any]:
+        """``config`` checked for ``input_size``, ``margin`` and ``downsample``."""
         for name in ("input_size", "downsample"):
-            integer_field(data, name, str(path), minimum=1)
-        number_field(data, "margin", str(path), positive=True)
-        return data
+            integer_field(config, name, str(path), minimum=1)
+        number_field(config, "margin", str(path), positive=True)
+        return config
+
+    @classmethod
+    def read_config(cls, run_dir: str | Path) -> dict[str, Any]:
+        """``config.json`` (required), checked by :meth:`check_config`."""
+        path = cls.config_path(run_dir)
+        return cls.check_config(load_run_json(path, cls.PIPELINE_CONFIG_KEYS, cls.KIND), path)
 
     @classmethod
     def read_keypoints(cls, run_dir: str | Path) -> tuple[np.ndarray, Any]:
@@ -200,9 +223,7 @@ class CropRunDir(RunDir):
 
     @classmethod
     def validate(cls, run_dir: str | Path) -> Path:
-        """Checks that ``run_dir`` is a directory with every file the pipeline needs and readable
-        configuration and keypoints; returns it as a Path."""
-        run_dir = cls.check_files(run_dir)
-        cls.read_config(run_dir)
+        """:meth:`RunDir.validate`, then the run's keypoints file; returns ``run_dir`` as a Path."""
+        run_dir = super().validate(run_dir)
         cls.read_keypoints(run_dir)
         return run_dir

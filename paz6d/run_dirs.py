@@ -1,6 +1,6 @@
 """Which method wrote a run directory (each registered method's ``RunDir`` recognises its own, see
 :mod:`paz6d.methods`); and the check every ``paz6d train <method>`` and ``paz6d benchmark`` makes before
-writing into its ``--out``."""
+writing into its ``--out``: the folder's owner and, when it is a run to resume, its files."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from pathlib import Path
 from paz6d import methods as registry
 from paz6d.backend.files import load_json_object, write_json_atomically
 from paz6d.backend.paths import check_outputs
+from paz6d.training.checkpoints import check_training_files
 
 #: Method name -> the module of its run directory class (file names, ``read_model``), for the methods
 #: registered when this module was imported.
@@ -39,12 +40,28 @@ def _owner(out: Path) -> str | None:
     return found[0] if len(found) == 1 else (", ".join(found) if found else None)
 
 
+def check_resumed_run(out: Path, method: str) -> None:
+    """Opens ``out``, an existing output folder of ``method``, to resume it: the validators of its files run
+    (the method's ``config.json`` check, :meth:`~paz6d.run_dir.RunDir.check_config`, when ``method`` is a
+    registered method; the Trainer's ``checkpoint.json``, checkpoint files and ``log.csv``) before the
+    command's long work.
+
+    Raises:
+        ValueError: naming the first corrupt file and field.
+    """
+    run_dir = next((known.run_dir for known in registry.methods() if known.name == method), None)
+    if run_dir is not None and run_dir.config_path(out).is_file():
+        run_dir.read_config(out)
+    check_training_files(out)
+
+
 def prepare_run_output(out: str | Path, method: str, inputs: dict[str, str | Path | None] | None = None,
                        flag: str = "--out") -> Path:
     """The output rule for a command's output folder (:func:`paz6d.backend.paths.check_outputs`: not a
     symbolic link, a file or a data set, not one of ``inputs``), and ownership: an existing folder
-    that another command or method wrote (its :data:`OWNER_FILE`, else its marker files) is refused.
-    Then creates ``out`` and records ``method`` as its owner.
+    that another command or method wrote (its :data:`OWNER_FILE`, else its marker files) is refused,
+    one of ``method`` is opened to resume (:func:`check_resumed_run`). Then creates ``out`` and records
+    ``method`` as its owner.
 
     Args:
         out: the output folder.
@@ -62,6 +79,7 @@ def prepare_run_output(out: str | Path, method: str, inputs: dict[str, str | Pat
         if owner is not None and owner != method:
             raise ValueError(f"{flag}: {out} is an output folder of {owner}, not {method}; give a new folder "
                              f"(or a {method} run to resume)")
+        check_resumed_run(out, method)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:

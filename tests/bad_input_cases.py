@@ -1581,6 +1581,111 @@ def late_validation_cases() -> list[Case]:
     return found
 
 
+#: A valid ``detector.json`` of a light SSD on 128-pixel inputs (the model beside it is garbage: the
+#: description is checked before the network is loaded).
+SSD_DETECTOR = {"architecture": "light", "class_names": ["a", "b"], "variances": [0.1, 0.1, 0.2, 0.2],
+                "priors": {"input_size": 128, "feature_map_sizes": [16, 8, 4, 2, 1, 1],
+                           "steps": [8.0, 16.0, 32.0, 64.0, 128.0, 128.0],
+                           "min_sizes": [5.6, 12.0, 24.3, 43.5, 67.8, 96.0],
+                           "max_sizes": [12.0, 24.3, 43.5, 67.8, 96.0, 128.0],
+                           "aspect_ratios": [[2.0], [2.0, 3.0], [2.0, 3.0], [2.0, 3.0], [2.0], [2.0]]}}
+#: A checkpoint of the shared Trainer, as ``train <method> --out`` finds it when resuming.
+CHECKPOINT = "checkpoints/step_00000010"
+
+
+def _ssd_run(change: Callable[[dict], Any]) -> Callable[[World, Path], None]:
+    """Setup: ``<case>/ssd``, an SSD run directory whose ``detector.json`` is :data:`SSD_DETECTOR` after
+    ``change(detector)`` (which edits it in place), and ``<case>/images`` with one image."""
+
+    def setup(world: World, folder: Path) -> None:
+        detector = json.loads(json.dumps(SSD_DETECTOR))
+        change(detector)
+        put(folder / "ssd" / "detector.json", json.dumps(detector))  # json.dumps writes inf as Infinity
+        put(folder / "ssd" / "model.keras", b"not a keras model")
+        shutil.copytree(world.bop / "test" / "000000" / "rgb", folder / "images")
+
+    return setup
+
+
+def _priors(name: str, value) -> Callable[[dict], None]:
+    return lambda detector: detector["priors"].__setitem__(name, value)
+
+
+def _resumed_aae_run(relative: str, content) -> Callable[[World, Path], None]:
+    """Setup: ``<case>/run``, the world's AAE run with a Trainer checkpoint, ``checkpoint.json`` and
+    ``log.csv`` as a killed training leaves them, then ``relative`` replaced by ``content`` (see
+    :func:`put`; a callable maps the file's JSON)."""
+
+    def setup(world: World, folder: Path) -> None:
+        import h5py
+
+        run = folder / "run"
+        shutil.copytree(world.aae_run, run)
+        (run / CHECKPOINT).mkdir(parents=True)
+        with h5py.File(run / CHECKPOINT / "model.weights.h5", "w") as weights:
+            weights.create_dataset("kernel", data=np.zeros((4, 2), np.float32))
+        np.savez(run / CHECKPOINT / "optimizer.npz", **{"0": np.int64(10), "1": np.float32(0.001)})
+        put(run / CHECKPOINT / "state.json", {"step": 10, "metrics": {}})
+        put(run / "checkpoint.json", {"step": 10, "path": CHECKPOINT, "kept": [10]})
+        put(run / "log.csv", "step,wall_seconds,data_seconds,step_seconds,loss\n5,0.1,0.01,0.02,0.5\n"
+                             "10,0.2,0.01,0.02,0.4\n")
+        value = content(json.loads((run / relative).read_text())) if callable(content) else content
+        put(run / relative, value)
+
+    return setup
+
+
+def run_directory_cases() -> list[Case]:
+    """Run directories whose settings or training files are spoilt: refused when the run directory is
+    opened (``detect``, ``estimate``, ``train <method>`` resuming), naming the file and the field."""
+    detector = ("detector.json",)
+    found = [Case("detect-ssd-run-model-garbage", DETECT, _ssd_run(lambda detector: None), ("model.keras",))]
+    found += [Case(f"detect-ssd-run-{name}", DETECT, _ssd_run(change), detector + expect) for name, change, expect in (
+        ("steps-0", _priors("steps", [0, 0, 0, 0, 0, 0]), ("steps",)),
+        ("aspect-ratio-0", _priors("aspect_ratios", [[0.0]] * 6), ("aspect_ratios",)),
+        ("feature-maps-short", _priors("feature_map_sizes", [16, 8]), ("feature_map_sizes",)),
+        ("min-size-nan", _priors("min_sizes", [float("nan")] * 6), ("min_sizes",)),
+        ("input-size-100", _priors("input_size", 100), ("input_size",)),
+        ("priors-missing", lambda detector: detector["priors"].pop("steps"), ("priors", "steps")),
+        ("class-names-duplicate", lambda detector: detector.__setitem__("class_names", ["a", "a"]),
+         ("class_names", "'a'")),
+        ("image-scale-1e-9", lambda detector: detector.__setitem__("image_scale", 1e-9), ("image_scale",)),
+        ("image-scale-infinity", lambda detector: detector.__setitem__("image_scale", float("inf")),
+         ("image_scale",)),
+        ("architecture-foo", lambda detector: detector.__setitem__("architecture", "foo"), ("architecture", "foo")),
+        ("variances-nan", lambda detector: detector.__setitem__("variances", [float("nan")] * 4), ("variances",)),
+    )]
+    aae_run = replace_flag(ESTIMATE, "--run", "{case}/run")
+    for name, change, expect in (
+            ("crop-size-minus-16", {"crop_size": -16}, "crop_size"),
+            ("latent-size-0", {"latent_size": 0}, "latent_size"),
+            ("views-text", {"views": "many"}, "views"),
+            ("filters-empty", {"filters": []}, "filters"),
+            ("augmentation-noise-negative", {"augmentation": {"noise": -1.0}}, "noise")):
+        def setup(world, folder, change=change):
+            shutil.copytree(world.aae_run, folder / "run")
+            data = json.loads((folder / "run" / "config.json").read_text())
+            put(folder / "run" / "config.json", {**data, "config": {**data["config"], **change}})
+        found.append(Case(f"estimate-aae-config-{name}", aae_run, setup, ("config.json", expect)))
+    train_aae = replace_flag(TRAIN_AAE, "--out", "{case}/run")
+    found.append(Case("train-aae-resume-config-crop-size-minus-16", train_aae, _resumed_aae_run(
+        "config.json", lambda data: {**data, "config": {**data["config"], "crop_size": -16}}),
+        ("config.json", "crop_size")))
+    for name, relative, content, expect in (
+            ("pointer-garbage", "checkpoint.json", "{", ("checkpoint.json",)),
+            ("pointer-no-folder", "checkpoint.json", {"step": 20, "path": "checkpoints/step_00000020"},
+             ("checkpoint.json", "step_00000020")),
+            ("log-garbage", "log.csv", "step,loss\nabc,1\n", ("log.csv", "line 2", "step")),
+            ("log-nul", "log.csv", b"step,loss\n1\x00,1\n", ("log.csv",)),
+            ("log-no-step", "log.csv", "a,b\n1,2\n", ("log.csv", "step")),
+            ("weights-garbage", f"{CHECKPOINT}/model.weights.h5", b"garbage", ("model.weights.h5",)),
+            ("weights-missing", f"{CHECKPOINT}/model.weights.h5", None, ("model.weights.h5",)),
+            ("optimizer-garbage", f"{CHECKPOINT}/optimizer.npz", b"garbage", ("optimizer.npz",)),
+            ("optimizer-missing", f"{CHECKPOINT}/optimizer.npz", None, ("optimizer.npz",))):
+        found.append(Case(f"train-aae-resume-{name}", train_aae, _resumed_aae_run(relative, content), expect))
+    return found
+
+
 CALIBRATE = ("calibrate", "--images", "{world}/bop/test/000000/rgb", "--chessboard", "9x6", "--square-size", "0.025",
              "--out", "{out}")
 EXPORT = ("export", "--run", "{world}/runs/aae", "--format", "tflite", "--out", "{out}")
@@ -1636,7 +1741,8 @@ def all_cases() -> list[Case]:
     """The table: every case, names unique."""
     found = generate_cases() + evaluate_bop_cases() + evaluate_coco_cases() + evaluate_voc_cases() + \
         estimate_cases() + estimate_images_cases() + train_cases() + output_rule_cases() + dataset_path_cases() + \
-        annotation_cases() + late_validation_cases() + run_cases() + calibrate_and_export_cases()
+        annotation_cases() + late_validation_cases() + run_cases() + calibrate_and_export_cases() + \
+        run_directory_cases()
     names = [case.name for case in found]
     duplicated = {name for name in names if names.count(name) > 1}
     if duplicated:

@@ -189,6 +189,43 @@ def test_run_dir_base_reads_settings_metrics_and_the_training_mesh(tmp_path):
     assert keypointnet_run.KeypointNetRunDir.training_mesh(keypointnet) is None  # the config names no mesh
 
 
+@pytest.mark.parametrize("method", sorted(RUN_DIR_MODULES))
+def test_opening_a_run_directory_checks_its_config_through_the_methods_hook(tmp_path, method):
+    class Checked(get(method).run_dir):
+        @classmethod
+        def check_config(cls, config, path):
+            raise ValueError(f"{path}: field 'steps' checked by the hook")
+
+    for name in Checked.REQUIRED_FILES:
+        (tmp_path / name).write_bytes(b"not read before config.json")
+    (tmp_path / "config.json").write_text(json.dumps({"input_size": 32, "margin": 1.25, "downsample": 2}))
+    with pytest.raises(ValueError, match="config.json: field 'steps' checked by the hook"):
+        Checked.validate(tmp_path)  # before the method's own files, which are not readable here
+    with pytest.raises(ValueError, match="config.json: field 'steps' checked by the hook"):
+        Checked.read_config(tmp_path)  # what a resumed training reads
+
+
+def test_a_resumed_run_is_opened_with_its_config_and_trainer_files_checked(tmp_path):
+    from paz6d.run_dirs import OWNER_FILE, run_output
+
+    run = write_aae_run(tmp_path / "run")
+    config = json.loads(aae_run.config_path(run).read_text())
+    aae_run.config_path(run).write_text(json.dumps({**config, "config": {**config["config"], "crop_size": -16}}))
+    with pytest.raises(ValueError, match=r"config.json: config: AAEConfig.crop_size: expected a positive multiple "
+                                         r"of 2\*\*len\(filters\) = 16 pixels, got -16"):
+        with run_output(run, "aae"):
+            pass
+    aae_run.config_path(run).write_text(json.dumps(config))
+    (run / "log.csv").write_text("step,loss\n10,0.5\nten,0.4\n")
+    with pytest.raises(ValueError, match="log.csv: line 3"):
+        with run_output(run, "aae"):
+            pass
+    assert not (run / OWNER_FILE).exists()  # refused before the folder is claimed
+    (run / "log.csv").unlink()
+    with run_output(run, "aae"):
+        assert (run / OWNER_FILE).is_file()
+
+
 def test_run_output_claims_a_folder_resumes_its_own_and_refuses_others(tmp_path):
     from paz6d.run_dirs import OWNER_FILE, run_output
 

@@ -147,7 +147,10 @@ def test_tiny_backbone_training_lowers_the_loss_and_loads_through_the_pipeline(t
 
 
 def test_detector_normalization_is_checked(tmp_path):
-    run_files.write_detector(tmp_path, "light", ["a"], {}, normalization={"mean": [0.5] * 3, "std": [0.5] * 3})
+    from paz6d.ssd.model import paper_priors
+
+    priors = paper_priors("light", 128).to_dict()
+    run_files.write_detector(tmp_path, "light", ["a"], priors, normalization={"mean": [0.5] * 3, "std": [0.5] * 3})
     assert run_files.read_detector(tmp_path)["normalization"] == {"mean": [0.5] * 3, "std": [0.5] * 3}
     data = json.loads((tmp_path / "detector.json").read_text())
     for bad in ({"mean": [0.5] * 3, "std": [0.0] * 3}, {"mean": [0.5] * 2, "std": [0.5] * 3}, [0.5, 0.5]):

@@ -171,7 +171,7 @@ def test_corrupt_run_directory_is_refused(trained, tmp_path):
         DetectSingleShot(broken)
     detector = json.loads((trained / "detector.json").read_text())
     (broken / "detector.json").write_text(json.dumps({**detector, "image_scale": -1}))
-    with pytest.raises(ValueError, match=r"detector.json: image_scale: expected a positive number or null, got -1"):
+    with pytest.raises(ValueError, match=r"detector.json: image_scale: expected a factor from 0.0625 to 16 or null"):
         DetectSingleShot(broken)
     (broken / "detector.json").write_text((trained / "detector.json").read_text())
     (broken / "model.keras").unlink()

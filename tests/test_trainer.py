@@ -300,3 +300,132 @@ def test_checkpoint_pointer_outside_the_run_or_malformed_is_refused(tmp_path, po
     with pytest.raises(ValueError, match="checkpoint.json") as error:
         _trainer(run, 10).fit()
     assert expected in str(error.value)
+
+
+def _spoil_checkpoint(run, relative, content):
+    path = run / relative
+    if content is None:
+        path.unlink()
+    else:
+        path.write_bytes(content)
+
+
+CHECKPOINT_10 = "checkpoints/step_00000010"
+
+
+@pytest.mark.parametrize("relative, content, expected", [
+    ("log.csv", b"step,loss\nabc,1\n", "log.csv: line 2"),
+    ("log.csv", b"a,b\n1,2\n", "log.csv: line 1: expected a header with a 'step' column"),
+    ("log.csv", b"step,loss\n1\x00,1\n", "log.csv: line 2"),
+    ("log.csv", b"step,loss\n5,1\n3,1\n", "log.csv: line 3"),
+    ("log.csv", b"step,loss\n\xff\n", "log.csv: not UTF-8"),
+    (f"{CHECKPOINT_10}/model.weights.h5", b"garbage", "model.weights.h5: not an HDF5 weights file"),
+    (f"{CHECKPOINT_10}/model.weights.h5", None, "has no model.weights.h5"),
+    (f"{CHECKPOINT_10}/optimizer.npz", b"garbage", "optimizer.npz: not a readable .npz file"),
+    (f"{CHECKPOINT_10}/optimizer.npz", None, "has no optimizer.npz"),
+])
+def test_corrupt_checkpoint_and_log_files_are_refused_naming_the_file(tmp_path, relative, content, expected):
+    from paz6d.training.checkpoints import check_training_files
+
+    run = tmp_path / "run"
+    _trainer(run, 10).fit()
+    _spoil_checkpoint(run, relative, content)
+    before = _tree(run)
+    with pytest.raises(ValueError, match=expected):
+        check_training_files(run)  # when the run directory is opened (paz6d.run_dirs.prepare_run_output)
+    with pytest.raises(ValueError, match=expected):
+        _trainer(run, 20).fit()
+    assert _tree(run) == before
+
+
+def test_a_truncated_weights_file_is_refused_when_restored(tmp_path):
+    run = tmp_path / "run"
+    _trainer(run, 10).fit()
+    weights = run / CHECKPOINT_10 / "model.weights.h5"
+    weights.write_bytes(weights.read_bytes()[:600])  # the HDF5 signature survives, the data does not
+    with pytest.raises(ValueError, match="model.weights.h5: not the weights of this network"):
+        _trainer(run, 20).fit()
+
+
+@pytest.mark.parametrize("steps", [20, 5])
+def test_a_checkpoint_beyond_the_runs_steps_is_refused(tmp_path, steps):
+    run = tmp_path / "run"
+    _trainer(run, 10).fit()
+    if steps == 20:  # a pointer claiming a million steps
+        (run / "checkpoint.json").write_text(json.dumps({"step": 10 ** 6, "path": CHECKPOINT_10}))
+    before = _tree(run)
+    beyond = 10 ** 6 if steps == 20 else 10
+    with pytest.raises(ValueError, match=f"checkpoint.json: step {beyond} is beyond this run's {steps} steps"):
+        _trainer(run, steps).fit()
+    assert _tree(run) == before  # no "finished" run of a million steps recorded
+
+
+def test_checkpoint_files_of_another_network_are_refused_naming_the_file(tmp_path):
+    from paz6d.training.trainer import Trainer
+
+    keras = import_keras()
+    _, _, loss_fn, data = _problem()
+    deeper = keras.Sequential([keras.Input((4,)), keras.layers.Dense(8), keras.layers.Dense(2)])
+    Trainer(deeper, keras.optimizers.Adam(0.01), loss_fn, data, tmp_path / "other", 10, checkpoint_every=5,
+            progress=False, tensorboard=False).fit()
+    run = tmp_path / "run"
+    _trainer(run, 10).fit()
+    ours = run / CHECKPOINT_10
+    original = (ours / "optimizer.npz").read_bytes()
+    (ours / "optimizer.npz").write_bytes((tmp_path / "other" / CHECKPOINT_10 / "optimizer.npz").read_bytes())
+    with pytest.raises(ValueError, match=r"optimizer.npz: the state of another network or optimizer "
+                                         r"\(10 variables, this optimizer has 6\)"):
+        _trainer(run, 20).fit()
+    with np.load(tmp_path / "other" / CHECKPOINT_10 / "optimizer.npz") as stored:
+        arrays = [stored[str(index)] for index in range(6)]
+    arrays[2] = np.zeros((3, 3), np.float32)  # as many variables, one of another shape
+    np.savez(ours / "optimizer.npz", **{str(index): array for index, array in enumerate(arrays)})
+    with pytest.raises(ValueError, match=r"optimizer.npz: .*variable 2 has shape \(3, 3\), here \(4, 2\)"):
+        _trainer(run, 20).fit()
+    (ours / "optimizer.npz").write_bytes(original)
+    (ours / "model.weights.h5").write_bytes((tmp_path / "other" / CHECKPOINT_10 / "model.weights.h5").read_bytes())
+    with pytest.raises(ValueError, match="model.weights.h5: not the weights of this network"):
+        _trainer(run, 20).fit()
+
+
+KILLED_TRAINING = """
+import sys, time
+sys.path.insert(0, sys.argv[2])
+from test_trainer import _problem, _trainer
+_, _, _, data = _problem()
+def slow(step):
+    time.sleep(0.05)
+    return data(step)
+_trainer(sys.argv[1], 40, data=slow, tensorboard=False).fit()
+"""
+
+
+def test_resume_after_sigkill_matches_an_uninterrupted_run(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    run = tmp_path / "killed"
+    repository = Path(__file__).resolve().parents[1]
+    process = subprocess.Popen([sys.executable, "-c", KILLED_TRAINING, str(run), str(Path(__file__).parent)],
+                               env={**os.environ, "PYTHONPATH": str(repository)}, cwd=repository)
+    pointer = run / "checkpoint.json"
+    deadline = time.monotonic() + 300  # importing TensorFlow takes a minute on a loaded machine
+    while time.monotonic() < deadline and process.poll() is None and \
+            (not pointer.exists() or json.loads(pointer.read_text())["step"] < 10):
+        time.sleep(0.01)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    killed_at = json.loads(pointer.read_text())["step"]
+    assert 10 <= killed_at < 40, "the run should have been killed part-way"
+    resumed = _trainer(run, 40, tensorboard=False)
+    assert resumed.fit().start_step == killed_at
+    assert _log_steps(run) == list(range(1, 41))
+    reference = _trainer(tmp_path / "reference", 40, tensorboard=False)
+    reference.fit()
+    for got, want in zip(resumed.model.get_weights(), reference.model.get_weights()):
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    assert int(resumed.optimizer.iterations.numpy()) == 40

@@ -11,7 +11,8 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from paz6d.backbones import BACKBONES, check_backbone
-from paz6d.backend.checks import is_whole_number, unknown_fields
+from paz6d.backend.checks import (integer_field, is_whole_number, number_field, required_field, short_repr,
+                                  unknown_fields)
 from paz6d.cli_options import option
 from paz6d.datasets.bop.fields import BOX_FIELDS, box_field
 from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
@@ -65,6 +66,14 @@ class Augmentation:
     noise: float = 8.0
 
     def __post_init__(self):
+        fields = vars(self)
+        if not isinstance(self.backgrounds, bool):
+            raise ValueError(f"Augmentation.backgrounds: expected true or false, got {short_repr(self.backgrounds)}")
+        integer_field(fields, "max_occluders", "Augmentation", minimum=1)
+        for name in ("occlusion_probability", "blur_probability", "shift", "light", "brightness", "hue", "noise"):
+            number_field(fields, name, "Augmentation")
+        for name in ("occluder_size", "scale", "contrast", "saturation"):
+            required_field(fields, name, "Augmentation", size=2)
         for name in ("occlusion_probability", "blur_probability"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"Augmentation.{name}: expected a probability in [0, 1], got {getattr(self, name)}")
@@ -72,8 +81,6 @@ class Augmentation:
             low, high = getattr(self, name)
             if not 0.0 < low <= high:
                 raise ValueError(f"Augmentation.{name}: expected 0 < low <= high, got {getattr(self, name)}")
-        if int(self.max_occluders) < 1:
-            raise ValueError(f"Augmentation.max_occluders: expected at least 1, got {self.max_occluders}")
         for name in ("shift", "light", "brightness", "hue", "noise"):
             if getattr(self, name) < 0:
                 raise ValueError(f"Augmentation.{name}: expected >= 0, got {getattr(self, name)}")
@@ -134,6 +141,27 @@ class AAEConfig:
     log_every: int = 25
 
     def __post_init__(self):
+        fields = vars(self)
+        for name, minimum in (("latent_size", 1), ("kernel_size", 1), ("render_size", 1), ("views", 1),
+                              ("in_plane", 1), ("steps", 1), ("batch_size", 1), ("checkpoint_every", 1),
+                              ("sample_every", 0), ("log_every", 1)):
+            integer_field(fields, name, "AAEConfig", minimum)
+        for name in ("padding", "learning_rate"):
+            number_field(fields, name, "AAEConfig", positive=True)
+        number_field(fields, "bootstrap_fraction", "AAEConfig", maximum=1.0, positive=True)
+        if not isinstance(self.batch_norm, bool):
+            raise ValueError(f"AAEConfig.batch_norm: expected true or false, got {short_repr(self.batch_norm)}")
+        if not (isinstance(self.filters, tuple) and self.filters
+                and all(isinstance(channels, int) and not isinstance(channels, bool) and channels > 0
+                        for channels in self.filters)):
+            raise ValueError(f"AAEConfig.filters: expected a non-empty list of positive channel counts, got "
+                             f"{short_repr(self.filters)}")
+        stride = 2 ** len(self.filters)  # one strided convolution per entry of filters
+        if not (type(self.crop_size) is int and self.crop_size > 0 and self.crop_size % stride == 0):
+            raise ValueError(f"AAEConfig.crop_size: expected a positive multiple of 2**len(filters) = {stride} "
+                             f"pixels, got {short_repr(self.crop_size)}")
+        if not isinstance(self.augmentation, Augmentation):
+            raise ValueError(f"AAEConfig.augmentation: expected an Augmentation, got {short_repr(self.augmentation)}")
         if not is_whole_number(self.lr_drop_steps) or not 0 <= self.lr_drop_steps <= self.steps:
             raise ValueError(f"AAEConfig.lr_drop_steps: expected a whole number from 0 to steps ({self.steps}), "
                              f"got {self.lr_drop_steps!r}")
@@ -149,18 +177,30 @@ class AAEConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> "AAEConfig":
+        """The settings of :meth:`to_dict` (a run's ``config.json``), every field checked.
+
+        Raises:
+            ValueError: an unknown field, or one of the wrong type or out of range (naming it).
+        """
+        if not isinstance(data, dict):
+            raise ValueError(f"AAE config: expected an object of settings, got {short_repr(data)}")
         data = dict(data)
         unknown = unknown_fields(cls, data)
         if unknown:
             raise ValueError(f"AAE config: unknown field(s) {unknown}")
-        augmentation = dict(data.pop("augmentation", {}))
+        augmentation = data.pop("augmentation", {})
+        if not isinstance(augmentation, dict):
+            raise ValueError(f"AAEConfig.augmentation: expected an object, got {short_repr(augmentation)}")
+        augmentation = dict(augmentation)
         unknown = unknown_fields(Augmentation, augmentation)
         if unknown:
             raise ValueError(f"AAE config: augmentation: unknown field(s) {unknown}")
         for key in ("occluder_size", "scale", "contrast", "saturation"):
-            if key in augmentation:
+            if isinstance(augmentation.get(key), list):
                 augmentation[key] = tuple(augmentation[key])
-        return cls(filters=tuple(data.pop("filters", cls.filters)), augmentation=Augmentation(**augmentation), **data)
+        if isinstance(data.get("filters"), list):
+            data["filters"] = tuple(data["filters"])
+        return cls(augmentation=Augmentation(**augmentation), **data)
 
     @property
     def codebook_size(self) -> int:

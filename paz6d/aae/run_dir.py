@@ -23,9 +23,11 @@ from typing import Any
 import numpy as np
 
 from paz6d.aae.codebook import Codebook
+from paz6d.aae.config import AAEConfig
 from paz6d.aae.model import load_model
-from paz6d.backend.checks import integer_field, number_field
+from paz6d.backend.checks import integer_field, number_field, short_repr
 from paz6d.backend.files import load_json_object, load_npz, save_npz_atomically
+from paz6d.datasets.bop.fields import BOX_FIELDS
 from paz6d.run_dir import RunDir
 
 OBJECT_FILE = "object.npz"
@@ -82,24 +84,38 @@ class AAERunDir(RunDir):
             "dataset": None if dataset is None else str(Path(dataset).resolve()), "crop_box": crop_box})
 
     @classmethod
-    def read_config(cls, run_dir: str | Path) -> dict[str, Any]:
-        """The whole ``config.json`` (see :meth:`write_config`), checked for the keys readers use."""
-        run_dir = Path(run_dir)
-        if not run_dir.is_dir():
-            raise ValueError(f"run_dir: {run_dir} is not a directory")
-        path = _required(cls.config_path(run_dir))
-        data = load_json_object(path)
-        missing = [key for key in CONFIG_KEYS if key not in data]
-        if not missing and isinstance(data["config"], dict):
-            missing = [f"config.{key}" for key in MODEL_CONFIG_KEYS if key not in data["config"]]
+    def check_config(cls, config: dict[str, Any], path: Path) -> dict[str, Any]:
+        """``config.json`` checked: its keys, every model/training setting (:meth:`AAEConfig.from_dict
+        <paz6d.aae.config.AAEConfig.from_dict>`), ``mesh_scale``, ``seed``, ``dataset`` and ``crop_box``."""
+        missing = [key for key in CONFIG_KEYS if key not in config]
+        if not missing and isinstance(config["config"], dict):
+            missing = [f"config.{key}" for key in MODEL_CONFIG_KEYS if key not in config["config"]]
         elif not missing:
             missing = ["config (an object)"]
         if missing:
             raise ValueError(f"{path}: missing key(s) {missing} of an AAE run configuration")
-        integer_field(data["config"], "crop_size", f"{path}: config", minimum=1)
-        number_field(data["config"], "padding", f"{path}: config", positive=True)
-        number_field(data, "mesh_scale", str(path), positive=True)
-        return data
+        try:
+            AAEConfig.from_dict(config["config"])
+        except ValueError as error:
+            raise ValueError(f"{path}: config: {error}") from None
+        number_field(config, "mesh_scale", str(path), positive=True)
+        integer_field(config, "seed", str(path))
+        if config.get("dataset") is not None and not isinstance(config["dataset"], str):
+            raise ValueError(f"{path}: field 'dataset' must be the path of a data set or null, got "
+                             f"{short_repr(config['dataset'])}")
+        if config.get("crop_box", "obj") not in BOX_FIELDS:
+            raise ValueError(f"{path}: field 'crop_box' must be one of {sorted(BOX_FIELDS)}, got "
+                             f"{short_repr(config['crop_box'])}")
+        return config
+
+    @classmethod
+    def read_config(cls, run_dir: str | Path) -> dict[str, Any]:
+        """The whole ``config.json`` (see :meth:`write_config`), checked by :meth:`check_config`."""
+        run_dir = Path(run_dir)
+        if not run_dir.is_dir():
+            raise ValueError(f"run_dir: {run_dir} is not a directory")
+        path = _required(cls.config_path(run_dir))
+        return cls.check_config(load_json_object(path), path)
 
     @classmethod
     def validate(cls, run_dir: str | Path) -> Path:
@@ -109,8 +125,7 @@ class AAERunDir(RunDir):
         Returns:
             ``run_dir`` as a Path.
         """
-        run_dir = cls.check_files(run_dir)
-        cls.read_config(run_dir)
+        run_dir = super().validate(run_dir)
         read_object(run_dir)
         read_codebook(run_dir)
         return run_dir

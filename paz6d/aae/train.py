@@ -31,11 +31,8 @@ def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEC
     may change)."""
     path = run_files.config_path(run_dir)
     if path.exists():
-        stored = run_files.read_config(run_dir)
-        try:
-            stored_config = AAEConfig.from_dict(stored["config"])
-        except (KeyError, TypeError, ValueError) as error:
-            raise ValueError(f"{path}: unreadable AAE run configuration ({error})") from error
+        stored = run_files.read_config(run_dir)  # every setting checked (AAERunDir.check_config)
+        stored_config = AAEConfig.from_dict(stored["config"])
         if Path(stored["mesh"]).resolve() != mesh_path.resolve() or stored["mesh_scale"] != mesh_scale:
             raise ValueError(f"{path}: this run directory was trained on {stored['mesh']} (scale "
                              f"{stored['mesh_scale']}); use another --out for {mesh_path}")

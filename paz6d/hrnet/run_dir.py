@@ -51,18 +51,18 @@ class HRNetRunDir(RunDir):
     REQUIRED_FILES = (DESCRIPTION_FILE, RunDir.MODEL_FILE)
 
     @classmethod
-    def read_config(cls, run_dir: str | Path) -> dict[str, Any] | None:
-        """The run's ``config.json`` (a JSON object), ``None`` when the run has none yet."""
-        data = super().read_config(run_dir)
-        for key in CONFIG_KEYS if data is not None else ():
-            if key not in data:
-                raise ValueError(f"{cls.config_path(run_dir)}: missing field {key!r} (not an HRNet run configuration)")
-        return data
+    def check_config(cls, config: dict[str, Any], path: Path) -> dict[str, Any]:
+        """``config.json`` checked for the fields a resumed run compares."""
+        for key in CONFIG_KEYS:
+            if key not in config:
+                raise ValueError(f"{path}: missing field {key!r} (not an HRNet run configuration)")
+        return config
 
     @classmethod
     def validate(cls, run_dir: str | Path) -> dict[str, Any]:
-        """Checks that ``run_dir`` is a directory with ``hrnet.json`` and ``model.keras``; returns the description."""
-        return read_description(cls.check_files(run_dir))
+        """:meth:`RunDir.validate` (``hrnet.json`` and ``model.keras`` present, ``config.json`` checked), then
+        ``hrnet.json``; returns the description."""
+        return read_description(super().validate(run_dir))
 
 
 # the module's functions, as its callers use them

@@ -35,9 +35,9 @@ class SegmentationRunDir(RunDir):
 
     @classmethod
     def validate(cls, run_dir: str | Path) -> dict[str, Any]:
-        """Checks that ``run_dir`` is a directory with ``segmenter.json`` and ``model.keras``; returns the
-        segmenter description."""
-        return read_segmenter(cls.check_files(run_dir))
+        """:meth:`RunDir.validate` (``segmenter.json`` and ``model.keras`` present, ``config.json`` checked),
+        then ``segmenter.json``; returns the segmenter description."""
+        return read_segmenter(super().validate(run_dir))
 
 
 # the module's functions, as its callers use them

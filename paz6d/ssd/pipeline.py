@@ -266,8 +266,10 @@ class DetectSingleShot(SequentialProcessor):
     @classmethod
     def from_model(cls, model, detector: dict, score_threshold: float = 0.3, iou_threshold: float = 0.45,
                    max_detections: int = 100, flip: bool = False) -> "DetectSingleShot":
-        """The pipeline of a network in memory (e.g. during training) and its ``detector.json`` contents."""
+        """The pipeline of a network in memory (e.g. during training) and its ``detector.json`` contents
+        (checked by :func:`paz6d.ssd.run_dir.check_detector`)."""
         check_detection_settings(score_threshold, iou_threshold, max_detections)
+        run_files.check_detector(detector, "detector")
         pipeline = cls.__new__(cls)
         pipeline.run_dir = None
         pipeline._build(model, detector, score_threshold, iou_threshold, max_detections, flip)

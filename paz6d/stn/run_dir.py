@@ -37,9 +37,9 @@ class STNRunDir(RunDir):
 
     @classmethod
     def validate(cls, run_dir: str | Path) -> dict[str, Any]:
-        """Checks that ``run_dir`` is a directory with ``classifier.json`` and ``model.keras``; returns the
-        classifier description."""
-        return read_classifier(cls.check_files(run_dir))
+        """:meth:`RunDir.validate` (``classifier.json`` and ``model.keras`` present, ``config.json`` checked),
+        then ``classifier.json``; returns the classifier description."""
+        return read_classifier(super().validate(run_dir))
 
 
 # the module's functions, as its callers use them

@@ -14,7 +14,9 @@ everything it needs to continue in ``run_dir``::
 
 Re-running :meth:`Trainer.fit` with the same ``run_dir`` restores the weights and optimizer state of the
 latest checkpoint and continues from its step; log rows written after that checkpoint (by a run that was
-killed) are dropped so every step appears once. Ctrl-C saves a checkpoint before stopping.
+killed) are dropped so every step appears once. Ctrl-C saves a checkpoint before stopping. The files and
+their validators are :mod:`paz6d.training.checkpoints`; restoring also refuses a checkpoint beyond
+``steps``, and weights or optimizer state that are not this network's (naming the file).
 
 For a deterministic data stream across resumes pass ``data`` as a function of the step index
 (``data(step) -> batch``); an iterable is also accepted (it is simply continued).
@@ -33,7 +35,6 @@ Example:
 from __future__ import annotations
 
 import contextlib
-import csv
 import json
 import os
 import shutil
@@ -47,12 +48,11 @@ from typing import Any
 import numpy as np
 
 from paz6d.backend.files import write_csv_atomically, write_json_atomically
-from paz6d.backend.paths import path_inside
 from paz6d.backend.tensorflow_guard import import_tensorflow
+from paz6d.training.checkpoints import (CHECKPOINT_POINTER, LOG_FILE, OPTIMIZER_FILE, STATE_FILE, WEIGHTS_FILE,
+                                        check_weights_file, read_log, read_optimizer_state, read_pointer)
 from paz6d.training.distribution import is_chief, split_batch
 
-CHECKPOINT_POINTER = "checkpoint.json"
-LOG_FILE = "log.csv"
 #: Folders of ``run_dir`` the trainer writes into; none may be a symbolic link.
 RUN_FOLDERS = ("checkpoints", "tensorboard", "samples")
 _FIXED_COLUMNS = ["step", "wall_seconds", "data_seconds", "step_seconds"]
@@ -214,32 +214,11 @@ class Trainer:
             if path.exists() and not path.is_dir():
                 raise ValueError(f"{path}: expected a folder of the run, found a file")
 
-    def _read_pointer(self) -> tuple[int, Path, list[int]] | None:
-        """``(step, folder, kept steps)`` from ``checkpoint.json``, or None when there is none."""
-        pointer = self.run_dir / CHECKPOINT_POINTER
-        if not pointer.exists():
-            return None
-        try:
-            data = json.loads(pointer.read_text())
-            step, kept = data["step"], data.get("kept", [data["step"]])
-            if type(step) is not int or step < 0:
-                raise ValueError(f'"step" must be a non-negative integer, got {step!r:.40}')
-            if not isinstance(kept, list) or not all(type(item) is int and 0 <= item <= step for item in kept):
-                raise ValueError(f'"kept" must be a list of steps up to "step", got {kept!r:.60}')
-            folder = path_inside(self.run_dir, data["path"], f'{pointer}: "path"')
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError, RecursionError) as error:
-            raise ValueError(f"{pointer}: corrupt checkpoint pointer ({error}); delete it to start over") from error
-        return step, folder, [item for item in kept if item != step] + [step]
-
     def latest_checkpoint(self) -> tuple[int, Path] | None:
-        """``(step, folder)`` of the newest complete checkpoint in ``run_dir``, or None."""
-        read = self._read_pointer()
-        if read is None:
-            return None
-        step, folder, _ = read
-        if not (folder / "model.weights.h5").is_file():
-            raise ValueError(f"{self.run_dir / CHECKPOINT_POINTER}: points to {folder}, which has no model.weights.h5")
-        return step, folder
+        """``(step, folder)`` of the newest complete checkpoint in ``run_dir``, or None
+        (:func:`~paz6d.training.checkpoints.read_pointer`)."""
+        checkpoint = read_pointer(self.run_dir)
+        return None if checkpoint is None else (checkpoint.step, checkpoint.folder)
 
     def _ensure_optimizer_built(self) -> None:
         """Creates the optimizer's variables (in the strategy's scope: mirrored like the model's)."""
@@ -255,8 +234,8 @@ class Trainer:
             return self.checkpoint_dir / f"step_{step:08d}"
         self.check_run_folders()
         if self._kept_steps is None:
-            read = self._read_pointer()
-            self._kept_steps = [] if read is None else read[2]
+            checkpoint = read_pointer(self.run_dir)
+            self._kept_steps = [] if checkpoint is None else checkpoint.kept
         self.checkpoint_dir.mkdir(parents=True, exist_ok=True)
         name = f"step_{step:08d}"
         final = self.checkpoint_dir / name
@@ -265,11 +244,11 @@ class Trainer:
         temporary = self.checkpoint_dir / (name + ".tmp")
         shutil.rmtree(temporary, ignore_errors=True)
         temporary.mkdir()
-        self.model.save_weights(temporary / "model.weights.h5")
+        self.model.save_weights(temporary / WEIGHTS_FILE)
         store: dict[str, np.ndarray] = {}
         self.optimizer.save_own_variables(store)
-        np.savez(temporary / "optimizer.npz", **{key: np.asarray(value) for key, value in store.items()})
-        (temporary / "state.json").write_text(json.dumps({"step": step, "metrics": dict(metrics or {})}))
+        np.savez(temporary / OPTIMIZER_FILE, **{key: np.asarray(value) for key, value in store.items()})
+        (temporary / STATE_FILE).write_text(json.dumps({"step": step, "metrics": dict(metrics or {})}))
         shutil.rmtree(final, ignore_errors=True)
         os.replace(temporary, final)
         kept = [item for item in self._kept_steps if item != step] + [step]
@@ -284,28 +263,41 @@ class Trainer:
         return final
 
     def restore(self) -> int:
-        """Loads the latest checkpoint into model/optimizer; returns its step (0 when there is none)."""
-        latest = self.latest_checkpoint()
-        read = self._read_pointer()
-        self._kept_steps = [] if read is None else read[2]
-        if latest is None:
+        """Loads the latest checkpoint into model/optimizer; returns its step (0 when there is none).
+
+        Raises:
+            ValueError: a corrupt checkpoint, one beyond ``steps``, or weights or optimizer state of
+                another network (naming the file).
+        """
+        checkpoint = read_pointer(self.run_dir)
+        self._kept_steps = [] if checkpoint is None else checkpoint.kept
+        if checkpoint is None:
             return 0
-        step, folder = latest
-        self.model.load_weights(folder / "model.weights.h5")
+        if checkpoint.step > self.steps:
+            raise ValueError(f"{self.run_dir / CHECKPOINT_POINTER}: step {checkpoint.step} is beyond this run's "
+                             f"{self.steps} steps; resume it with at least {checkpoint.step} steps, or start a new run")
+        state = read_optimizer_state(checkpoint.optimizer)
+        try:
+            self.model.load_weights(check_weights_file(checkpoint.weights))
+        except Exception as error:  # h5py and Keras raise many types for damaged or foreign files
+            raise ValueError(f"{checkpoint.weights}: not the weights of this network ({type(error).__name__}: "
+                             f"{str(error)[:300]})") from error
         self._ensure_optimizer_built()
-        with np.load(folder / "optimizer.npz") as stored:
-            self.optimizer.load_own_variables({key: stored[key] for key in stored.files})
-        return step
+        stored = [tuple(array.shape) for array in state]
+        wanted = [tuple(variable.shape) for variable in self.optimizer.variables]
+        differing = next((index for index, (got, want) in enumerate(zip(stored, wanted)) if got != want), None)
+        if len(stored) != len(wanted) or differing is not None:
+            detail = (f"{len(stored)} variables, this optimizer has {len(wanted)}" if len(stored) != len(wanted) else
+                      f"variable {differing} has shape {stored[differing]}, here {wanted[differing]}")
+            raise ValueError(f"{checkpoint.optimizer}: the state of another network or optimizer ({detail}); "
+                             f"delete {CHECKPOINT_POINTER} to start over")
+        self.optimizer.load_own_variables({str(index): array for index, array in enumerate(state)})
+        return checkpoint.step
 
     # -------------------------------------------------------------------------------------- logging
     def _prepare_log(self, start_step: int) -> list[dict[str, str]]:
         """Keeps the log rows up to ``start_step`` (a killed run may have logged past its checkpoint)."""
-        path = self.run_dir / LOG_FILE
-        if not path.exists():
-            return []
-        with path.open(newline="") as handle:
-            rows = [row for row in csv.DictReader(handle) if int(row["step"]) <= start_step]
-        return rows
+        return [row for row in read_log(self.run_dir / LOG_FILE) if int(row["step"]) <= start_step]
 
     def _write_log(self, rows: list[dict[str, Any]]) -> None:
         if not self.writes_files:
