@@ -39,7 +39,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
-import json
 import types
 import typing
 from pathlib import Path
@@ -202,27 +201,3 @@ def config_inputs(settings: Any, outputs: tuple[str, ...] = ("out",)) -> dict[st
     a command reads."""
     return {flag_name(field.name): getattr(settings, field.name) for field in dataclasses.fields(settings)
             if field.name not in outputs and isinstance(getattr(settings, field.name), Path)}
-
-
-def training_output(settings: Any, method: str) -> contextlib.AbstractContextManager[Path]:
-    """``settings.out`` checked by the one output rule and claimed for ``method`` while the block runs
-    (:func:`paz6d.run_dirs.run_output`, with the settings' other paths as the inputs)."""
-    from paz6d.run_dirs import run_output  # here: it imports every method's run_dir module
-
-    return run_output(settings.out, method, config_inputs(settings))
-
-
-def run_training(config_class: type, args: argparse.Namespace, train: Callable[[Any], dict]) -> int:
-    """The ``run`` of a ``paz6d train <method>`` command (the method is ``args.model``): the run's
-    settings from the flags (every field but ``overrides``), ``--out`` checked and claimed
-    (:func:`training_output`), ``train(settings)`` and its summary printed as JSON; returns the exit
-    status 0.
-
-    Raises:
-        ValueError: bad settings or a failed run, naming the flag (:func:`flags_in_errors`).
-    """
-    job = config_from_args(config_class, args, exclude=("overrides",))
-    with flags_in_errors(config_class), training_output(job, args.model):
-        summary = train(job)
-    print(json.dumps(summary, indent=2))
-    return 0

@@ -4,15 +4,19 @@ writing into its ``--out``: the folder's owner and, when it is a run to resume, 
 
 from __future__ import annotations
 
-import importlib
+import argparse
 import contextlib
+import importlib
+import json
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 from paz6d import methods as registry
 from paz6d.backend.files import load_json_object, write_json_atomically
 from paz6d.backend.paths import check_outputs
+from paz6d.cli_options import config_from_args, config_inputs, flags_in_errors
 from paz6d.training.checkpoints import check_training_files
 
 #: Method name -> the module of its run directory class (file names, ``read_model``), for the methods
@@ -120,3 +124,25 @@ def method_of(run_dir: str | Path) -> str:
         ValueError: not a directory, or no method recognises it (the message names the marker files).
     """
     return registry.method_of(run_dir).name
+
+
+def training_output(settings: Any, method: str) -> contextlib.AbstractContextManager[Path]:
+    """``settings.out`` checked by the one output rule and claimed for ``method`` while the block runs
+    (:func:`run_output`, with the settings' other paths as the inputs)."""
+    return run_output(settings.out, method, config_inputs(settings))
+
+
+def run_training(config_class: type, args: argparse.Namespace, train: Callable[[Any], dict]) -> int:
+    """The ``run`` of a ``paz6d train <method>`` command (the method is ``args.model``): the run's
+    settings from the flags (every field but ``overrides``), ``--out`` checked and claimed
+    (:func:`training_output`), ``train(settings)`` and its summary printed as JSON; returns the exit
+    status 0.
+
+    Raises:
+        ValueError: bad settings or a failed run, naming the flag (:func:`flags_in_errors`).
+    """
+    job = config_from_args(config_class, args, exclude=("overrides",))
+    with flags_in_errors(config_class), training_output(job, args.model):
+        summary = train(job)
+    print(json.dumps(summary, indent=2))
+    return 0

@@ -936,7 +936,7 @@ def detector_stand_in(*more: Callable[[World, Path], None]) -> Callable[[World, 
     def setup(world: World, folder: Path) -> None:
         from paz6d.ssd.run_dir import model_path, write_detector
 
-        write_detector(folder / "ssd", "light", ["obj_000001"], {})
+        write_detector(folder / "ssd", "light", ["obj_000001"], SSD_DETECTOR["priors"])
         model_path(folder / "ssd").write_bytes(b"not a keras model")
         for step in more:
             step(world, folder)

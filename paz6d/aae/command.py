@@ -11,7 +11,8 @@ import json
 from pathlib import Path
 
 from paz6d.aae.config import AAETraining
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, training_output
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.run_dirs import training_output
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

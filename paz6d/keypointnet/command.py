@@ -10,7 +10,8 @@ import argparse
 import json
 from dataclasses import replace
 
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, training_output
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.run_dirs import training_output
 from paz6d.keypointnet.config import KeypointTraining
 from paz6d.keypointnet.train import train_keypointnet
 

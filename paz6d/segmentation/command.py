@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, training_output
+from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors
+from paz6d.run_dirs import training_output
 from paz6d.segmentation.config import SegmentationTraining
 
 

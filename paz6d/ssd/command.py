@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from paz6d.cli_options import add_config_arguments, run_training
+from paz6d.cli_options import add_config_arguments
+from paz6d.run_dirs import run_training
 from paz6d.ssd.config import SSDTraining
 
 
