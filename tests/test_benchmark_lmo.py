@@ -403,8 +403,10 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
                  "0.25", "--quick", "--no-progress"]) == 0
     assert jobs[5].settings == replace(lmo.QUICK, neutral_distractors=0.25)
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-encoder-backbone",
-                 "efficientnet-lite0", "--quick", "--no-progress"]) == 0
-    assert jobs[6].settings == replace(lmo.QUICK, aae_encoder_backbone="efficientnet-lite0")
+                 "none", "--quick", "--no-progress"]) == 0
+    assert jobs[6].settings == replace(lmo.QUICK, aae_encoder_backbone="none")
+    assert lmo.QUICK.aae_encoder_backbone == "efficientnet-lite0" and lmo.FULL.aae_encoder_backbone == "none"
+    assert (lmo.QUICK.neutral_distractors, lmo.FULL.neutral_distractors) == (0.3, 0.0)
     for bad in ("5", "x=aae", "5=aae 5=keypointnet"):
         assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--object-method",
                      *bad.split()]) == 2

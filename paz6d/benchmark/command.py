@@ -44,10 +44,11 @@ class LmoOptions:
                                                  "(default: the sizes' own)", choices=BACKBONES)
     neutral_distractors: float | None = option(None, "share of the synthetic images' distractors coloured white "
                                                      "to mid grey, hard negatives for the white objects (default: "
-                                                     "the sizes' own, 0)")
+                                                     "the sizes' own: 0.3 quick, 0 full)")
     aae_encoder_backbone: str | None = option(None, "the AAEs' encoder body: none (trained from scratch) or "
                                                     "efficientnet-lite0 (pretrained on ImageNet, frozen; "
-                                                    "docs/aae.md) (default: the sizes' own)", choices=BACKBONES)
+                                                    "docs/aae.md) (default: the sizes' own: efficientnet-lite0 "
+                                                    "quick, none full)", choices=BACKBONES)
     jobs: int = option(2, "pose models trained side by side, each in its own process with its share of the CPU "
                           "cores (measured in docs/real_photos.md)")
     progress: bool = option(True, "progress bars")

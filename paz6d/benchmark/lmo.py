@@ -140,14 +140,17 @@ class BenchmarkSettings:
 #: Most AAE training steps a benchmark accepts (the full sizes train 5,000).
 MAX_AAE_STEPS = 1_000_000
 
-# The quick benchmark keeps the detector at 320 px to stay within its time budget, on the pretrained
-# EfficientNet-Lite0 body; the AAEs train their last steps at a tenth of the rate, at no extra time. What each
-# choice measured: docs/real_photos.md ("Experiments") and docs/ssd.md ("Measured").
+# The quick benchmark keeps the detector at 320 px to stay within its time budget; the detector and the AAEs'
+# encoders build on the pretrained EfficientNet-Lite0; the AAEs train their last steps at a tenth of the rate,
+# at no extra time; white and grey clutter neither helps nor hurts and is in the measured configuration. What
+# each choice measured: docs/real_photos.md ("Experiments") and docs/ssd.md ("Measured").
 QUICK = BenchmarkSettings(images=1500, backgrounds=200, detector_steps=1500, aae_steps=1000, aae_in_plane=36,
                           keypointnet_steps=1000, keypointnet_views=2000, detector_input_size=320,
-                          aae_lr_drop_steps=200, detector_backbone="efficientnet-lite0")
-# The full detector sees the frames at their own width, 640 px, with the light network's own body (the pretrained
-# body at 640 px is not measured yet: --detector-backbone efficientnet-lite0) (docs/ssd.md, "Measured").
+                          aae_lr_drop_steps=200, detector_backbone="efficientnet-lite0",
+                          aae_encoder_backbone="efficientnet-lite0", neutral_distractors=0.3)
+# The full detector sees the frames at their own width, 640 px, with the light network's own body, and the AAEs keep
+# their own encoders (the pretrained body is not measured at these sizes yet: --detector-backbone and
+# --aae-encoder-backbone efficientnet-lite0) (docs/ssd.md, "Measured").
 FULL = BenchmarkSettings(images=2500, backgrounds=300, detector_steps=1500, aae_steps=5000, aae_in_plane=72,
                          keypointnet_steps=5000, keypointnet_views=4000, detector_input_size=640,
                          aae_lr_drop_steps=500)
