@@ -178,7 +178,12 @@ def run_settings(presets: dict[str, S], config: str, settings: S | None, **flags
     chosen = presets[config] if settings is None else settings
     if not isinstance(chosen, type(presets[config])):
         _fail("settings", f"{type(presets[config]).__name__} settings", settings)
-    return chosen.replace(**{name: value for name, value in flags.items() if value is not None})
+    return with_flags(chosen, **flags)
+
+
+def with_flags(settings: S, **flags: Any) -> S:
+    """``settings`` with each flag that is not ``None`` applied (checked as its field)."""
+    return settings.replace(**{name: value for name, value in flags.items() if value is not None})
 
 
 def recorded_settings(settings_class: type[S], config_path: str | Path, previous: dict) -> S:
