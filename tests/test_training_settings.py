@@ -123,9 +123,15 @@ def test_check_same_run_compares_the_recorded_settings(tmp_path):
 
 
 def _preset_tables():
+    from paz6d.hrnet.config import CONFIGS as HRNET
+    from paz6d.keypointnet.config import CONFIGS as KEYPOINTNET
+    from paz6d.probabilistic_keypoints.config import CONFIGS as PROBABILISTIC
+    from paz6d.segmentation.config import CONFIGS as SEGMENTATION
+    from paz6d.ssd.config import CONFIGS as SSD
     from paz6d.stn.config import CONFIGS as STN
 
-    return {"stn": STN}
+    return {"stn": STN, "segmentation": SEGMENTATION, "hrnet": HRNET, "probabilistic_keypoints": PROBABILISTIC,
+            "keypointnet": KEYPOINTNET, "ssd": SSD}
 
 
 @pytest.mark.parametrize("method, name", [(method, name) for method, presets in _preset_tables().items()
