@@ -27,12 +27,12 @@ def _run_dir(folder: Path, backbone: str) -> Path:
     from paz6d.ssd.config import SSDTraining
     from paz6d.ssd.model import build_ssd, input_normalization, save_ssd
 
-    settings = SSDTraining(dataset=folder, out=folder, backbone=backbone).settings()
-    model, spec = build_ssd(9, settings["architecture"], settings["input_size"], settings["width"],
-                            backbone=settings.get("backbone"), frozen_stages=settings.get("frozen_stages", 3))
+    settings = SSDTraining(dataset=folder, out=folder, backbone=backbone).model_config
+    model, spec = build_ssd(9, settings.architecture, settings.input_size, settings.width, backbone=settings.backbone,
+                            frozen_stages=settings.frozen_stages)
     save_ssd(model, run_files.model_path(folder))
-    run_files.write_detector(folder, settings["architecture"], [f"obj_{i:06d}" for i in range(1, 9)], spec.to_dict(),
-                             normalization=input_normalization(settings.get("backbone")))
+    run_files.write_detector(folder, settings.architecture, [f"obj_{i:06d}" for i in range(1, 9)], spec.to_dict(),
+                             normalization=input_normalization(settings.backbone))
     return folder
 
 

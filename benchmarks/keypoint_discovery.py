@@ -78,7 +78,8 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--object", choices=("demo", "cylinder", "symmetric"), default="demo")
-    parser.add_argument("--override", action="append", default=[], help="setting=JSON value (repeatable)")
+    parser.add_argument("--override", action="append", default=[],
+                        help="setting=JSON value replacing the config's (repeatable)")
     parser.add_argument("--views-cache", type=Path, default=None)
     args = parser.parse_args()
 
@@ -88,13 +89,14 @@ def main() -> None:
     from paz6d.assets.demo_object import write_demo_object, write_symmetric_demo_object
     from paz6d.backend.mesh import diameter, load_mesh
     from paz6d.demo.keypoint_demo import MANY_CROPS, TEST_SEED_OFFSET, run_keypoint_demo
-    from paz6d.keypointnet.config import KeypointTraining
+    from paz6d.keypointnet.config import CONFIGS, KeypointConfig, KeypointTraining
     from paz6d.keypointnet.views import ViewSampling, render_test_images
 
-    overrides = {}
+    changes = {}
     for item in args.override:
         key, _, value = item.partition("=")
-        overrides[key] = json.loads(value)
+        changes[key] = json.loads(value)
+    settings = KeypointConfig.from_dict({**CONFIGS[args.config].to_dict(), **changes})
     symmetric = args.object in ("cylinder", "symmetric")
     orientation = args.object == "symmetric"
     if args.object == "cylinder":
@@ -104,12 +106,11 @@ def main() -> None:
     else:
         mesh_path, scale = write_demo_object(args.out / "mesh"), 1e-3
     run_dir = args.out / f"keypointnet_{args.mode}"
-    settings = KeypointTraining(run_dir, mesh_path, mesh_scale=scale, config=args.config, mode=args.mode,
-                                seed=args.seed, steps=args.steps, overrides=overrides,
-                                orientation_network=orientation).settings()
-    cache_names = {"train": f"{args.object}_train_{settings['views']}_{args.seed}.npz",
-                   "val": f"{args.object}_val_{settings['validation_views']}_{args.seed}.npz",
-                   "lift": f"{args.object}_lift_{settings['lift_views']}_{args.seed}.npz"}
+    KeypointTraining(run_dir, mesh_path, mesh_scale=scale, config=args.config, mode=args.mode, seed=args.seed,
+                     steps=args.steps, settings=settings, orientation_network=orientation)  # checks the settings
+    cache_names = {"train": f"{args.object}_train_{settings.views}_{args.seed}.npz",
+                   "val": f"{args.object}_val_{settings.validation_views}_{args.seed}.npz",
+                   "lift": f"{args.object}_lift_{settings.lift_views}_{args.seed}.npz"}
     if args.views_cache is not None:
         run_dir.mkdir(parents=True, exist_ok=True)
         for kind, name in cache_names.items():
@@ -117,7 +118,7 @@ def main() -> None:
                 shutil.copy(args.views_cache / name, run_dir / f"views_{kind}.npz")
     started, cpu_started = time.perf_counter(), cpu_seconds()
     report = run_keypoint_demo(args.out, mesh_path, scale, modes=(args.mode,), config=args.config, seed=args.seed,
-                               steps=args.steps, symmetric=symmetric, overrides=overrides, progress=False,
+                               steps=args.steps, symmetric=symmetric, settings=settings, progress=False,
                                orientation_network=orientation)
     report["cpu_seconds"] = round(cpu_seconds() - cpu_started, 1)
     report["wall_seconds"] = round(time.perf_counter() - started, 1)

@@ -24,20 +24,19 @@ import numpy as np
 from timing import median_seconds
 
 
-def _random_run(folder: Path, settings: dict) -> Path:
+def _random_run(folder: Path, settings) -> Path:
     """A run directory with a randomly initialised KeypointNet of ``settings`` and a random 3D keypoint set."""
     from paz6d.keypointnet.model import build_keypointnet, save_keypointnet
     from paz6d.keypointnet import run_dir as run_files
     from paz6d.training.precision import resolve_precision
 
-    model = build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
-                              settings["downsample"], tuple(settings["dilations"]),
-                              context_stride=settings.get("context_stride"),
-                              compute_dtype=resolve_precision(settings.get("precision", "float32")))
+    model = build_keypointnet(settings.num_keypoints, settings.input_size, settings.filters, settings.downsample,
+                              settings.dilations, context_stride=settings.context_stride,
+                              compute_dtype=resolve_precision(settings.precision))
     save_keypointnet(model, run_files.model_path(folder))
-    run_files.write_config(folder, {"input_size": settings["input_size"], "margin": 1.25,
-                                    "downsample": settings["downsample"]})
-    points = np.random.default_rng(0).uniform(-0.05, 0.05, (settings["num_keypoints"], 3))
+    run_files.write_config(folder, {"input_size": settings.input_size, "margin": 1.25,
+                                    "downsample": settings.downsample})
+    points = np.random.default_rng(0).uniform(-0.05, 0.05, (settings.num_keypoints, 3))
     run_files.write_keypoints(folder, points, np.ones(len(points), bool), "farthest-point")
     return folder
 
@@ -57,7 +56,7 @@ def measure(name: str, repeats: int, batch: int) -> dict:
                                              for options in ({}, {"weighted_pnp": False}, {"crops": 13}))
     image = np.random.default_rng(1).integers(0, 256, (480, 640, 3), dtype=np.uint8)
     box = (250.0, 180.0, 400.0, 300.0)
-    size = settings["input_size"]
+    size = settings.input_size
     crop = np.random.default_rng(2).uniform(0, 255, (1, size, size, 3)).astype(np.float32)
     infer = estimator["predict"].processor.function  # the compiled network the pipeline's predict step runs
 

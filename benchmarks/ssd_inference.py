@@ -30,9 +30,9 @@ def _random_run(folder: Path, config: str) -> Path:
     from paz6d.ssd.config import CONFIGS
 
     settings = CONFIGS[config]
-    model, spec = build_ssd(9, settings["architecture"], settings["input_size"], settings["width"])
+    model, spec = build_ssd(9, settings.architecture, settings.input_size, settings.width)
     save_ssd(model, run_files.model_path(folder))
-    run_files.write_detector(folder, settings["architecture"], [f"obj_{i:06d}" for i in range(1, 9)], spec.to_dict())
+    run_files.write_detector(folder, settings.architecture, [f"obj_{i:06d}" for i in range(1, 9)], spec.to_dict())
     return folder
 
 

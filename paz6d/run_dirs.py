@@ -134,14 +134,14 @@ def training_output(settings: Any, method: str) -> contextlib.AbstractContextMan
 
 def run_training(config_class: type, args: argparse.Namespace, train: Callable[[Any], dict]) -> int:
     """The ``run`` of a ``paz6d train <method>`` command (the method is ``args.model``): the run's
-    settings from the flags (every field but ``overrides``), ``--out`` checked and claimed
+    settings from the flags (every field but ``settings``), ``--out`` checked and claimed
     (:func:`training_output`), ``train(settings)`` and its summary printed as JSON; returns the exit
     status 0.
 
     Raises:
         ValueError: bad settings or a failed run, naming the flag (:func:`flags_in_errors`).
     """
-    job = config_from_args(config_class, args, exclude=("overrides",))
+    job = config_from_args(config_class, args, exclude=("settings",))
     with flags_in_errors(config_class), training_output(job, args.model):
         summary = train(job)
     print(json.dumps(summary, indent=2))

@@ -11,6 +11,7 @@ import pytest
 
 from paz6d.benchmark import lmo
 from paz6d.benchmark.lmo import Benchmark, BenchmarkSettings, run_benchmark, score_table, stages
+from paz6d.keypointnet.config import QUICK as KEYPOINT_QUICK, ROBUST as KEYPOINT_ROBUST
 
 TINY = BenchmarkSettings(images=6, backgrounds=3, detector_steps=4, aae_steps=4, aae_in_plane=4,
                          keypointnet_steps=4, keypointnet_views=8, workers=1, aae_views=12, detector_input_size=128,
@@ -439,13 +440,13 @@ def test_keypointnet_stage_uses_the_orientation_network_for_half_turn_symmetric_
         lmo._stage_pose(job, obj_id)
     assert {stem: job.orientation_network for stem, job in jobs.items()} == {
         "obj_000005": False, "obj_000010": True, "obj_000011": True, "obj_000001": False}
-    assert {stem: (job.config, job.steps, job.overrides) for stem, job in jobs.items() if stem in (
-        "obj_000005", "obj_000001")} == {"obj_000005": ("quick", 4, {"views": 8}),
-                                         "obj_000001": ("robust", 5, {"views": 9})}
+    assert {stem: (job.config, job.model_config) for stem, job in jobs.items() if stem in (
+        "obj_000005", "obj_000001")} == {"obj_000005": ("quick", KEYPOINT_QUICK.replace(steps=4, views=8)),
+                                         "obj_000001": ("robust", KEYPOINT_ROBUST.replace(steps=5, views=9))}
     assert jobs["obj_000001"].out == tmp_path / "bench" / "pose_keypointnet_robust" / "obj_000001"
     full = Benchmark(out=tmp_path / "full", lmo=shared_data / "bop_lmo", object_methods={8: "keypointnet_robust"})
     lmo._stage_pose(full, 8)  # the robust preset at its own length
-    assert jobs["obj_000008"].settings()["steps"] == 10000 and jobs["obj_000008"].settings()["views"] == 4000
+    assert jobs["obj_000008"].model_config == KEYPOINT_ROBUST  # 10,000 steps, 4,000 views
     assert abs(jobs["obj_000010"].symmetry().symmetry[0, 0] + 1.0) < 1e-3  # the eggbox's half turn about z
 
 

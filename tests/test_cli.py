@@ -128,10 +128,20 @@ def _command_configs() -> dict[tuple[str, ...], list[tuple[type, tuple[str, ...]
     from paz6d.benchmark.command import LmoOptions
     from paz6d.demo.command import DemoOptions
     from paz6d.faces.emotion_config import EmotionTraining
+    from paz6d.hrnet.config import HRNetTraining
     from paz6d.keypointnet.config import KeypointTraining
+    from paz6d.probabilistic_keypoints.config import ProbabilisticTraining
+    from paz6d.segmentation.config import SegmentationTraining
+    from paz6d.ssd.config import SSDTraining
+    from paz6d.stn.config import STNTraining
 
     return {("generate",): [(GenerationConfig, ()), (GenerationRun, ())], ("train", "aae"): [(AAETraining, ())],
-            ("train", "keypointnet"): [(KeypointTraining, ("overrides",))],
+            ("train", "keypointnet"): [(KeypointTraining, ("settings",))],
+            ("train", "stn"): [(STNTraining, ("settings",))],
+            ("train", "segmentation"): [(SegmentationTraining, ("settings",))],
+            ("train", "hrnet"): [(HRNetTraining, ("settings",))],
+            ("train", "probabilistic-keypoints"): [(ProbabilisticTraining, ("settings",))],
+            ("train", "ssd"): [(SSDTraining, ("settings",))],
             ("train", "emotion"): [(EmotionTraining, ())], ("demo",): [(DemoOptions, ())],
             ("benchmark", "lmo"): [(LmoOptions, ())]}
 
@@ -174,7 +184,11 @@ def test_parsed_defaults_build_the_default_config(path, tmp_path):
 
     required = {("generate",): ["--meshes", "a.ply", "--out", "o", "--num-images", "3"],
                 ("train", "aae"): ["--mesh", "a.ply", "--out", "o"],
-                ("train", "keypointnet"): ["--mesh", "a.ply", "--out", "o"],
+                ("train", "keypointnet"): ["--mesh", "a.ply", "--out", "o"], ("train", "stn"): ["--out", "o"],
+                ("train", "segmentation"): ["--dataset", "d", "--out", "o"],
+                ("train", "hrnet"): ["--mesh", "a.ply", "--out", "o"],
+                ("train", "probabilistic-keypoints"): ["--mesh", "a.ply", "--out", "o"],
+                ("train", "ssd"): ["--dataset", "d", "--out", "o"],
                 ("train", "emotion"): ["--data", "d.csv", "--out", "o"], ("demo",): [],
                 ("benchmark", "lmo"): ["--out", "o"]}[path]
     args = _subparser(path).parse_args(required)

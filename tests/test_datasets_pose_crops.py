@@ -130,15 +130,15 @@ def test_tiny_aae_training_on_ycb_video_crops(tmp_path):
 
 @pytest.mark.slow  # ~12 s: the AAE run above keeps the default suite's check of the wiring
 def test_tiny_keypointnet_training_on_fat_views(tmp_path):
-    from paz6d.keypointnet.config import KeypointTraining
+    from paz6d.keypointnet.config import QUICK, KeypointTraining
     from paz6d.keypointnet.dataset import sample_object_views
     from paz6d.keypointnet.train import train_keypointnet
 
-    tiny = {"num_keypoints": 4, "input_size": 32, "filters": 8, "downsample": 2, "dilations": (1,), "views": 4,
-            "validation_views": 2, "lift_views": 2, "pairs": 2, "checkpoint_every": 3, "sample_every": 3}
+    tiny = QUICK.replace(num_keypoints=4, input_size=32, filters=8, downsample=2, dilations=(1,), views=4,
+                         validation_views=2, lift_views=2, pairs=2, checkpoint_every=3, sample_every=3)
     views, mesh, scale = sample_object_views(FAT, "fat", "mixed", "003_cracker_box", mesh=FAT_MESH, input_size=32,
                                              progress=False)
     job = KeypointTraining(tmp_path / "run", mesh, mesh_scale=scale, workers=0, steps=3, progress=False,
-                           overrides=tiny)
+                           settings=tiny)
     summary = train_keypointnet(job, views=views)
     assert summary["steps"] == 3 and (tmp_path / "run" / "model.keras").is_file()

@@ -23,14 +23,15 @@ import_tensorflow()  # before any renderer in this process
 from paz6d.abstract import Box2D, Pose6D  # noqa: E402
 from paz6d.backend.camera import Camera, project_points  # noqa: E402
 from paz6d.aae.config import QUICK, Augmentation  # noqa: E402
+from paz6d.ssd.config import QUICK as SSD_QUICK  # noqa: E402
 from paz6d.cli import main  # noqa: E402
 
 OBJECTS = (5, 8)
 TOY = replace(QUICK, crop_size=16, latent_size=16, filters=(8, 16), kernel_size=3, render_size=40, views=24,
               in_plane=6, steps=20, batch_size=8, learning_rate=2e-3, bootstrap_fraction=0.25,
               checkpoint_every=20, sample_every=20, log_every=10, augmentation=Augmentation())
-TINY_SSD = {"input_size": 128, "width": 0.25, "learning_rate": 5e-3, "warmup_steps": 0, "expand_probability": 0.0,
-            "checkpoint_every": 30, "sample_every": 30}
+TINY_SSD = SSD_QUICK.replace(input_size=128, width=0.25, learning_rate=5e-3, warmup_steps=0, expand_probability=0.0,
+                            checkpoint_every=30, sample_every=30)
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +51,7 @@ def world(tmp_path_factory, shared_data):
                               split="test", objects_per_image=(2, 2), distractors=0, occluder_probability=0.0,
                               distance=(0.5, 0.7), seed=3), workers=1, show_progress=False)
     train_ssd(SSDTraining(dataset=root / "set", out=root / "ssd", split="test", steps=30, batch_size=4,
-                          progress=False, overrides=TINY_SSD))
+                          progress=False, settings=TINY_SSD))
     for obj_id, mesh in zip(OBJECTS, meshes):
         train_aae(mesh, root / f"aae_{obj_id}", TOY, mesh_scale=0.001, seed=obj_id, workers=0, progress=False)
     return root

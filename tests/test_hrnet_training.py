@@ -12,15 +12,15 @@ from paz6d.backend.camera import Camera, transform_and_project
 from paz6d.backend.square_crop import square_window, to_full_image
 from paz6d.backend.tensorflow_guard import import_tensorflow
 from paz6d.hrnet import run_dir as run_files
-from paz6d.hrnet.config import HRNetTraining
+from paz6d.hrnet.config import QUICK, HRNetTraining
 from paz6d.hrnet.heatmaps import gaussian_heatmaps
 from paz6d.run_dirs import is_run_dir
 
 import_tensorflow()  # the renderer shares this process with TensorFlow (workers=0)
 
-TINY = {"num_keypoints": 5, "input_size": 32, "stem_width": 8, "stem_blocks": 0, "widths": (8, 16),
-        "stage_modules": (1,), "blocks": 1, "precision": "float32", "views": 16, "validation_views": 4,
-        "test_images": 4, "batch_size": 8, "learning_rate": 1e-2, "checkpoint_every": 20, "sample_every": 20}
+TINY = QUICK.replace(num_keypoints=5, input_size=32, stem_width=8, stem_blocks=0, widths=(8, 16), stage_modules=(1,),
+                     blocks=1, precision="float32", views=16, validation_views=4, test_images=4, batch_size=8,
+                     learning_rate=1e-2, checkpoint_every=20, sample_every=20)
 SMALL_CAMERA = Camera(np.array([[150.0, 0.0, 79.5], [0.0, 150.0, 59.5], [0.0, 0.0, 1.0]]), 160, 120)
 
 
@@ -41,7 +41,7 @@ def trained(mesh_path, tmp_path_factory):
     from paz6d.hrnet.train import train_hrnet
 
     job = HRNetTraining(tmp_path_factory.mktemp("hrnet") / "run", mesh_path, mesh_scale=1e-3, seed=0, workers=0,
-                        steps=40, progress=False, overrides=TINY)
+                        steps=40, progress=False, settings=TINY)
     return job, train_hrnet(job)
 
 
@@ -62,14 +62,14 @@ def test_tiny_training_lowers_the_loss_writes_a_scored_run_and_resumes(trained, 
     assert description["points_model"].shape == (5, 3) and description["domain"] == "log"
     # resuming continues from the last checkpoint up to the new total
     resumed = train_hrnet(HRNetTraining(job.out, mesh_path, mesh_scale=1e-3, workers=0, steps=50, progress=False,
-                                        overrides=TINY))
+                                        settings=TINY))
     assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
     again = train_hrnet(HRNetTraining(job.out, mesh_path, mesh_scale=1e-3, workers=0, steps=50, progress=False,
-                                      overrides=TINY))  # finished: re-scored, the training record kept
+                                      settings=TINY))  # finished: re-scored, the training record kept
     assert again["final_losses"] == resumed["final_losses"] and again["train_seconds"] == resumed["train_seconds"]
     with pytest.raises(ValueError, match="different network"):
         train_hrnet(HRNetTraining(job.out, mesh_path, mesh_scale=1e-3, workers=0, steps=50, progress=False,
-                                  overrides={**TINY, "widths": (8, 12)}))
+                                  settings=TINY.replace(widths=(8, 12))))
 
 
 def test_pipeline_maps_keypoints_back_to_image_pixels_for_a_known_box(trained):
@@ -176,12 +176,17 @@ def test_settings_and_cli_errors(mesh_path, tmp_path, capsys):
         HRNetTraining(tmp_path, mesh_path, steps=0)
     with pytest.raises(ValueError, match="config: expected one of"):
         HRNetTraining(tmp_path, mesh_path, config="huge")
-    with pytest.raises(ValueError, match="overrides: unknown setting"):
-        HRNetTraining(tmp_path, mesh_path, overrides={"width": 3})
+    with pytest.raises(ValueError, match="width: unknown setting; known: num_keypoints"):
+        QUICK.from_dict({"width": 3})
     with pytest.raises(ValueError, match="loss: expected one of"):
-        HRNetTraining(tmp_path, mesh_path, overrides={"loss": "l1"})
+        QUICK.replace(loss="l1")
     with pytest.raises(ValueError, match="input_size: expected a multiple of 16"):
-        HRNetTraining(tmp_path, mesh_path, overrides={"input_size": 120})
+        QUICK.replace(input_size=120)
+    with pytest.raises(ValueError, match="batch_size: expected an even number"):
+        QUICK.replace(batch_size=15)
+    with pytest.raises(ValueError, match="settings: expected HRNetConfig settings"):
+        HRNetTraining(tmp_path, mesh_path, settings={"loss": "mse"})
+    assert HRNetTraining(tmp_path, mesh_path, settings=TINY, steps=7).model_config == TINY.replace(steps=7)
     with pytest.raises(ValueError, match="mesh_scale"):
         HRNetTraining(tmp_path, mesh_path, mesh_scale=-1.0)
     assert main(["train", "hrnet", "--mesh", str(tmp_path / "missing.ply"), "--out", str(tmp_path / "r")]) == 2

@@ -7,7 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from paz6d.keypointnet import views as kv
-from paz6d.keypointnet.config import KeypointTraining, anchor_start_step, anchors_due, pair_angle_at
+from paz6d.keypointnet.config import (DISCOVERY, QUICK, KeypointTraining, anchor_start_step, anchors_due,
+                                      pair_angle_at)
 
 
 def test_relative_angles_hand_computed():
@@ -44,27 +45,29 @@ def test_pair_partners_respect_the_curriculum_angle():
 
 
 def test_pair_angle_curriculum_hand_computed():
-    settings = {"pair_angle": (30.0, 180.0), "pair_angle_ramp": 0.5, "steps": 100}
+    settings = QUICK.replace(pair_angle=(30.0, 180.0), pair_angle_ramp=0.5, steps=100)
     assert [pair_angle_at(step, settings) for step in (0, 25, 50, 90)] == pytest.approx([30.0, 105.0, 180.0, 180.0])
-    assert pair_angle_at(10, {**settings, "pair_angle_ramp": 0.0}) == 180.0
-    assert pair_angle_at(10, {"steps": 100}) is None
+    assert pair_angle_at(10, settings.replace(pair_angle_ramp=0.0)) == 180.0
+    assert pair_angle_at(10, QUICK.replace(steps=100)) is None
+    with pytest.raises(ValueError, match="pair_angle: expected at most 180.0"):
+        settings.replace(pair_angle=(30.0, 200.0))
 
 
 def test_anchors_are_due_from_the_start_then_every_period():
-    settings = {"anchor_start": 0.3, "anchor_every": 25, "steps": 100}
-    assert anchor_start_step(settings) == 30 and anchor_start_step({"steps": 100}) is None
+    settings = QUICK.replace(anchor_start=0.3, anchor_every=25, steps=100)
+    assert anchor_start_step(settings) == 30 and anchor_start_step(QUICK.replace(steps=100)) is None
     assert not anchors_due(29, None, settings)
     assert anchors_due(30, None, settings)
     assert not anchors_due(54, 30, settings)
     assert anchors_due(55, 30, settings)
-    assert not anchors_due(500, None, {"steps": 1000})  # no bootstrapping without anchor_start
+    assert not anchors_due(500, None, QUICK.replace(steps=1000))  # no bootstrapping without anchor_start
 
 
 def test_discovery_preset_requires_discovery_mode(tmp_path):
     mesh = tmp_path / "m.ply"
     mesh.write_text("ply")
-    settings = KeypointTraining(tmp_path / "run", mesh, mode="discovery", config="discovery").settings()
-    assert settings["pair_angle"] == (30.0, 180.0) and settings["anchor_start"] > 0
+    settings = KeypointTraining(tmp_path / "run", mesh, mode="discovery", config="discovery").model_config
+    assert settings == DISCOVERY and settings.pair_angle == (30.0, 180.0) and settings.anchor_start > 0
     with pytest.raises(ValueError, match="--mode discovery"):
         KeypointTraining(tmp_path / "run", mesh, config="discovery")
 
@@ -105,11 +108,11 @@ def test_tiny_discovery_run_bootstraps_from_anchors_after_the_start(tmp_path):
 
     import_tensorflow()  # before the renderer (workers=0)
     mesh = write_demo_object(tmp_path / "mesh")
-    tiny = {"num_keypoints": 5, "input_size": 32, "filters": 8, "downsample": 2, "dilations": (1, 2), "views": 24,
-            "validation_views": 8, "lift_views": 8, "pairs": 4, "learning_rate": 3e-3, "checkpoint_every": 20,
-            "sample_every": 20, "anchor_views": 12, "anchor_every": 10, "anchor_start": 0.3}
+    tiny = DISCOVERY.replace(num_keypoints=5, input_size=32, filters=8, downsample=2, dilations=(1, 2), views=24,
+                             validation_views=8, lift_views=8, pairs=4, learning_rate=3e-3, checkpoint_every=20,
+                             sample_every=20, anchor_views=12, anchor_every=10, anchor_start=0.3)
     job = KeypointTraining(tmp_path / "run", mesh, mesh_scale=1e-3, mode="discovery", config="discovery", workers=0,
-                           steps=40, progress=False, overrides=tiny)
+                           steps=40, progress=False, settings=tiny)
     train_keypointnet(job)
     with (job.out / "log.csv").open() as handle:
         rows = list(csv.DictReader(handle))
@@ -133,8 +136,8 @@ def test_anchor_source_lifts_when_due_and_keeps_the_anchors_in_between(tmp_path)
     views = kv.ViewSet(rng.integers(0, 256, (count, size, size, 3), dtype=np.uint8),
                        masks.astype(np.uint8) * 255, masks, K, T)
     model = build_keypointnet(4, size, 8, 2, (1,))
-    source = AnchorSource(model, views, {"anchor_start": 0.5, "anchor_every": 10, "steps": 20, "downsample": 2,
-                                         "anchor_views": 8, "input_size": size}, seed=0, object_diameter=0.1)
+    settings = QUICK.replace(anchor_start=0.5, anchor_every=10, steps=20, downsample=2, anchor_views=8, input_size=size)
+    source = AnchorSource(model, views, settings, seed=0, object_diameter=0.1)
     assert source(9) is None and source.lifted_at is None
     first = source(10)
     assert first.shape == (4, 3) and np.all(np.isfinite(first)) and source.lifted_at == 10

@@ -13,12 +13,13 @@ from scipy.spatial import cKDTree
 
 from paz6d.backend.tensorflow_guard import import_tensorflow
 from paz6d.keypointnet import orientation as ko
+from paz6d.keypointnet.config import QUICK
 
 import_tensorflow()  # the renderer shares this process with TensorFlow (workers=0)
 
-TINY = {"num_keypoints": 6, "input_size": 32, "filters": 8, "downsample": 2, "dilations": (1, 2), "views": 24,
-        "validation_views": 8, "lift_views": 8, "pairs": 4, "learning_rate": 3e-3, "checkpoint_every": 20,
-        "sample_every": 20}
+TINY = QUICK.replace(num_keypoints=6, input_size=32, filters=8, downsample=2, dilations=(1, 2), views=24,
+                     validation_views=8, lift_views=8, pairs=4, learning_rate=3e-3, checkpoint_every=20,
+                     sample_every=20)
 seeds = st.integers(0, 2**32 - 1)
 
 
@@ -174,7 +175,7 @@ def test_tiny_orientation_training_writes_a_run_the_pipeline_loads(tmp_path):
 
     mesh = write_symmetric_demo_object(tmp_path / "mesh")
     job = KeypointTraining(tmp_path / "run", mesh, mesh_scale=1e-3, mode="discovery", seed=0, workers=0, steps=40,
-                           progress=False, overrides=TINY, orientation_network=True)
+                           progress=False, settings=TINY, orientation_network=True)
     summary = train_keypointnet(job)
     rows = _losses(job.out)
     orientation = [float(row["orientation"]) for row in rows]
@@ -190,7 +191,7 @@ def test_tiny_orientation_training_writes_a_run_the_pipeline_loads(tmp_path):
     assert len(KeypointPose6D(job.out, K, depth_from_box=True).detect(image, (60, 40, 100, 80))) == 6
     with pytest.raises(ValueError, match="different run .orientation="):
         train_keypointnet(KeypointTraining(job.out, mesh, mesh_scale=1e-3, mode="discovery", workers=0, steps=50,
-                                           progress=False, overrides=TINY))
+                                           progress=False, settings=TINY))
     asymmetric = write_demo_object(tmp_path / "asymmetric")
     with pytest.raises(ValueError, match="models_info.json: object 1: .*exactly one discrete symmetry"):
         KeypointTraining(tmp_path / "other", asymmetric, mesh_scale=1e-3, mode="discovery", orientation_network=True)

@@ -11,12 +11,13 @@ import pytest
 from paz6d.backend.camera import Camera, transform_and_project
 from paz6d.backend.tensorflow_guard import import_tensorflow
 from paz6d.keypointnet import views as kv
+from paz6d.keypointnet.config import QUICK
 
 import_tensorflow()  # the renderer shares this process with TensorFlow (workers=0)
 
-TINY = {"num_keypoints": 6, "input_size": 32, "filters": 8, "downsample": 2, "dilations": (1, 2), "views": 24,
-        "validation_views": 8, "lift_views": 8, "pairs": 4, "learning_rate": 3e-3, "checkpoint_every": 20,
-        "sample_every": 20}
+TINY = QUICK.replace(num_keypoints=6, input_size=32, filters=8, downsample=2, dilations=(1, 2), views=24,
+                     validation_views=8, lift_views=8, pairs=4, learning_rate=3e-3, checkpoint_every=20,
+                     sample_every=20)
 SMALL_CAMERA = Camera(np.array([[150.0, 0.0, 79.5], [0.0, 150.0, 59.5], [0.0, 0.0, 1.0]]), 160, 120)
 
 
@@ -149,20 +150,17 @@ def test_view_lighting_styles_are_drawn_per_view_and_recorded(mesh_path, views):
 @pytest.mark.parametrize("field, value", [("photos", 1.5), ("photos", -0.1), ("photos", float("nan")),
                                           ("background_noise", -1.0), ("relight", float("nan"))])
 def test_augmentation_refuses_bad_strengths(field, value):
-    with pytest.raises(ValueError, match=f"augmentation.{field}"):
+    with pytest.raises(ValueError, match=f"^{field}: expected"):
         kv.Augmentation(**{field: value})
+    with pytest.raises(ValueError, match=f"^augmentation.{field}: expected"):  # as read back from config.json
+        QUICK.from_dict({"augmentation": {field: value}})
 
 
-def test_an_unknown_augmentation_setting_is_named_before_anything_is_rendered(mesh_path, tmp_path):
-    from paz6d.keypointnet.config import KeypointTraining
-
-    assert kv.Augmentation.from_settings({"photos": 0.5}) == kv.Augmentation(photos=0.5)
-    assert kv.Augmentation.from_settings(None) == kv.Augmentation()
-    with pytest.raises(ValueError, match=r"augmentation.photo: unknown setting; expected some of \('crop_scale'"):
-        kv.Augmentation.from_settings({"photo": 0.5})
-    with pytest.raises(ValueError, match="augmentation.photos: expected a probability"):
-        KeypointTraining(tmp_path / "run", mesh_path, overrides={"augmentation": {"photos": 2.0}})
-    assert not (tmp_path / "run").exists()
+def test_an_unknown_augmentation_setting_is_named():
+    assert kv.Augmentation.from_dict({"photos": 0.5}) == kv.Augmentation(photos=0.5)
+    assert QUICK.from_dict({"augmentation": {}}).augmentation == kv.Augmentation()
+    with pytest.raises(ValueError, match="^augmentation.photo: unknown setting; known: crop_scale, crop_shift"):
+        QUICK.from_dict({"augmentation": {"photo": 0.5}})
 
 
 def test_a_lighting_style_listed_twice_is_drawn_twice_as_often():
@@ -210,7 +208,7 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
     from paz6d.keypointnet.train import train_keypointnet
 
     job = KeypointTraining(tmp_path / mode, mesh_path, mesh_scale=1e-3, mode=mode, seed=0, workers=0, steps=40,
-                           progress=False, overrides=TINY)
+                           progress=False, settings=TINY)
     summary = train_keypointnet(job)
     losses = _losses(job.out)
     assert len(losses) == 4 and np.mean(losses[-2:]) < np.mean(losses[:2])
@@ -232,12 +230,12 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
         # resuming continues from the last checkpoint up to the new total (and lifts keypoints again)
         resumed = train_keypointnet(KeypointTraining(job.out, mesh_path, mesh_scale=1e-3, mode=mode, workers=0,
                                                      steps=50,
-                                                     progress=False, overrides=TINY))
+                                                     progress=False, settings=TINY))
         assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
 
 
 def test_the_robust_preset_trains_on_photos_and_mixed_lights(mesh_path, tmp_path, monkeypatch):
-    from paz6d.keypointnet.config import CONFIGS, KeypointTraining
+    from paz6d.keypointnet.config import ROBUST, KeypointTraining
     from paz6d.keypointnet.train import train_keypointnet
 
     collages = []
@@ -245,17 +243,16 @@ def test_the_robust_preset_trains_on_photos_and_mixed_lights(mesh_path, tmp_path
     monkeypatch.setattr(kv, "photo_collage", lambda *args,
                         **kwargs: collages.append(1) or real_collage(*args, **kwargs))
     job = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, config="robust", seed=0, workers=0, steps=4,
-                           progress=False, overrides=TINY)
-    assert job.settings()["augmentation"] == CONFIGS["robust"]["augmentation"]
+                           progress=False, settings=TINY.replace(lighting=ROBUST.lighting,
+                                                                 augmentation=ROBUST.augmentation))
+    assert job.model_config.augmentation == kv.Augmentation(photos=0.5, background_noise=40.0)
     train_keypointnet(job)
     config = json.loads((tmp_path / "config.json").read_text())
     assert config["config"] == "robust" and config["sampling"]["lighting"] == ["key-fill", "key-fill", "surround"]
-    assert config["settings"]["augmentation"] == {"photos": 0.5, "background_noise": 40.0}
-    crops = 4 * 2 * TINY["pairs"]  # steps x the two views of each pair
+    assert config["settings"]["augmentation"] == ROBUST.augmentation.to_dict()
+    crops = 4 * 2 * TINY.pairs  # steps x the two views of each pair
     assert 0.25 * crops < len(collages) < 0.75 * crops  # about half of the training crops over photo collages
-    assert {key: value for key,
-            value in CONFIGS["robust"].items() if key not in ("steps", "lighting", "augmentation")} \
-        == {key: value for key, value in CONFIGS["quick"].items() if key != "steps"}  # the quick network
+    assert ROBUST.replace(steps=QUICK.steps, lighting=QUICK.lighting, augmentation=QUICK.augmentation) == QUICK
 
 
 def test_lifting_crops_are_cut_as_at_inference_with_matching_intrinsics():
@@ -287,19 +284,27 @@ def test_a_run_directory_refuses_a_different_run(mesh_path, tmp_path):
     from paz6d.keypointnet.config import KeypointTraining
     from paz6d.keypointnet.train import _prepare_run_dir
 
-    job = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="supervised", overrides=TINY)
-    _prepare_run_dir(job, job.settings(), 0.1, kv.ViewSampling(input_size=32))
-    other = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="discovery", overrides=TINY)
+    job = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="supervised", settings=TINY)
+    _prepare_run_dir(job, job.model_config, 0.1, kv.ViewSampling(input_size=32))
+    other = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="discovery", settings=TINY)
     with pytest.raises(ValueError, match="different run"):
-        _prepare_run_dir(other, other.settings(), 0.1, kv.ViewSampling(input_size=32))
-    longer = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="supervised", steps=7, overrides=TINY)
-    assert _prepare_run_dir(longer, longer.settings(), 0.1, kv.ViewSampling(input_size=32))["settings"]["steps"] == 7
+        _prepare_run_dir(other, other.model_config, 0.1, kv.ViewSampling(input_size=32))
+    longer = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="supervised", steps=7, settings=TINY)
+    assert _prepare_run_dir(longer, longer.model_config, 0.1, kv.ViewSampling(input_size=32))["settings"]["steps"] == 7
     edited = KeypointTraining(tmp_path, mesh_path, mesh_scale=1e-3, mode="supervised",
-                              overrides={**TINY, "augmentation": {"photos": 0.5}})
-    with pytest.raises(ValueError, match="settings changed since this run started .augmentation=None"):
-        _prepare_run_dir(edited, edited.settings(), 0.1, kv.ViewSampling(input_size=32))
+                              settings=TINY.replace(augmentation=kv.Augmentation(photos=0.5)))
+    with pytest.raises(ValueError, match=r"settings changed since this run started \(augmentation=Augmentation\("):
+        _prepare_run_dir(edited, edited.model_config, 0.1, kv.ViewSampling(input_size=32))
+    # a config.json from before a setting existed reads back with the setting's default: the run resumes
+    path = tmp_path / "config.json"
+    written = json.loads(path.read_text())
+    for key in ("augmentation", "lighting", "anchor_lifting", "discovery_weights"):
+        del written["settings"][key]
+    path.write_text(json.dumps(written))
+    assert "augmentation" not in _prepare_run_dir(longer, longer.model_config, 0.1,
+                                                  kv.ViewSampling(input_size=32))["settings"]
     with pytest.raises(ValueError, match="view sampling changed"):
-        _prepare_run_dir(job, job.settings(), 0.1, kv.ViewSampling(input_size=32, lighting=("surround",)))
+        _prepare_run_dir(job, job.model_config, 0.1, kv.ViewSampling(input_size=32, lighting=("surround",)))
     with pytest.raises(ValueError, match="mode"):
         KeypointTraining(tmp_path, mesh_path, mode="other")
     with pytest.raises(ValueError, match="steps"):
@@ -397,7 +402,7 @@ def test_keypoint_demo_trains_evaluates_and_reports(mesh_path, tmp_path, capsys)
     from paz6d.demo.keypoint_demo import run_keypoint_demo
 
     report = run_keypoint_demo(tmp_path, mesh_path, mesh_scale=1e-3, test_images=3, workers=0, steps=10,
-                               progress=False, overrides=TINY)
+                               progress=False, settings=TINY)
     result = report["modes"]["supervised"]
     for variant in ("pnp", "pnp_13_crops", "pnp_depth_from_box"):
         assert result[variant]["count"] == 3 and 0.0 <= result[variant]["recall_0.1d"] <= 1.0

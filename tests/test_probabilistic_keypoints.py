@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from paz6d.probabilistic_keypoints.config import QUICK
 from paz6d.probabilistic_keypoints import run_dir as run_files
 from paz6d.run_dirs import is_run_dir
 from paz6d.probabilistic_keypoints.model import (CholeskyFromMaps, ProbabilisticKeypointsError,
@@ -91,8 +92,7 @@ def test_tiny_training_lowers_the_loss(tmp_path):
     T[:, :2, 3] = generator.uniform(-0.02, 0.02, (8, 2))
     images = generator.uniform(0, 255, (8, 32, 32, 3)).astype(np.float32)
     batch = {"images": images, "K": K, "T_model2cam": T}
-    settings = {"input_size": 32, "downsample": 4, "nll_weight": 0.1}
-    loss_fn = _loss_function(settings, points, 0.1)
+    loss_fn = _loss_function(QUICK.replace(input_size=32, downsample=4, nll_weight=0.1), points, 0.1)
     Trainer(model, keras.optimizers.Adam(3e-3), loss_fn, lambda step: batch, tmp_path, 40, log_every=5,
             progress=False, tensorboard=False).fit()
     rows = (tmp_path / "log.csv").read_text().splitlines()
@@ -111,7 +111,7 @@ def test_covariance_scale_and_occluders_are_seeded():
     covariances = np.tile(np.array([[2.0, 0.5], [0.5, 1.0]]), (4000, 1, 1))
     truth = means + generator.normal(size=(4000, 2)) @ np.linalg.cholesky(4.0 * covariances[0]).T
     assert fit_covariance_scale(truth, means, covariances) == pytest.approx(4.0, rel=0.08)
-    settings = {"test_occluders": 3, "occluder_size": (0.3, 0.7)}
+    settings = QUICK.replace(test_occluders=3, occluder_size=(0.3, 0.7))
     images = np.full((3, 32, 32, 3), 128, np.uint8)
     first = occlude(images, occluder(settings, 1.0, 1.25), 0, 2)
     np.testing.assert_array_equal(first, occlude(images, occluder(settings, 1.0, 1.25), 0, 2))
@@ -188,6 +188,21 @@ def test_command_line_errors_name_the_flag(tmp_path, capsys):
     assert "--steps" in capsys.readouterr().err
 
 
+def test_settings_are_checked_where_made(tmp_path):
+    from paz6d.probabilistic_keypoints.config import FULL, ProbabilisticTraining
+
+    assert FULL.replace(views=2000, validation_views=200, test_images=200, lift_images=200, steps=2500) == QUICK
+    job = ProbabilisticTraining(mesh=tmp_path / "m.ply", out=tmp_path / "run", config="full", steps=9)
+    assert job.model_config == FULL.replace(steps=9)
+    for changes, message in (({"lifting": "median"}, "lifting: expected one of"),
+                             ({"train_occlusion": 1.5}, "train_occlusion: expected at most 1.0"),
+                             ({"occluder_size": (0.7, 0.3)}, "occluder_size: expected values that do not decrease"),
+                             ({"context_stride": 2}, r"context_stride: expected at least downsample \(4\)"),
+                             ({"input_size": 100}, "input_size: expected a multiple of 8")):
+        with pytest.raises(ValueError, match=message):
+            QUICK.replace(**changes)
+
+
 @pytest.mark.slow
 def test_render_train_evaluate_and_estimate_end_to_end(tmp_path):
     """Renders a few views of the demo object, trains a tiny network, evaluates and runs the pipeline."""
@@ -198,12 +213,11 @@ def test_render_train_evaluate_and_estimate_end_to_end(tmp_path):
 
     mesh = write_demo_object(tmp_path / "mesh")
     out = tmp_path / "run"
-    overrides = {"views": 40, "validation_views": 16, "test_images": 8, "lift_images": 6, "filters": 8,
-                 "input_size": 64,
-                 "num_keypoints": 6, "dilations": (1, 2), "pairs": 2, "checkpoint_every": 10, "sample_every": 10,
-                 "precision": "float32"}
+    tiny = QUICK.replace(views=40, validation_views=16, test_images=8, lift_images=6, filters=8, input_size=64,
+                         num_keypoints=6, dilations=(1, 2), pairs=2, checkpoint_every=10, sample_every=10,
+                         precision="float32")
     job = ProbabilisticTraining(mesh=mesh, mesh_scale=0.001, out=out, steps=20, workers=1, progress=False,
-                                overrides=overrides)
+                                settings=tiny)
     summary = train_probabilistic_keypoints(job)
     assert summary["steps"] == 20 and summary["covariance_scale"] > 0
     evaluation = json.loads((out / run_files.EVALUATION_FILE).read_text())
@@ -218,4 +232,4 @@ def test_render_train_evaluate_and_estimate_end_to_end(tmp_path):
     assert keypoints.points.shape == (6, 2) and np.all(np.linalg.eigvalsh(covariances) > 0)
     with pytest.raises(ValueError, match="different run"):
         train_probabilistic_keypoints(ProbabilisticTraining(mesh=mesh, mesh_scale=0.001, out=out, seed=1, steps=20,
-                                                            workers=1, progress=False, overrides=overrides))
+                                                            workers=1, progress=False, settings=tiny))

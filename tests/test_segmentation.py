@@ -18,12 +18,12 @@ from paz6d.cli import main
 from paz6d.datasets.coco import mask_from_counts
 from paz6d.run_dirs import method_of
 from paz6d.segmentation import run_dir as run_files
-from paz6d.segmentation.config import SegmentationTraining
+from paz6d.segmentation.config import QUICK, SegmentationTraining
 from paz6d.segmentation.dataset import crop_batch, load_mask_set
 from paz6d.segmentation.masks import blank_background, jitter_box, paste_mask, rle_from_mask
 
-TINY = {"input_size": 32, "widths": (8, 16), "batch_size": 8, "learning_rate": 1e-2, "checkpoint_every": 20,
-        "sample_every": 40}
+TINY = QUICK.replace(input_size=32, widths=(8, 16), batch_size=8, learning_rate=1e-2, checkpoint_every=20,
+                     sample_every=40)
 
 
 @pytest.fixture(scope="module")
@@ -43,8 +43,18 @@ def trained(generated, tmp_path_factory) -> Path:
     from paz6d.segmentation.train import train_segmentation
 
     out = tmp_path_factory.mktemp("segmentation_run") / "run"
-    train_segmentation(SegmentationTraining(dataset=generated, out=out, steps=40, progress=False, overrides=TINY))
+    train_segmentation(SegmentationTraining(dataset=generated, out=out, steps=40, progress=False, settings=TINY))
     return out
+
+
+def test_a_run_directory_resumes_only_its_own_network(generated, trained):
+    from paz6d.segmentation.train import train_segmentation
+
+    with pytest.raises(ValueError, match=r"holds a different run \(widths differ\)"):
+        train_segmentation(SegmentationTraining(dataset=generated, out=trained, steps=40, progress=False,
+                                                settings=TINY.replace(widths=(8, 8))))
+    with pytest.raises(ValueError, match="input_size: expected a multiple of 4"):
+        SegmentationTraining(dataset=generated, out=trained, settings=TINY.replace(input_size=30))
 
 
 def test_model_maps_crops_to_one_logit_map_per_class():

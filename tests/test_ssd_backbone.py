@@ -16,11 +16,13 @@ from data_gen.generator import generate
 from paz6d.cli import build_parser
 from paz6d.cli_options import config_from_args
 from paz6d.ssd import run_dir as run_files
-from paz6d.ssd.config import BACKBONE_SETTINGS, CONFIGS, SSDTraining
+from paz6d.ssd.config import BACKBONE_SETTINGS, QUICK, SSDTraining
 
 BACKBONE = "efficientnet-lite0"
-TINY = {"input_size": 128, "width": 0.25, "learning_rate": 5e-3, "warmup_steps": 0, "expand_probability": 0.0,
-        "checkpoint_every": 20, "sample_every": 20}
+TINY = QUICK.replace(input_size=128, width=0.25, learning_rate=5e-3, warmup_steps=0, expand_probability=0.0,
+                     checkpoint_every=20, sample_every=20)
+#: The tiny network with the backbone's body, learning-rate factor and frozen stages.
+TINY_BACKBONE = TINY.replace(backbone=BACKBONE, backbone_rate_factor=0.1, frozen_stages=3)
 
 
 @pytest.fixture(scope="module")
@@ -40,22 +42,21 @@ def trained(generated, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("ssd_backbone_run") / "run"
     from paz6d.ssd.train import train_ssd
 
-    train_ssd(SSDTraining(dataset=generated, out=out, steps=20, batch_size=4, progress=False, backbone=BACKBONE,
-                          overrides=TINY))
+    train_ssd(SSDTraining(dataset=generated, out=out, steps=20, batch_size=4, progress=False,
+                          settings=TINY_BACKBONE))
     return out
 
 
 def test_backbone_flag_brings_its_settings_and_leaves_the_light_defaults_alone():
-    assert SSDTraining(dataset="d", out="o").settings() == CONFIGS["quick"]
-    assert SSDTraining(dataset="d", out="o", backbone="none").settings() == CONFIGS["quick"]
-    settings = SSDTraining(dataset="d", out="o", backbone=BACKBONE).settings()
-    assert settings == {**CONFIGS["quick"], **BACKBONE_SETTINGS[BACKBONE]}
-    assert settings["input_size"] == 320 and settings["batch_size"] == 8 and settings["backbone_rate_factor"] == 0.1
-    given = SSDTraining(dataset="d", out="o", backbone=BACKBONE, input_size=256, batch_size=4,
-                        overrides={"learning_rate": 2e-3}).settings()
-    assert (given["input_size"], given["batch_size"], given["learning_rate"]) == (256, 4, 2e-3)
+    assert SSDTraining(dataset="d", out="o").model_config == QUICK
+    assert SSDTraining(dataset="d", out="o", backbone="none").model_config == QUICK
+    settings = SSDTraining(dataset="d", out="o", backbone=BACKBONE).model_config
+    assert settings == QUICK.replace(**BACKBONE_SETTINGS[BACKBONE])
+    assert settings.input_size == 320 and settings.batch_size == 8 and settings.backbone_rate_factor == 0.1
+    given = SSDTraining(dataset="d", out="o", backbone=BACKBONE, input_size=256, batch_size=4).model_config
+    assert (given.input_size, given.batch_size, given.learning_rate) == (256, 4, 1e-3)
     args = build_parser().parse_args(["train", "ssd", "--dataset", "d", "--out", "o", "--backbone", BACKBONE])
-    assert config_from_args(SSDTraining, args, exclude=("overrides",)).settings()["backbone"] == BACKBONE
+    assert config_from_args(SSDTraining, args, exclude=("settings",)).model_config.backbone == BACKBONE
     with pytest.raises(ValueError, match="backbone: only the light network"):
         SSDTraining(dataset="d", out="o", config="full", backbone=BACKBONE)
     with pytest.raises(ValueError, match="backbone: expected one of"):
@@ -143,7 +144,7 @@ def test_tiny_backbone_training_lowers_the_loss_and_loads_through_the_pipeline(t
     with pytest.raises(ValueError, match="backbone"):  # resuming with another body is refused
         from paz6d.ssd.train import train_ssd
 
-        train_ssd(SSDTraining(dataset=generated, out=trained, steps=20, batch_size=4, progress=False, overrides=TINY))
+        train_ssd(SSDTraining(dataset=generated, out=trained, steps=20, batch_size=4, progress=False, settings=TINY))
 
 
 def test_detector_normalization_is_checked(tmp_path):

@@ -11,15 +11,15 @@ import pytest
 
 from paz6d.cli import main
 from paz6d.datasets import voc
-from paz6d.ssd.config import SSDTraining
+from paz6d.ssd.config import QUICK, SSDTraining
 from paz6d.ssd.dataset import detect_format, load_detection_set
 
 DATA = Path(__file__).parent / "data" / "datasets"
 VOC = DATA / "voc" / "VOC2007"
 COCO = DATA / "coco"
 OPENIMAGES = DATA / "openimages"
-TINY = {"input_size": 128, "width": 0.25, "learning_rate": 1e-3, "warmup_steps": 0, "expand_probability": 0.0,
-        "checkpoint_every": 2, "sample_every": 100}
+TINY = QUICK.replace(input_size=128, width=0.25, learning_rate=1e-3, warmup_steps=0, expand_probability=0.0,
+                     checkpoint_every=2, sample_every=100)
 
 
 def test_formats_are_detected(tmp_path):
@@ -61,7 +61,7 @@ def test_a_few_training_steps_on_each_format(tmp_path, dataset, dataset_format):
     from paz6d.ssd.train import train_ssd
 
     summary = train_ssd(SSDTraining(dataset=dataset, out=tmp_path / "run", steps=4, batch_size=2, progress=False,
-                                    format=dataset_format, overrides=TINY))
+                                    format=dataset_format, settings=TINY))
     assert summary["steps"] == 4 and np.isfinite(summary["final_losses"]["loss"])
     detector = json.loads((tmp_path / "run" / "detector.json").read_text())
     assert detector["class_names"] == list(load_detection_set(dataset, dataset_format=dataset_format).class_names)

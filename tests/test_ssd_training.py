@@ -19,11 +19,11 @@ from paz6d.datasets.bop.coco_ground_truth import bop_split_to_coco, coco_image_i
 from paz6d.run_dirs import method_of
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.dataset import load_detection_set
-from paz6d.ssd.config import CONFIGS, SSDTraining
+from paz6d.ssd.config import FULL, QUICK, SSDTraining
 from paz6d.ssd.train import augmentation_factory, image_scale, train_ssd
 
-TINY = {"input_size": 128, "width": 0.25, "learning_rate": 5e-3, "warmup_steps": 0, "expand_probability": 0.0,
-        "checkpoint_every": 30, "sample_every": 30}
+TINY = QUICK.replace(input_size=128, width=0.25, learning_rate=5e-3, warmup_steps=0, expand_probability=0.0,
+                     checkpoint_every=30, sample_every=30)
 
 
 @pytest.fixture(scope="module")
@@ -41,16 +41,18 @@ def generated(tmp_path_factory, shared_data) -> Path:
 @pytest.fixture(scope="module")
 def trained(generated, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("ssd_run") / "run"
-    train_ssd(SSDTraining(dataset=generated, out=out, steps=60, batch_size=4, progress=False, overrides=TINY))
+    train_ssd(SSDTraining(dataset=generated, out=out, steps=60, batch_size=4, progress=False, settings=TINY))
     return out
 
 
 def test_optional_augmentations_follow_the_run_settings():
-    assert augmentation_factory(CONFIGS["quick"])().names == ["photometric", "expand", "crop", "flip"]
-    chain = augmentation_factory({**CONFIGS["quick"], "white_balance": 0.3, "grayscale": 0.2})()
+    assert augmentation_factory(QUICK)().names == ["photometric", "expand", "crop", "flip"]
+    chain = augmentation_factory(QUICK.replace(white_balance=0.3, grayscale=0.2))()
     assert chain.names == ["photometric", "white_balance", "grayscale", "expand", "crop", "flip"]
     assert chain["grayscale"].probability == 0.2 and chain["white_balance"].strength == 0.3
-    assert chain["expand"].max_ratio == CONFIGS["quick"]["expand_ratio"]
+    assert chain["expand"].max_ratio == QUICK.expand_ratio
+    with pytest.raises(ValueError, match="grayscale: expected at most 1.0"):
+        QUICK.replace(grayscale=1.5)
 
 
 def test_scale_crops_train_on_windows_and_detect_on_whole_images(generated, tmp_path):
@@ -58,21 +60,21 @@ def test_scale_crops_train_on_windows_and_detect_on_whole_images(generated, tmp_
     from paz6d.pipelines import DetectSingleShot
     from paz6d.synthesis.box_augment import RandomScaleCrop
 
-    settings = {**CONFIGS["quick"], **TINY, "scale_crops": [0.5, 2.0]}
+    settings = TINY.replace(scale_crops=(0.5, 2.0))
     chain = augmentation_factory(settings)()
     assert chain.names == ["photometric", "flip", "crop"]
     assert isinstance(chain["crop"], RandomScaleCrop) and chain["crop"].size == 128
-    assert image_scale(settings) == pytest.approx(1.0) and image_scale(CONFIGS["quick"]) is None
+    assert image_scale(settings) == pytest.approx(1.0) and image_scale(QUICK) is None
     flagged = build_parser().parse_args(["train", "ssd", "--dataset", "d", "--out", "o", "--scale-crops", "0.7", "1.4"])
     assert tuple(flagged.scale_crops) == (0.7, 1.4)
-    assert SSDTraining(dataset="d", out="o", scale_crops=(0.7, 1.4)).settings()["scale_crops"] == [0.7, 1.4]
-    with pytest.raises(ValueError, match="scale_crops: expected a factor range 0 < LOW <= HIGH"):
+    assert SSDTraining(dataset="d", out="o", scale_crops=(0.7, 1.4)).model_config.scale_crops == (0.7, 1.4)
+    with pytest.raises(ValueError, match="scale_crops: expected values that do not decrease"):
         SSDTraining(dataset="d", out="o", scale_crops=(2.0, 1.0))
     with pytest.raises(ValueError, match="scale_crops: only the light network"):
         SSDTraining(dataset="d", out="o", config="full", scale_crops=(0.7, 1.4))
     out = tmp_path / "run"
     train_ssd(SSDTraining(dataset=generated, out=out, steps=20, batch_size=4, progress=False,
-                          overrides={**TINY, "scale_crops": [0.5, 2.0], "checkpoint_every": 20, "sample_every": 20}))
+                          settings=settings.replace(checkpoint_every=20, sample_every=20)))
     assert run_files.read_detector(out)["image_scale"] == pytest.approx(1.0)
     detect = DetectSingleShot(out, score_threshold=0.0, max_detections=5)
     assert detect.names == ["check", "resize", "normalize", "predict", "decode", "nms", "to_pixels", "to_boxes2d"]
@@ -198,35 +200,37 @@ def test_data_set_errors_name_the_problem(generated, tmp_path):
 def test_resuming_continues_and_other_settings_are_refused(trained, generated):
     with pytest.raises(ValueError, match="holds a different run"):
         train_ssd(SSDTraining(dataset=generated, out=trained, steps=60, batch_size=4, seed=9, progress=False,
-                              overrides=TINY))
+                              settings=TINY))
     with pytest.raises(ValueError, match="holds a different run"):  # --input-size is part of the run
         train_ssd(SSDTraining(dataset=generated, out=trained, steps=60, batch_size=4, input_size=192,
-                              progress=False, overrides=TINY))
+                              progress=False, settings=TINY))
     summary = train_ssd(SSDTraining(dataset=generated, out=trained, steps=70, batch_size=4, progress=False,
-                                    overrides=TINY))
+                                    settings=TINY))
     assert summary["steps"] == 70
     with (trained / "log.csv").open() as handle:
         assert [int(row["step"]) for row in csv.DictReader(handle)] == list(range(10, 71, 10))
 
 
 def test_input_size_flag_sets_the_light_network_input_and_is_checked():
-    assert SSDTraining(dataset="d", out="o").settings()["input_size"] == 448  # the quick config
-    assert SSDTraining(dataset="d", out="o", input_size=320).settings()["input_size"] == 320
-    assert SSDTraining(dataset="d", out="o", input_size=192, overrides=TINY).settings()["input_size"] == 192
-    for size, message in ((100, "multiple of 64"), (64, "at least 128"), (0, "positive")):
+    assert SSDTraining(dataset="d", out="o").model_config.input_size == 448  # the quick config
+    assert SSDTraining(dataset="d", out="o", input_size=320).model_config.input_size == 320
+    assert SSDTraining(dataset="d", out="o", input_size=192, settings=TINY).model_config == TINY.replace(input_size=192)
+    for size, message in ((100, "multiple of 64"), (64, "at least 128"), (0, "at least 128"), (-64, "at least 128")):
         with pytest.raises(ValueError, match=message):
             SSDTraining(dataset="d", out="o", input_size=size)
     with pytest.raises(ValueError, match="only the light network"):
         SSDTraining(dataset="d", out="o", config="full", input_size=512)
-    assert SSDTraining(dataset="d", out="o", config="full", input_size=300).settings()["input_size"] == 300
-    with pytest.raises(ValueError, match="input_size: expected a multiple of 64"):  # overrides pass the same check
-        SSDTraining(dataset="d", out="o", overrides={**TINY, "input_size": 100})
+    assert SSDTraining(dataset="d", out="o", config="full", input_size=300).model_config == FULL
+    with pytest.raises(ValueError, match="input_size: expected a multiple of 64"):  # settings pass the same check
+        TINY.replace(input_size=100)
+    with pytest.raises(ValueError, match="input_size: expected a whole number, got 128.0"):
+        TINY.replace(input_size=128.0)
 
 
 def test_input_size_has_one_default_and_one_check_for_settings_and_the_model():
     from paz6d.ssd.model import SSDModelError, paper_priors
 
-    assert paper_priors("light").input_size == SSDTraining(dataset="d", out="o").settings()["input_size"] == 448
+    assert paper_priors("light").input_size == SSDTraining(dataset="d", out="o").model_config.input_size == 448
     assert paper_priors("ssd512").input_size == 512
     for size, message in ((4096, "at most 2048"), (100, "multiple of 64")):
         with pytest.raises(SSDModelError, match=message):

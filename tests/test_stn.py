@@ -160,15 +160,15 @@ def test_digits_are_seeded_and_split_by_digit_sample():
 
 def test_tiny_training_lowers_the_loss_and_the_pipeline_reads_the_run(tmp_path):
     pytest.importorskip("sklearn")
-    from paz6d.stn.config import STNTraining
+    from paz6d.stn.config import QUICK, STNTraining
     from paz6d.stn.pipeline import ClassifyDigit
     from paz6d.stn.train import train_stn
 
     out = tmp_path / "run"
     # large centred digits without clutter: learnable in a few dozen steps
-    overrides = {"canvas_size": 16, "crop_size": 16, "scale": (14.0, 16.0), "clutter": 0, "filters": 8,
-                 "learning_rate": 3e-3, "test_samples": 64, "checkpoint_every": 40, "sample_every": 0}
-    summary = train_stn(STNTraining(out=out, steps=60, batch_size=32, progress=False, overrides=overrides))
+    tiny = QUICK.replace(canvas_size=16, crop_size=16, scale=(14.0, 16.0), clutter=0, filters=8, learning_rate=3e-3,
+                         test_samples=64, checkpoint_every=40, sample_every=0)
+    summary = train_stn(STNTraining(out=out, steps=60, batch_size=32, progress=False, settings=tiny))
     rows = (out / "log.csv").read_text().splitlines()[1:]
     losses = [float(row.split(",")[4]) for row in rows]
     assert losses[-1] < losses[0] - 0.5, losses
@@ -185,10 +185,10 @@ def test_tiny_training_lowers_the_loss_and_the_pipeline_reads_the_run(tmp_path):
     with pytest.raises(ValueError, match="image"):
         classify(np.zeros((4, 4, 2), np.uint8))
     # the same settings resume (nothing left to do, the training figures are kept); different ones are refused
-    again = train_stn(STNTraining(out=out, steps=60, batch_size=32, progress=False, overrides=overrides))
+    again = train_stn(STNTraining(out=out, steps=60, batch_size=32, progress=False, settings=tiny))
     assert again["final_losses"] == summary["final_losses"] and again["test_accuracy"] == summary["test_accuracy"]
     with pytest.raises(ValueError, match="transformer"):
-        train_stn(STNTraining(out=out, steps=60, transformer=False, progress=False, overrides=overrides))
+        train_stn(STNTraining(out=out, steps=60, transformer=False, progress=False, settings=tiny))
 
 
 def test_corrupt_run_directories_are_reported_by_file(tmp_path):
@@ -224,14 +224,14 @@ def test_command_line_flags_and_errors(tmp_path, capsys):
     from paz6d import cli
 
     assert cli.main(["train", "stn", "--out", str(tmp_path / "run"), "--steps", "0"]) == 2
-    assert "paz6d train stn: error: --steps: expected a positive integer, got 0" in capsys.readouterr().err
+    assert "paz6d train stn: error: --steps: expected a positive number, got 0" in capsys.readouterr().err
     (tmp_path / "file").write_text("x")
     assert cli.main(["train", "stn", "--out", str(tmp_path / "file")]) == 2
     assert "--out" in capsys.readouterr().err
     assert cli.main(["train", "stn", "--out", str(tmp_path / "run"), "--crop-size", "8"]) == 2
-    assert "--crop-size: expected at least 16 pixels, got 8" in capsys.readouterr().err
+    assert "--crop-size: expected at least 16, got 8" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         cli.main(["train", "stn", "--out", str(tmp_path / "run"), "--config", "huge"])
     from paz6d.stn.config import STNTraining
 
-    assert STNTraining(out=tmp_path, crop_size=48).settings()["crop_size"] == 48
+    assert STNTraining(out=tmp_path, crop_size=48).model_config.crop_size == 48

@@ -56,7 +56,7 @@ from paz6d.datasets.bop import read_pose_results
 from paz6d.datasets.bop.models import MODELS_INFO, load_models_info, model_meshes
 from paz6d.datasets.bop.units import units_per_mm
 from paz6d.estimate import estimate
-from paz6d.keypointnet.config import KeypointTraining
+from paz6d.keypointnet.config import CONFIGS as KEYPOINT_CONFIGS, KeypointTraining
 from paz6d.keypointnet.orientation import is_single_half_turn
 from paz6d.keypointnet.train import train_keypointnet
 from paz6d.ssd.config import BACKBONES, SSDTraining
@@ -343,7 +343,8 @@ def _train_keypointnet(job: Benchmark, obj_id: int, preset: str, steps: int | No
     return train_keypointnet(KeypointTraining(
         job.pose_dir(obj_id), job.mesh(obj_id), mesh_scale=MESH_SCALE, config=preset, seed=job.seed,
         workers=job.settings.workers, steps=steps, progress=job.progress,
-        overrides={} if views is None else {"views": views}, orientation_network=is_single_half_turn(symmetries)))
+        settings=None if views is None else KEYPOINT_CONFIGS[preset].replace(views=views),
+        orientation_network=is_single_half_turn(symmetries)))
 
 
 @dataclass(frozen=True)

@@ -59,10 +59,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     add_config_arguments(parser, DemoOptions)
 
 
-def run_demos(options: DemoOptions, config=QUICK, keypoint_overrides: dict | None = None) -> dict:
-    """The AAE demo with ``config``, KeypointNet's when ``options.keypoints`` (``keypoint_overrides``:
-    settings replaced in its quick config), then the OOD check of every model, added to the AAE
-    demo's report (``OUT/report.json``, key ``ood_check``); returns that report."""
+def run_demos(options: DemoOptions, config=QUICK, keypoint_settings=None) -> dict:
+    """The AAE demo with ``config``, KeypointNet's when ``options.keypoints`` (``keypoint_settings``: a
+    :class:`~paz6d.keypointnet.config.KeypointConfig` replacing its preset), then the OOD check of every
+    model, added to the AAE demo's report (``OUT/report.json``, key ``ood_check``); returns that report."""
     from paz6d.demo import aae_demo, keypoint_demo, ood_check  # here: they load OpenCV, the renderers, TensorFlow
 
     out = Path(options.out)
@@ -73,7 +73,7 @@ def run_demos(options: DemoOptions, config=QUICK, keypoint_overrides: dict | Non
     if options.keypoints:
         keypoint_out = out / "keypoints"
         keypoint_demo.run_keypoint_demo(keypoint_out, mesh, mesh_scale=1.0 / MM_PER_M, test_images=options.test_images,
-                                        workers=options.workers, overrides=keypoint_overrides,
+                                        workers=options.workers, settings=keypoint_settings,
                                         config=options.keypoint_config)
         models.append(ood_check.PoseModel("KeypointNet", "keypointnet",
                                           keypoint_demo.mode_run_dir(keypoint_out, "supervised")))

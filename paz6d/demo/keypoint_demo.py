@@ -25,7 +25,7 @@ import numpy as np
 from paz6d.backend.files import finite_or_none, new_figure, save_figure_atomically
 from paz6d.demo.report import number, pose_rows, print_rows, score_poses, write_report
 from paz6d.keypointnet import run_dir as keypointnet_run_dir
-from paz6d.keypointnet.config import KeypointTraining
+from paz6d.keypointnet.config import KeypointConfig, KeypointTraining
 from paz6d.keypointnet.train import train_keypointnet
 
 TEST_SEED_OFFSET = 1_000_003  # test images never share a seed with training/validation views
@@ -127,7 +127,7 @@ def _recall_png(path: Path, curves: dict[str, np.ndarray], object_diameter: floa
 def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
                       modes: tuple[str, ...] = ("supervised",), config: str = "quick",
                       test_images: int = 200, seed: int = 0, workers: int = 2, steps: int | None = None,
-                      symmetric: bool = False, progress: bool = True, overrides: dict | None = None,
+                      symmetric: bool = False, progress: bool = True, settings: KeypointConfig | None = None,
                       orientation_network: bool = False) -> dict:
     """Trains each mode in ``modes`` and evaluates it on ``test_images`` held-out synthetic images.
 
@@ -136,7 +136,7 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
         mesh_path: the object mesh; ``mesh_scale`` converts its units to metres (0.001 for BOP mm).
         steps: override the config's training steps.
         symmetric: the object is symmetric (score with ADD-S).
-        overrides: replace settings of the config (e.g. a smaller network for tests).
+        settings: replace the preset ``config`` (e.g. a smaller network for tests).
         orientation_network: train with the orientation network (a BOP mesh with a half-turn symmetry in
             its ``models_info.json``; implies ``symmetric``).
     Returns:
@@ -164,7 +164,7 @@ def run_keypoint_demo(out_dir: Path, mesh_path: Path, mesh_scale: float = 1.0,
         runs[mode] = run_dir
         report["modes"][mode] = {"training": train_keypointnet(
             KeypointTraining(run_dir, Path(mesh_path), mesh_scale=mesh_scale, config=config, mode=mode, seed=seed,
-                             workers=workers, steps=steps, progress=progress, overrides=dict(overrides or {}),
+                             workers=workers, steps=steps, progress=progress, settings=settings,
                              orientation_network=orientation_network))}
     render_started = time.perf_counter()
     test = render_test_images(mesh_path, test_images, seed + TEST_SEED_OFFSET, sampling, mesh_scale, workers,

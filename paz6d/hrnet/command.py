@@ -15,7 +15,7 @@ from paz6d.hrnet.config import HRNetTraining
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Adds the ``paz6d train hrnet`` flags (the fields of :class:`HRNetTraining`)."""
-    add_config_arguments(parser, HRNetTraining, exclude=("overrides",))
+    add_config_arguments(parser, HRNetTraining, exclude=("settings",))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -27,8 +27,8 @@ TensorFlow and the renderer are loaded inside :func:`train_keypointnet`.
 
 from __future__ import annotations
 
-import json
 import time
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -38,12 +38,13 @@ from paz6d.backend.farthest_points import farthest_point_sampling
 from paz6d.backend.files import finite_or_none, null_non_finite, read_cache, save_npz_atomically
 from paz6d.backend.transform import apply, compose, invert
 from paz6d.keypointnet import run_dir as run_files
-from paz6d.keypointnet.config import (DISCOVERY_WEIGHTS, LIFTINGS, MAX_LIFTING_ERROR, ORIENTATION_WEIGHT,
-                                      OTHER_CHART_PROBABILITY, SEPARATION_DELTA, SEPARATION_DELTA_IMAGE,
-                                      SUPERVISED_WEIGHTS, KeypointTraining, anchors_due, pair_angle_at)
+from paz6d.keypointnet.config import (MAX_LIFTING_ERROR, ORIENTATION_WEIGHT, OTHER_CHART_PROBABILITY,
+                                      SUPERVISED_WEIGHTS, KeypointConfig, KeypointTraining, anchors_due,
+                                      pair_angle_at)
 from paz6d.keypointnet.orientation import canonical_poses, chart_targets, one_hot, training_charts
 from paz6d.processors.predict import predict_in_batches
 from paz6d.training.precision import resolve_precision
+from paz6d.training.settings import changed_settings, recorded_settings
 
 
 # ------------------------------------------------------------------------------- run directory
@@ -52,14 +53,14 @@ from paz6d.training.precision import resolve_precision
 RESUMABLE_CHANGES = ("steps", "precision")
 
 
-def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: float, sampling, symmetry=None) -> dict:
+def _prepare_run_dir(job: KeypointTraining, settings: KeypointConfig, object_diameter: float, sampling,
+                     symmetry=None) -> dict:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"mode": job.mode, "config": job.config, "seed": job.seed, "mesh_path": str(Path(job.mesh).resolve()),
               "mesh_scale": job.mesh_scale, "diameter": object_diameter,
               "orientation": None if symmetry is None else symmetry.to_dict(),
-              "input_size": settings["input_size"], "margin": sampling.margin, "downsample": settings["downsample"],
-              "settings": {key: list(value) if isinstance(value, tuple) else value for key, value in settings.items()},
-              "sampling": sampling.to_dict()}
+              "input_size": settings.input_size, "margin": sampling.margin, "downsample": settings.downsample,
+              "settings": settings.to_dict(), "sampling": sampling.to_dict()}
     job.out.mkdir(parents=True, exist_ok=True)
     path = run_files.config_path(job.out)
     if path.exists():
@@ -68,17 +69,19 @@ def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: flo
             if previous.get(key) != config[key]:
                 raise ValueError(f"{path}: this run directory holds a different run ({key}={previous.get(key)!r}, "
                                  f"now {config[key]!r}); choose another --out")
-        now = json.loads(json.dumps(config))  # tuples as lists, as config.json holds them
-        for key in sorted(set(previous["settings"]) | set(now["settings"])):
-            if key not in RESUMABLE_CHANGES and previous["settings"].get(key) != now["settings"].get(key):
-                raise ValueError(f"{path}: the {job.config!r} settings changed since this run started ({key}="
-                                 f"{previous['settings'].get(key)!r}, now {now['settings'].get(key)!r}); resuming "
-                                 f"would mix two trainings, choose another --out")
-        if previous.get("sampling") != now["sampling"]:
+        earlier = recorded_settings(KeypointConfig, path, previous)
+        fixed = [item.name for item in fields(settings) if item.name not in RESUMABLE_CHANGES]
+        changed = changed_settings(earlier, settings, fixed)
+        if changed:
+            key = changed[0]
+            raise ValueError(f"{path}: the {job.config!r} settings changed since this run started ({key}="
+                             f"{getattr(earlier, key)!r}, now {getattr(settings, key)!r}); resuming would mix two "
+                             f"trainings, choose another --out")
+        if previous.get("sampling") != config["sampling"]:
             raise ValueError(f"{path}: the view sampling changed since this run started ({previous.get('sampling')!r}, "
-                             f"now {now['sampling']!r}); resuming would mix two trainings, choose another --out")
-        if previous["settings"].get("steps") != config["settings"]["steps"]:
-            previous["settings"]["steps"] = config["settings"]["steps"]  # extending a run is allowed
+                             f"now {config['sampling']!r}); resuming would mix two trainings, choose another --out")
+        if earlier.steps != settings.steps:
+            previous["settings"]["steps"] = settings.steps  # extending a run is allowed
             run_files.write_config(job.out, previous)
         return previous
     run_files.write_config(job.out, config)
@@ -87,7 +90,7 @@ def _prepare_run_dir(job: KeypointTraining, settings: dict, object_diameter: flo
 
 # ------------------------------------------------------------------------------- losses
 
-def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_model: np.ndarray | None):
+def _loss_function(mode: str, settings: KeypointConfig, object_diameter: float, keypoints_model: np.ndarray | None):
     """``loss_fn(model, batch) -> dict`` for the shared Trainer (TensorFlow imported here). With a
     ``chart`` in the batch, ``model`` is the chart-forcing network and the orientation network's
     cross-entropy against ``chart_target`` is added (weight :data:`ORIENTATION_WEIGHT`)."""
@@ -109,8 +112,8 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
             loss = loss + ORIENTATION_WEIGHT * orientation["orientation"]
         return {"loss": loss, **terms, **orientation}
 
-    size = float(settings["input_size"])
-    stride = int(settings["downsample"])
+    size = float(settings.input_size)
+    stride = settings.downsample
     grid = kp.cell_centres(int(size) // stride, int(size) // stride, stride)
     scale, offset = (terms.astype(np.float32) for terms in keypoints_backend.normalization((size, size)))
     to_unit = tf.constant([[scale[0], 0.0, offset[0]], [0.0, scale[1], offset[1]], [0.0, 0.0, 1.0]], tf.float32)
@@ -149,15 +152,13 @@ def _loss_function(mode: str, settings: dict, object_diameter: float, keypoints_
                                               K_unit[:pairs], K_unit[pairs:], T_a2b)
             points = kp.unproject(outputs["uv"], depth, K) / object_diameter
             pose = kp.relative_pose_loss(points[:pairs], points[pairs:], T_a2b[:, :3, :3])
-            separation = kp.separation_loss(points, settings.get("separation_delta", SEPARATION_DELTA))
+            separation = kp.separation_loss(points, settings.separation_delta)
             silhouette = kp.silhouette_loss(outputs["probabilities"], batch["masks"])
             variance = kp.variance_loss(outputs["probabilities"], uv_unit, grid_unit)
-            separation_image = kp.separation_loss(uv_unit,
-                                                  settings.get("separation_delta_image", SEPARATION_DELTA_IMAGE))
+            separation_image = kp.separation_loss(uv_unit, settings.separation_delta_image)
             terms = {"consistency": consistency, "pose": pose, "separation": separation,
                      "separation_image": separation_image, "silhouette": silhouette, "variance": variance}
-            weights = {**DISCOVERY_WEIGHTS, **settings.get("discovery_weights", {})}
-            loss = tf.add_n([weights[name] * value for name, value in terms.items()])
+            loss = tf.add_n([getattr(settings.discovery_weights, name) * value for name, value in terms.items()])
             if "anchors" in batch:  # bootstrapping: the network's own keypoints, lifted to 3D (_anchor_source)
                 anchor = anchor_loss(outputs, batch["anchors"], K, T)
                 loss = loss + batch["anchor_weight"] * anchor
@@ -285,12 +286,12 @@ def _cached_lifting_crops(path: Path, render, K, margin: float, size: int):
     return images, intrinsics, poses
 
 
-def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out: Path,
+def lift_run_keypoints(model, crops, settings: KeypointConfig, object_diameter: float, out: Path,
                        targets: np.ndarray | None = None, symmetry=None) -> dict:
     """Writes ``out/keypoints.json``: the 3D keypoints (object frame, metres) that PnP will use.
 
     The trained network's keypoints on ``crops = (images, K, T_model2cam)`` (views with known
-    poses) are lifted to 3D, by ``settings["lifting"]``:
+    poses) are lifted to 3D, by ``settings.lifting``:
 
     - ``"triangulate"``: 2D-only least-squares triangulation with outlier views dropped
       (:func:`~paz6d.keypointnet.keypoints.triangulate_keypoints`); systematic 2D biases of the
@@ -307,21 +308,19 @@ def lift_run_keypoints(model, crops, settings: dict, object_diameter: float, out
     from paz6d.keypointnet.model import metres_from_depth_code
     from paz6d.keypointnet.keypoints import decode_keypoints, lift_keypoints, triangulate_keypoints
 
-    method = settings.get("lifting", "triangulate")
-    if method not in LIFTINGS:
-        raise ValueError(f"lifting: expected one of {LIFTINGS}, got {method!r}")
+    method = settings.lifting
     images, K, T = crops
     outputs = predict_crops(model, images)
     if symmetry is not None:
         T = symmetry.for_outputs(T, outputs)
-    uv = decode_keypoints(outputs, settings["downsample"])
+    uv = decode_keypoints(outputs, settings.downsample)
     if method == "median":
-        depth = np.asarray(metres_from_depth_code(outputs["depth"], object_diameter, K, settings["input_size"]))
+        depth = np.asarray(metres_from_depth_code(outputs["depth"], object_diameter, K, settings.input_size))
         points, _ = lift_keypoints(uv, depth, K, T)
     else:
         points, _ = triangulate_keypoints(uv, K, T)
     error = np.median(model_reprojection_errors(uv, K, T, points, np.ones(len(points), bool)), axis=0)
-    usable = error <= MAX_LIFTING_ERROR * settings["input_size"]
+    usable = error <= MAX_LIFTING_ERROR * settings.input_size
     name = {"triangulate": "triangulated", "median": "lifted-median"}[method]
     run_files.write_keypoints(out, points, usable, name, error, targets)
     return {"lifting": name, "lifting_error_px": error.tolist(), "usable_keypoints": int(usable.sum())}
@@ -341,7 +340,7 @@ class AnchorSource:
         views: the training :class:`~paz6d.keypointnet.views.ViewSet`; seed: of the crops' backgrounds.
     """
 
-    def __init__(self, model, views, settings: dict, seed: int, object_diameter: float, symmetry=None):
+    def __init__(self, model, views, settings: KeypointConfig, seed: int, object_diameter: float, symmetry=None):
         self.model, self.views, self.settings, self.seed, self.symmetry = model, views, settings, seed, symmetry
         self.diameter = float(object_diameter)
         self.points: np.ndarray | None = None
@@ -371,24 +370,18 @@ class AnchorSource:
         from paz6d.keypointnet.model import inference_function
 
         if self._crops is None:
-            self._crops = fixed_crops(self.views, self.seed, int(self.settings.get("anchor_views", 256)))
+            self._crops = fixed_crops(self.views, self.seed, self.settings.anchor_views)
             self._infer = inference_function(self.model)
         images, K, T = self._crops
         outputs = predict_in_batches(self._infer, images, 32)
         if self.symmetry is not None:
             T = self.symmetry.for_outputs(T, outputs)
-        uv = decode_keypoints(outputs, int(self.settings["downsample"]))
-        method = self.settings.get("anchor_lifting", "modes")
-        if method == "triangulate":
+        uv = decode_keypoints(outputs, self.settings.downsample)
+        if self.settings.anchor_lifting == "triangulate":
             return triangulate_keypoints(uv, K, T)[0]
-        if method != "modes":
-            raise ValueError(f"anchor_lifting: expected 'modes' or 'triangulate', got {method!r}")
-        depth = np.asarray(outputs["depth"],
-                           np.float64) * self.diameter * K[:, 0:1, 0] / int(self.settings["input_size"])
-        delta = float(self.settings.get("separation_delta", SEPARATION_DELTA)) * self.diameter
-        return spread_modes(per_view_points(uv, depth, K, T),
-                            float(self.settings.get("anchor_radius", 0.1)) * self.diameter,
-                            delta)
+        depth = np.asarray(outputs["depth"], np.float64) * self.diameter * K[:, 0:1, 0] / self.settings.input_size
+        return spread_modes(per_view_points(uv, depth, K, T), self.settings.anchor_radius * self.diameter,
+                            self.settings.separation_delta * self.diameter)
 
 
 def orientation_batch(T_model2cam: np.ndarray, symmetry, rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -427,16 +420,15 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     import_tensorflow()  # before any renderer in this process (workers=0)
     from paz6d.backend.mesh import diameter, load_mesh
     from paz6d.keypointnet.keypoints import DECODERS, decode_keypoints, keypoint_spread
-    from paz6d.keypointnet.views import (Augmentation, ViewSampling, cached_views, render_test_images, render_views,
-                                         training_batch)
+    from paz6d.keypointnet.views import ViewSampling, cached_views, render_test_images, render_views, training_batch
     from paz6d.synthesis.sampling import hull_points
 
-    settings = job.settings()
-    settings["precision"] = resolve_precision(settings.get("precision", "float32"))
+    settings = job.model_config
+    settings = settings.replace(precision=resolve_precision(settings.precision))
     started = time.perf_counter()
     mesh = load_mesh(job.mesh, job.mesh_scale)
     object_diameter = diameter(np.asarray(mesh.vertices))
-    sampling = ViewSampling(input_size=settings["input_size"], lighting=tuple(settings.get("lighting", ("key-fill",))))
+    sampling = ViewSampling(input_size=settings.input_size, lighting=settings.lighting)
     symmetry = job.symmetry()
     _prepare_run_dir(job, settings, object_diameter, sampling, symmetry)
     out = job.out
@@ -447,46 +439,44 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
                                     progress=job.progress)
 
     train_views = views if views is not None else cached_views(run_files.views_path(out, "train"),
-                                                               render(settings["views"], job.seed))
+                                                               render(settings.views, job.seed))
     validation_views = cached_views(run_files.views_path(out, "val"),
-                                    render(settings["validation_views"], job.seed + 10_000))
+                                    render(settings.validation_views, job.seed + 10_000))
     render_seconds = time.perf_counter() - started
 
     keypoints_model = None
     if job.mode == "supervised":
-        keypoints_model = supervised_keypoints(mesh, settings["num_keypoints"], job.seed)
+        keypoints_model = supervised_keypoints(mesh, settings.num_keypoints, job.seed)
 
     from paz6d.keypointnet import model as kp
     from paz6d.training.trainer import Trainer
 
     keras = kp.keras
     keras.utils.set_random_seed(job.seed)
-    built = kp.build_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
-                                 settings["downsample"], tuple(settings["dilations"]),
-                                 context_stride=settings.get("context_stride"), compute_dtype=settings["precision"],
-                                 orientation=symmetry is not None)
+    built = kp.build_keypointnet(settings.num_keypoints, settings.input_size, settings.filters, settings.downsample,
+                                 settings.dilations, context_stride=settings.context_stride,
+                                 compute_dtype=settings.precision, orientation=symmetry is not None)
     model, trained = built if symmetry is not None else (built, built)  # trained: the chart-forcing twin
-    schedule = keras.optimizers.schedules.CosineDecay(settings["learning_rate"], settings["steps"], alpha=0.05)
-    ema = settings.get("ema_momentum")
+    schedule = keras.optimizers.schedules.CosineDecay(settings.learning_rate, settings.steps, alpha=0.05)
+    ema = settings.ema_momentum
     optimizer = keras.optimizers.Adam(schedule, global_clipnorm=5.0, use_ema=ema is not None,
-                                      ema_momentum=0.99 if ema is None else float(ema))
-    pairs, downsample = settings["pairs"], settings["downsample"]
+                                      ema_momentum=0.99 if ema is None else ema)
+    pairs, downsample = settings.pairs, settings.downsample
 
     anchors = (AnchorSource(model, train_views, settings, job.seed + 3, object_diameter, symmetry)
                if job.mode == "discovery" else None)
 
-    augmentation = Augmentation.from_settings(settings.get("augmentation"))
 
     def make_batch(step: int):
         rng = np.random.default_rng([job.seed, 1, step])
-        batch = training_batch(train_views, rng, pairs, downsample, augmentation,
+        batch = training_batch(train_views, rng, pairs, downsample, settings.augmentation,
                                max_angle=pair_angle_at(step, settings))
         if symmetry is not None:
             batch.update(orientation_batch(batch["T_model2cam"], symmetry, rng))
         points = None if anchors is None else anchors(step)
         if points is not None:
             batch["anchors"] = points.astype(np.float32)
-            batch["anchor_weight"] = np.float32(settings.get("anchor_weight", 1.0))
+            batch["anchor_weight"] = np.float32(settings.anchor_weight)
         return batch
 
     sample_images, sample_K, sample_T = fixed_crops(validation_views, job.seed, 8)
@@ -496,8 +486,8 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
 
         sample_targets = np.stack([transform_and_project(keypoints_model, T, K) for T, K in zip(sample_T, sample_K)])
     trainer = Trainer(trained, optimizer, _loss_function(job.mode, settings, object_diameter, keypoints_model),
-                      make_batch, out, settings["steps"], checkpoint_every=settings["checkpoint_every"], log_every=10,
-                      sample_every=settings["sample_every"],
+                      make_batch, out, settings.steps, checkpoint_every=settings.checkpoint_every, log_every=10,
+                      sample_every=settings.sample_every,
                       sample_callback=_sample_drawer(model, sample_images, sample_targets), progress=job.progress,
                       prefetch=1)
     training = trainer.fit()
@@ -507,11 +497,11 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     if views is None:  # rendered views: lift from unseen whole images cropped as at inference
         lifting_crops = _cached_lifting_crops(
             run_files.views_path(out, "lift"),
-            lambda: render_test_images(job.mesh, settings["lift_views"], job.seed + 20_000, sampling,
+            lambda: render_test_images(job.mesh, settings.lift_views, job.seed + 20_000, sampling,
                                        job.mesh_scale, job.workers, progress=job.progress),
-            sampling.camera.K, sampling.margin, settings["input_size"])
+            sampling.camera.K, sampling.margin, settings.input_size)
     else:  # crops cut from a data set's images: already made as at inference
-        lifting_crops = fixed_crops(train_views, job.seed + 1, settings["lift_views"])
+        lifting_crops = fixed_crops(train_views, job.seed + 1, settings.lift_views)
     lifting = lift_run_keypoints(model, lifting_crops, settings, object_diameter, out, keypoints_model, symmetry)
     points_model, usable = run_files.read_keypoints(out)
 
@@ -521,13 +511,13 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     if symmetry is not None:
         chart_accuracy = float(np.mean(np.argmax(outputs["chart"], axis=1) == chart_targets(T, symmetry.axis)))
         T = symmetry.for_outputs(T, outputs)
-    depth = np.asarray(kp.metres_from_depth_code(outputs["depth"], object_diameter, K, settings["input_size"]))
+    depth = np.asarray(kp.metres_from_depth_code(outputs["depth"], object_diameter, K, settings.input_size))
     summary = {"mode": job.mode, "config": job.config, "steps": training.final_step,
                "train_seconds": round(train_seconds, 1), "render_seconds": round(render_seconds, 1),
                "final_losses": training.metrics,
                "loader_samples_per_second": finite_or_none(training.loader_samples_per_second, 1),
                "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1),
-               **lifting, "validation_views": len(images), "input_size": settings["input_size"],
+               **lifting, "validation_views": len(images), "input_size": settings.input_size,
                "chart_accuracy": chart_accuracy}
     for method in DECODERS:  # "local" is what KeypointPose6D uses by default
         uv = decode_keypoints(outputs, downsample, method)

@@ -23,7 +23,7 @@ This module imports neither TensorFlow nor pyrender at import time.
 from __future__ import annotations
 
 import functools
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import cv2
@@ -32,10 +32,10 @@ import numpy as np
 from paz6d.abstract.processor import SequentialProcessor
 from paz6d.backend import image as image_backend
 from paz6d.backend.camera import Camera
-from paz6d.backend.checks import unknown_fields
 from paz6d.backend.files import load_npz, save_npz_atomically
 from paz6d.backend.mesh import diameter, load_mesh
 from paz6d.backend.square_crop import crop_intrinsics, crop_square, projected_box, square_window
+from paz6d.keypointnet.config import Augmentation
 from paz6d.synthesis.augment import (BlendBackground, RandomBrightness, RandomContrast, RandomGaussianBlur, RandomHue,
                                      RandomImageNoise, RandomSaturation, relight, sensor_noise, share_generator)
 from paz6d.synthesis.lighting import LIGHTING_STYLES, random_lighting
@@ -295,54 +295,6 @@ def render_test_images(mesh_path: str | Path, count: int, seed: int, sampling: V
 
 
 # ------------------------------------------------------------------------------- batches
-
-@dataclass(frozen=True)
-class Augmentation:
-    """Batch-time augmentation strengths.
-
-    Attributes:
-        crop_scale: crop zoom factor drawn from ``[1 - crop_scale, 1 + crop_scale]``.
-        crop_shift: crop shift drawn from ``±crop_shift`` × crop side.
-        colour: apply brightness/contrast/saturation/hue jitter and noise.
-        background: composite over random backgrounds (else black).
-        relight: strength of the object's image-space re-lighting before compositing
-            (:func:`~paz6d.synthesis.augment.relight`: per-channel gains ``1 ± relight/2`` and a brightness
-            ramp); 0: none.
-        background_noise: on half of the crops, Gaussian pixel noise of a standard deviation uniform in
-            ``[0, background_noise]`` grey levels on the background only; 0: none.
-        photos: probability that a crop's background is a collage of scikit-image's sample photographs
-            (:func:`~paz6d.synthesis.photo_backgrounds.photo_collage`) instead of :data:`BACKGROUND`'s style.
-    """
-
-    crop_scale: float = 0.08
-    crop_shift: float = 0.05
-    colour: bool = True
-    background: bool = True
-    relight: float = 0.0
-    background_noise: float = 0.0
-    photos: float = 0.0
-
-    def __post_init__(self):
-        if not 0.0 <= self.photos <= 1.0:
-            raise ValueError(f"augmentation.photos: expected a probability in [0, 1], got {self.photos!r}")
-        for name in ("crop_scale", "crop_shift", "relight", "background_noise"):
-            if not getattr(self, name) >= 0.0:
-                raise ValueError(f"augmentation.{name}: expected a value >= 0, got {getattr(self, name)!r}")
-
-    @classmethod
-    def from_settings(cls, values: dict | None) -> "Augmentation":
-        """The ``augmentation`` setting of a preset (``None``: the defaults).
-
-        Raises:
-            ValueError: for a key that is not a field, naming it and the known ones.
-        """
-        values = dict(values or {})
-        unknown = unknown_fields(cls, values)
-        if unknown:
-            known = tuple(item.name for item in fields(cls))
-            raise ValueError(f"augmentation.{unknown[0]}: unknown setting; expected some of {known}")
-        return cls(**values)
-
 
 @functools.cache
 def _photographs() -> tuple[np.ndarray, ...]:

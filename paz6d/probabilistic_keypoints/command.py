@@ -12,7 +12,7 @@ from paz6d.probabilistic_keypoints.config import ProbabilisticTraining
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Adds the flags (the fields of :class:`ProbabilisticTraining`)."""
-    add_config_arguments(parser, ProbabilisticTraining, exclude=("overrides",))
+    add_config_arguments(parser, ProbabilisticTraining, exclude=("settings",))
 
 
 def run(args: argparse.Namespace) -> int:

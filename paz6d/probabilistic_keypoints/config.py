@@ -1,33 +1,63 @@
-"""Settings of ``paz6d train probabilistic-keypoints``: the quick and full configs and one run's
-:class:`ProbabilisticTraining` (whose fields are the command's flags). Light: no numpy, no TensorFlow."""
+"""Settings of ``paz6d train probabilistic-keypoints``: the network, data and schedule
+(:class:`ProbabilisticConfig`, presets :data:`QUICK` and :data:`FULL`) and one run's
+:class:`ProbabilisticTraining` (whose fields are the command's flags). Light: no TensorFlow."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
+from typing import ClassVar
 
 from paz6d.cli_options import option
-from paz6d.training.presets import apply_steps, preset_settings
-from paz6d.training.source import checked_mesh_scale
+from paz6d.keypointnet.config import KeypointNetwork
+from paz6d.training.settings import positive, setting, share
+from paz6d.training.source import MeshTraining
 
-_NETWORK = {"num_keypoints": 16, "input_size": 128, "filters": 48, "downsample": 4, "context_stride": 8,
-            "dilations": (1, 2, 4, 1, 2, 4), "precision": "auto"}
-_OCCLUSION = {"train_occlusion": 0.5, "test_occluders": 3, "occluder_size": (0.3, 0.7)}
-CONFIGS: dict[str, dict] = {
-    # About 15 minutes on 2 CPU cores (docs/probabilistic_keypoints.md): KeypointNet's quick network,
-    # fewer views and steps.
-    "quick": {**_NETWORK, **_OCCLUSION, "views": 2000, "validation_views": 200, "test_images": 200, "lift_images": 200,
-              "lifting": "triangulate", "steps": 2500,
-              "pairs": 8, "learning_rate": 5e-3, "nll_weight": 0.1, "checkpoint_every": 500, "sample_every": 500},
-    # KeypointNet's quick schedule (5,000 steps, 4,000 views) with the Gaussian head.
-    "full": {**_NETWORK, **_OCCLUSION, "views": 4000, "validation_views": 300, "test_images": 400, "lift_images": 300,
-             "lifting": "triangulate", "steps": 5000,
-             "pairs": 8, "learning_rate": 5e-3, "nll_weight": 0.1, "checkpoint_every": 500, "sample_every": 500},
-}
+#: Where the 3D keypoints PnP uses come from: ``"triangulate"`` (lifted from the network's keypoints on
+#: held-out crops, as KeypointNet does) or ``"targets"`` (the farthest-point keypoints it was trained on).
+LIFTINGS = ("triangulate", "targets")
+
+
+@dataclass(frozen=True)
+class ProbabilisticConfig(KeypointNetwork):
+    """Network (KeypointNet's, :class:`~paz6d.keypointnet.config.KeypointNetwork`, with a Gaussian head),
+    data and schedule of a probabilistic-keypoints run.
+
+    Attributes:
+        train_occlusion: share of training crops with polygon occluders (1 to 2).
+        test_occluders: most occluders per occluded test crop.
+        occluder_size: occluder size range, fractions of the object's side.
+        views / validation_views: rendered training and validation views.
+        test_images / lift_images: held-out whole images scored, and cut for the lifting.
+        lifting: one of :data:`LIFTINGS`.
+        steps / pairs / learning_rate: the schedule (cosine decay); ``pairs`` views per step, twice jittered.
+        nll_weight: weight of the Gaussian negative log-likelihood.
+        checkpoint_every / sample_every: Trainer intervals in steps (sample_every 0: no samples).
+    """
+
+    train_occlusion: float = share(0.5)
+    test_occluders: int = positive(3)
+    occluder_size: tuple[float, float] = setting((0.3, 0.7), positive=True, ordered=True)
+    views: int = positive(2000)
+    validation_views: int = positive(200)
+    test_images: int = positive(200)
+    lift_images: int = positive(200)
+    lifting: str = setting("triangulate", choices=LIFTINGS)
+    steps: int = positive(2500)
+    pairs: int = positive(8)
+    learning_rate: float = positive(5e-3)
+    nll_weight: float = setting(0.1, minimum=0.0)
+    checkpoint_every: int = positive(500)
+    sample_every: int = setting(500, minimum=0)
+
+
+#: About 15 minutes on 2 CPU cores (docs/probabilistic_keypoints.md): KeypointNet's quick network, fewer views
+#: and steps.
+QUICK = ProbabilisticConfig(context_stride=8)
+#: KeypointNet's quick schedule (5,000 steps, 4,000 views) with the Gaussian head.
+FULL = QUICK.replace(views=4000, validation_views=300, test_images=400, lift_images=300, steps=5000)
+CONFIGS = {"quick": QUICK, "full": FULL}
 #: Settings that must not change when a run is resumed.
 FIXED_SETTINGS = ("num_keypoints", "input_size", "filters", "downsample", "context_stride", "dilations", "views")
-#: Supervised KeypointNet loss weights (heatmap cross-entropy, coordinates in [-1, 1] units, depth code).
-SUPERVISED_WEIGHTS = {"heatmap": 1.0, "coordinates": 2.0, "depth": 1.0}
 #: RANSAC inlier threshold of both PnP variants, crop pixels (as KeypointPose6D).
 RANSAC_THRESHOLD = 5.0
 #: Knee of the Huber loss of the weighted refinement, standard deviations.
@@ -35,24 +65,10 @@ ROBUST_SCALE = 3.0
 
 
 @dataclass
-class ProbabilisticTraining:
-    """One ``paz6d train probabilistic-keypoints`` run (each field but ``overrides`` is a flag)."""
+class ProbabilisticTraining(MeshTraining):
+    """One ``paz6d train probabilistic-keypoints`` run (:class:`~paz6d.training.source.MeshTraining`)."""
 
-    mesh: Path = option(help="object mesh (PLY/OBJ/GLB); views are rendered on the fly")
-    out: Path = option(help="run directory (re-run the command to resume)")
-    mesh_scale: float = option(1.0, "mesh file units to metres (0.001 for BOP millimetre meshes)")
-    config: str = option("quick", "model and schedule size", choices=tuple(sorted(CONFIGS)))
-    seed: int = option(0, "seed of every random choice")
-    workers: int = option(2, "rendering worker processes (0: render in this process)")
-    steps: int | None = option(None, "training steps (default: the config's)")
-    progress: bool = option(True, "progress bars")
-    overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
+    CONFIGS: ClassVar[dict[str, ProbabilisticConfig]] = CONFIGS
 
-    def __post_init__(self):
-        self.mesh, self.out = Path(self.mesh), Path(self.out)
-        self.mesh_scale = checked_mesh_scale(self.mesh, None, self.mesh_scale, self.seed, self.workers, None, None)
-        self.settings()
-
-    def settings(self) -> dict:
-        """The config's settings with ``overrides`` and ``steps`` applied."""
-        return apply_steps(preset_settings(CONFIGS, self.config, self.overrides), self.steps)
+    config: str = option("quick", "network and schedule size", choices=tuple(sorted(CONFIGS)))
+    settings: ProbabilisticConfig | None = field(default=None)  # replaces the config's preset (e.g. a tiny network)

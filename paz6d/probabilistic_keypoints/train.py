@@ -22,7 +22,6 @@ Re-running the same command resumes.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from pathlib import Path
@@ -37,41 +36,39 @@ from paz6d.training.precision import resolve_precision
 from paz6d.keypointnet.keypoints import triangulate_keypoints
 from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
 from paz6d.probabilistic_keypoints import run_dir as run_files
-from paz6d.probabilistic_keypoints.config import (FIXED_SETTINGS, RANSAC_THRESHOLD, ROBUST_SCALE, SUPERVISED_WEIGHTS,
+from paz6d.keypointnet.config import SUPERVISED_WEIGHTS
+from paz6d.probabilistic_keypoints.config import (FIXED_SETTINGS, RANSAC_THRESHOLD, ROBUST_SCALE, ProbabilisticConfig,
                                                   ProbabilisticTraining)
 from paz6d.processors.predict import predict_in_batches
 from paz6d.synthesis.augment import share_generator
 from paz6d.synthesis.occluders import PolygonOccluders
-from paz6d.training.presets import check_same_run
+from paz6d.training.settings import check_same_run
 
 #: Seed offsets of the validation views, of the lifting images and of the test images (disjoint from the
 #: training views and from each other).
 VALIDATION_SEED_OFFSET = 10_000
 LIFT_SEED_OFFSET = 20_000
 TEST_SEED_OFFSET = 30_000
-LIFTINGS = ("triangulate", "targets")
 EXAMPLE_COUNT = 8  # occluded test crops drawn in occluded_examples.png
 
 
-def _canonical(value):
-    return json.loads(json.dumps(value))
-
-
-def _prepare_run_dir(job: ProbabilisticTraining, settings: dict, object_diameter: float, margin: float) -> None:
-    config = _canonical({"method": "probabilistic_keypoints", "config": job.config, "seed": job.seed,
-                         "mesh_path": str(Path(job.mesh).resolve()), "mesh_scale": job.mesh_scale,
-                         "diameter": object_diameter, "input_size": settings["input_size"], "margin": margin,
-                         "downsample": settings["downsample"], "settings": settings})
-    if run_files.path_of(job.out, run_files.CONFIG_FILE).is_file():
-        check_same_run(job.out, run_files.read_config(job.out), config,
-                       ("method", "config", "seed", "mesh_path", "mesh_scale"), FIXED_SETTINGS)
+def _prepare_run_dir(job: ProbabilisticTraining, settings: ProbabilisticConfig, object_diameter: float,
+                     margin: float) -> None:
+    config = {"method": "probabilistic_keypoints", "config": job.config, "seed": job.seed,
+              "mesh_path": str(Path(job.mesh).resolve()), "mesh_scale": job.mesh_scale, "diameter": object_diameter,
+              "input_size": settings.input_size, "margin": margin, "downsample": settings.downsample,
+              "settings": settings.to_dict()}
+    path = run_files.path_of(job.out, run_files.CONFIG_FILE)
+    if path.is_file():
+        check_same_run(path, run_files.read_config(job.out), config,
+                       ("method", "config", "seed", "mesh_path", "mesh_scale"), settings, FIXED_SETTINGS)
     run_files.write_config(job.out, config)
 
 
-def occluder(settings: dict, probability: float, margin: float, max_count: int | None = None) -> PolygonOccluders:
+def occluder(settings: ProbabilisticConfig, probability: float, margin: float,
+             max_count: int | None = None) -> PolygonOccluders:
     """The polygon occluders of a run (object side = crop side / ``margin``)."""
-    return PolygonOccluders(probability, int(max_count or settings["test_occluders"]), tuple(settings["occluder_size"]),
-                            padding=margin)
+    return PolygonOccluders(probability, max_count or settings.test_occluders, settings.occluder_size, padding=margin)
 
 
 def occlude(images: np.ndarray, occluders: PolygonOccluders, seed: int, stream: int) -> np.ndarray:
@@ -83,14 +80,14 @@ def occlude(images: np.ndarray, occluders: PolygonOccluders, seed: int, stream: 
     return out
 
 
-def _loss_function(settings: dict, keypoints_model: np.ndarray, object_diameter: float):
+def _loss_function(settings: ProbabilisticConfig, keypoints_model: np.ndarray, object_diameter: float):
     """``loss_fn(model, batch) -> dict`` for the shared Trainer."""
     from paz6d.keypointnet import model as kp
     from paz6d.probabilistic_keypoints.model import gaussian_nll
 
     tf = kp.tf
-    size = float(settings["input_size"])
-    stride = int(settings["downsample"])
+    size = float(settings.input_size)
+    stride = settings.downsample
     grid = kp.cell_centres(int(size) // stride, int(size) // stride, stride)
     points = tf.constant(keypoints_model, tf.float32)
     scale, offset = (terms.astype(np.float32) for terms in keypoints_backend.normalization((size, size)))
@@ -109,7 +106,7 @@ def _loss_function(settings: dict, keypoints_model: np.ndarray, object_diameter:
         coordinates = kp.coordinate_loss(normalised(outputs["uv"]), normalised(target_uv))
         nll = gaussian_nll(outputs["uv"], outputs["cholesky"], target_uv)
         loss = (SUPERVISED_WEIGHTS["heatmap"] * heatmap + SUPERVISED_WEIGHTS["coordinates"] * coordinates
-                + SUPERVISED_WEIGHTS["depth"] * depth + float(settings["nll_weight"]) * nll)
+                + SUPERVISED_WEIGHTS["depth"] * depth + settings.nll_weight * nll)
         pixel_error = tf.reduce_mean(tf.norm(outputs["uv"] - target_uv, axis=-1))
         return {"loss": loss, "heatmap": heatmap, "coordinates": coordinates, "depth": depth, "nll": nll,
                 "pixel_error": pixel_error}
@@ -181,7 +178,7 @@ def score_poses(poses, T_gt: np.ndarray, vertices: np.ndarray, object_diameter: 
 
 
 def evaluate_run(model, points_model: np.ndarray, targets: np.ndarray, covariance_scale: float, crops: dict,
-                 settings: dict, vertices: np.ndarray, object_diameter: float, seed: int, margin: float,
+                 settings: ProbabilisticConfig, vertices: np.ndarray, object_diameter: float, seed: int, margin: float,
                  png: Path | None = None, examples: Path | None = None) -> dict:
     """Calibration and plain vs covariance-weighted PnP on test crops, clean and occluded.
 
@@ -232,7 +229,8 @@ def _spearman(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(rank_a, rank_b)[0, 1])
 
 
-def _cached_test_crops(path: Path, job: ProbabilisticTraining, settings: dict, sampling, count: int, seed: int) -> dict:
+def _cached_test_crops(path: Path, job: ProbabilisticTraining, settings: ProbabilisticConfig, sampling, count: int,
+                       seed: int) -> dict:
     """Crops of ``count`` freshly rendered whole images cut as at inference (``images``, ``K``,
     ``T_model2cam``), cached in ``path``."""
     from paz6d.keypointnet.views import render_test_images
@@ -240,7 +238,7 @@ def _cached_test_crops(path: Path, job: ProbabilisticTraining, settings: dict, s
     crops = read_cache(path, ("images", "K", "T_model2cam"))
     if crops is None:
         whole = render_test_images(job.mesh, count, seed, sampling, job.mesh_scale, job.workers, progress=job.progress)
-        images, K, T = inference_crops(whole, sampling.camera.K, sampling.margin, settings["input_size"])
+        images, K, T = inference_crops(whole, sampling.camera.K, sampling.margin, settings.input_size)
         save_npz_atomically(path, images=images, K=K, T_model2cam=T)
         crops = {"images": images, "K": K, "T_model2cam": T}
     return crops
@@ -293,13 +291,13 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
     from paz6d.probabilistic_keypoints import model as pk
     from paz6d.training.trainer import Trainer
 
-    settings = job.settings()
-    precision = resolve_precision(settings["precision"])
+    settings = job.model_config
+    precision = resolve_precision(settings.precision)
     started = time.perf_counter()
     mesh = load_mesh(job.mesh, job.mesh_scale)
     vertices = np.asarray(mesh.vertices)
     object_diameter = diameter(vertices)
-    sampling = ViewSampling(input_size=settings["input_size"])
+    sampling = ViewSampling(input_size=settings.input_size)
     job.out.mkdir(parents=True, exist_ok=True)
     _prepare_run_dir(job, settings, object_diameter, sampling.margin)
     out = job.out
@@ -307,33 +305,32 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
     def render(count, seed):
         return lambda: render_views(job.mesh, count, seed, sampling, job.mesh_scale, job.workers, progress=job.progress)
 
-    train_views = cached_views(run_files.views_path(out, "train"), render(settings["views"], job.seed))
+    train_views = cached_views(run_files.views_path(out, "train"), render(settings.views, job.seed))
     validation_views = cached_views(run_files.views_path(out, "val"),
-                                    render(settings["validation_views"], job.seed + VALIDATION_SEED_OFFSET))
-    test = _cached_test_crops(run_files.views_path(out, "test"), job, settings, sampling, settings["test_images"],
+                                    render(settings.validation_views, job.seed + VALIDATION_SEED_OFFSET))
+    test = _cached_test_crops(run_files.views_path(out, "test"), job, settings, sampling, settings.test_images,
                               job.seed + TEST_SEED_OFFSET)
     render_seconds = time.perf_counter() - started
 
-    keypoints_model = supervised_keypoints(mesh, settings["num_keypoints"], job.seed)
+    keypoints_model = supervised_keypoints(mesh, settings.num_keypoints, job.seed)
     pk.keras.utils.set_random_seed(job.seed)
-    model = pk.build_probabilistic_keypointnet(settings["num_keypoints"], settings["input_size"], settings["filters"],
-                                               settings["downsample"], tuple(settings["dilations"]),
-                                               settings["context_stride"], precision)
-    schedule = pk.keras.optimizers.schedules.CosineDecay(settings["learning_rate"], settings["steps"], alpha=0.05)
+    model = pk.build_probabilistic_keypointnet(settings.num_keypoints, settings.input_size, settings.filters,
+                                               settings.downsample, settings.dilations, settings.context_stride,
+                                               precision)
+    schedule = pk.keras.optimizers.schedules.CosineDecay(settings.learning_rate, settings.steps, alpha=0.05)
     optimizer = pk.keras.optimizers.Adam(schedule, global_clipnorm=5.0)
-    training_occluders = occluder(settings, float(settings["train_occlusion"]), sampling.margin, 2)
+    training_occluders = occluder(settings, settings.train_occlusion, sampling.margin, 2)
 
     def make_batch(step: int):
-        batch = training_batch(train_views, np.random.default_rng([job.seed, 1, step]), settings["pairs"],
-                               settings["downsample"])
+        batch = training_batch(train_views, np.random.default_rng([job.seed, 1, step]), settings.pairs,
+                               settings.downsample)
         batch["images"] = occlude(batch["images"], training_occluders, job.seed, 1_000_000 + step)
         return batch
 
     sample_images = fixed_crops(validation_views, job.seed, 8)[0]
     trainer = Trainer(model, optimizer, _loss_function(settings, keypoints_model, object_diameter), make_batch, out,
-                      settings["steps"],
-                      checkpoint_every=settings["checkpoint_every"], log_every=10,
-                      sample_every=settings["sample_every"],
+                      settings.steps, checkpoint_every=settings.checkpoint_every, log_every=10,
+                      sample_every=settings.sample_every,
                       sample_callback=_sample_drawer(sample_images), progress=job.progress, prefetch=1)
     previous_metrics = run_files.read_metrics(out)
     training = trainer.fit()
@@ -344,15 +341,13 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
     images = occlude(images, training_occluders, job.seed, 3)  # occluded as often as in training
     means, covariances = predict_gaussians(model, images.astype(np.float32))
     scale = fit_covariance_scale(projected_keypoints(keypoints_model, K, T), means, covariances)
-    if settings["lifting"] not in LIFTINGS:
-        raise ValueError(f"lifting: expected one of {LIFTINGS}, got {settings['lifting']!r}")
     points_model = keypoints_model
-    if settings["lifting"] == "triangulate":  # as KeypointNet: absorbs the network's 2D biases into the 3D model
+    if settings.lifting == "triangulate":  # as KeypointNet: absorbs the network's 2D biases into the 3D model
         lift = _cached_test_crops(run_files.views_path(out, "lift"), job, settings, sampling,
-                                  settings["lift_images"], job.seed + LIFT_SEED_OFFSET)
+                                  settings.lift_images, job.seed + LIFT_SEED_OFFSET)
         lift_means, _ = predict_gaussians(model, lift["images"].astype(np.float32))
         points_model, _ = triangulate_keypoints(lift_means, lift["K"], lift["T_model2cam"])
-    run_files.write_keypoints(out, points_model, scale, keypoints_model, settings["lifting"])
+    run_files.write_keypoints(out, points_model, scale, keypoints_model, settings.lifting)
     evaluation = evaluate_run(model, points_model, keypoints_model, scale, test, settings, vertices, object_diameter,
                               job.seed, sampling.margin, run_files.path_of(out, run_files.CALIBRATION_PNG),
                               run_files.path_of(out, run_files.EXAMPLES_PNG))

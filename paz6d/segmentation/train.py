@@ -19,21 +19,17 @@ from paz6d.backend.draw import draw_mask_outline, image_grid
 from paz6d.backend.files import finite_or_none
 from paz6d.backend.image import save_image
 from paz6d.segmentation import run_dir as run_files
-from paz6d.segmentation.config import FIXED_SETTINGS, SegmentationTraining
+from paz6d.segmentation.config import FIXED_SETTINGS, SegmentationConfig, SegmentationTraining
 from paz6d.segmentation.dataset import MaskSet, crop_batch, cut_instance, load_mask_set
-from paz6d.training.presets import check_same_run
+from paz6d.training.settings import check_same_run
 
 
-def _jsonable(settings: dict) -> dict:
-    return {key: list(value) if isinstance(value, tuple) else value for key, value in settings.items()}
-
-
-def _prepare_run_dir(job: SegmentationTraining, settings: dict, class_names: tuple[str, ...]) -> None:
+def _prepare_run_dir(job: SegmentationTraining, settings: SegmentationConfig, class_names: tuple[str, ...]) -> None:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"dataset": str(job.dataset.resolve()), "split": job.split, "config": job.config, "seed": job.seed,
-              "class_names": list(class_names), "settings": _jsonable(settings)}
+              "class_names": list(class_names), "settings": settings.to_dict()}
     check_same_run(job.out / run_files.CONFIG_FILE, run_files.read_config(job.out), config,
-                   ("dataset", "split", "config", "seed", "class_names"), FIXED_SETTINGS)
+                   ("dataset", "split", "config", "seed", "class_names"), settings, FIXED_SETTINGS)
     run_files.write_config(job.out, config)
 
 
@@ -78,30 +74,29 @@ def train_segmentation(job: SegmentationTraining) -> dict:
     from paz6d.segmentation.model import build_segmenter, keras, mask_iou, mask_loss, save_segmenter
     from paz6d.training.trainer import Trainer
 
-    settings = job.settings()
+    settings = job.model_config
     started = time.perf_counter()
     data = load_mask_set(job.dataset, job.split, progress=job.progress)
     job.out.mkdir(parents=True, exist_ok=True)
     _prepare_run_dir(job, settings, data.class_names)
     keras.utils.set_random_seed(job.seed)
-    size, margin = int(settings["input_size"]), float(settings["margin"])
-    model = build_segmenter(len(data.class_names), size, settings["widths"])
+    size, margin = settings.input_size, settings.margin
+    model = build_segmenter(len(data.class_names), size, settings.widths)
     run_files.write_segmenter(job.out, size, margin, data.class_names)
-    schedule = keras.optimizers.schedules.CosineDecay(settings["learning_rate"], int(settings["steps"]), alpha=0.02)
+    schedule = keras.optimizers.schedules.CosineDecay(settings.learning_rate, settings.steps, alpha=0.02)
     optimizer = keras.optimizers.Adam(schedule, global_clipnorm=5.0)
 
     def make_batch(step: int):
-        return crop_batch(data, np.random.default_rng([job.seed, step]), settings["batch_size"], size, margin,
-                          settings["jitter"])
+        return crop_batch(data, np.random.default_rng([job.seed, step]), settings.batch_size, size, margin,
+                          settings.jitter)
 
     def loss_fn(model, batch):
         logits = model(batch["crops"], training=True)
         return {"loss": mask_loss(logits, batch["masks"], batch["class_ids"]),
                 "iou": mask_iou(logits, batch["masks"], batch["class_ids"])}
 
-    trainer = Trainer(model, optimizer, loss_fn, make_batch, job.out, settings["steps"],
-                      checkpoint_every=settings["checkpoint_every"], log_every=10,
-                      sample_every=settings["sample_every"],
+    trainer = Trainer(model, optimizer, loss_fn, make_batch, job.out, settings.steps,
+                      checkpoint_every=settings.checkpoint_every, log_every=10, sample_every=settings.sample_every,
                       sample_callback=_sample_drawer(fixed_crops(data, 16, size, margin)),
                       progress=job.progress, prefetch=2, prefetch_workers=1)
     training = trainer.fit()

@@ -11,7 +11,7 @@ from paz6d.ssd.config import SSDTraining
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Adds the ``paz6d train ssd`` flags (the fields of :class:`SSDTraining`)."""
-    add_config_arguments(parser, SSDTraining, exclude=("overrides",))
+    add_config_arguments(parser, SSDTraining, exclude=("settings",))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,33 +1,23 @@
-"""Settings of ``paz6d train ssd``: the quick and full configs and one run's :class:`SSDTraining`
-(whose fields are the command's flags). Light: no numpy, no TensorFlow."""
+"""Settings of ``paz6d train ssd``: the network, augmentation and schedule (:class:`SSDConfig`, presets
+:data:`QUICK` and :data:`FULL`) and one run's :class:`SSDTraining` (whose fields are the command's flags).
+Light: no numpy, no TensorFlow."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from paz6d.backbones import BACKBONES
 from paz6d.cli_options import option
-from paz6d.training.presets import apply_positive_integers, preset_settings
-
-CONFIGS: dict[str, dict] = {
-    # CPU budget: generation + training within 30 minutes on 2 cores; the input size's trade-off is measured in
-    # docs/experiments/2026-12-02-ssd-input-resolution.md.
-    "quick": {"architecture": "light", "input_size": 448, "width": 1.0, "batch_size": 16, "steps": 1500,
-              "learning_rate": 3e-3, "warmup_steps": 100, "weight_decay": 1e-4, "expand_ratio": 2.0,
-              "expand_probability": 0.3, "iou_threshold": 0.5, "checkpoint_every": 250, "sample_every": 250},
-    # The paper's SSD300 (VGG16, random initialisation) for a GPU.
-    "full": {"architecture": "ssd300", "input_size": 300, "width": 1.0, "batch_size": 32, "steps": 120000,
-             "learning_rate": 1e-3, "warmup_steps": 1000, "weight_decay": 5e-4, "expand_ratio": 4.0,
-             "expand_probability": 0.5, "iou_threshold": 0.5, "checkpoint_every": 5000, "sample_every": 5000},
-}
-
+from paz6d.training.settings import Settings, positive, run_settings, setting, share, with_flags
 
 #: SSD networks: the paper's two VGG16 ones and a light CPU one (:mod:`paz6d.ssd.model`).
 ARCHITECTURES = ("ssd300", "ssd512", "light")
 #: Input sides of the VGG networks (fixed); the light network takes any :func:`check_light_side` up to
-#: :data:`MAX_INPUT_SIZE`, by default :data:`DEFAULT_INPUT_SIZE` (the quick config's).
+#: :data:`MAX_INPUT_SIZE`, by default :data:`DEFAULT_INPUT_SIZE` (the quick config's; its trade-off is measured in
+#: docs/experiments/2026-12-02-ssd-input-resolution.md).
 FIXED_INPUT_SIZES = {"ssd300": 300, "ssd512": 512}
-DEFAULT_INPUT_SIZE: int = CONFIGS["quick"]["input_size"]
+DEFAULT_INPUT_SIZE = 448
 MAX_INPUT_SIZE = 2048
 
 
@@ -42,35 +32,98 @@ def check_light_side(size: int, error: type[ValueError] = ValueError) -> int:
 def check_input_size(architecture: str, size: int | None, error: type[ValueError] = ValueError) -> int:
     """The side in pixels of ``architecture``'s square training input for a requested ``size`` (``None``:
     the default): the VGG networks' fixed side, or for ``light`` a :func:`check_light_side` of at most
-    :data:`MAX_INPUT_SIZE`. The one check of ``input_size`` (settings, :func:`paz6d.ssd.model.paper_priors`).
+    :data:`MAX_INPUT_SIZE`. The one check of ``input_size`` (:class:`SSDConfig`, :func:`paz6d.ssd.model.paper_priors`).
 
     Raises:
         error: an unknown ``architecture`` or a size it cannot take (naming the setting).
     """
     if architecture not in ARCHITECTURES:
         raise error(f"architecture: expected one of {ARCHITECTURES}, got {architecture!r}")
+    if size is not None and (isinstance(size, bool) or not isinstance(size, int)):
+        raise error(f"input_size: expected a whole number of pixels, got {size!r}")
     if architecture in FIXED_INPUT_SIZES:
         fixed = FIXED_INPUT_SIZES[architecture]
-        if size is not None and int(size) != fixed:
+        if size is not None and size != fixed:
             raise error(f"input_size: only the light network takes another input size; {architecture} takes "
                         f"{fixed} x {fixed} images, got {size}")
         return fixed
-    size = check_light_side(DEFAULT_INPUT_SIZE if size is None else int(size), error)
+    size = check_light_side(DEFAULT_INPUT_SIZE if size is None else size, error)
     if size > MAX_INPUT_SIZE:
         raise error(f"input_size: expected at most {MAX_INPUT_SIZE} px (a training input side), got {size}")
     return size
 
 
-#: Pretrained bodies of the light network (``--backbone``; docs/backbones.md); "none": its own, from scratch.
-BACKBONES = ("none", "efficientnet-lite0")
-#: Settings a backbone brings, applied over the config's (and under ``overrides`` and the flags): input 320 px,
-#: batch 8 (their cost: docs/backbones.md), the heads' learning rate and the backbone's factor of it, and the
-#: stages kept fixed (stem and stages up to stride 4).
+#: Settings a backbone brings, applied over the preset's (and under the flags): input 320 px, batch 8 (their
+#: cost: docs/backbones.md), the heads' learning rate and the backbone's factor of it, and the stages kept fixed
+#: (stem and stages up to stride 4).
 BACKBONE_SETTINGS: dict[str, dict] = {
     "efficientnet-lite0": {"backbone": "efficientnet-lite0", "input_size": 320, "batch_size": 8,
                            "learning_rate": 1e-3, "backbone_rate_factor": 0.1, "frozen_stages": 3,
                            "warmup_steps": 100},
 }
+
+
+@dataclass(frozen=True)
+class SSDConfig(Settings):
+    """Network, augmentation and schedule of an SSD run.
+
+    Attributes:
+        architecture: one of :data:`ARCHITECTURES`.
+        input_size: side of the square training input in pixels (:func:`check_input_size`).
+        width: channel multiplier of the light network.
+        top_down: light network only: top-down feature fusion (FPN-style) before the heads.
+        backbone: body of the light network, one of :data:`BACKBONES` (``"none"``: its own, from scratch).
+        backbone_rate_factor: the backbone's learning rate as a factor of the heads'.
+        frozen_stages: backbone stages kept fixed (stem and stages up to stride 4: 3).
+        scale_crops: light network only: train on input-sized windows of images rescaled by a factor in this
+            range and detect on whole images at the factors' geometric mean (``None``: whole images resized).
+        batch_size / steps / learning_rate / warmup_steps / weight_decay: the schedule (linear warm-up, then
+            cosine decay; AdamW).
+        expand_ratio / expand_probability: zoom-out augmentation (canvas up to ``expand_ratio`` × the image).
+        white_balance: strength of the random white-balance shift (0: off).
+        grayscale: probability of a grey image.
+        iou_threshold: prior-to-box overlap that makes a prior positive.
+        checkpoint_every / sample_every: Trainer intervals in steps (sample_every 0: no samples).
+    """
+
+    architecture: str = setting("light", choices=ARCHITECTURES)
+    input_size: int = DEFAULT_INPUT_SIZE
+    width: float = positive(1.0)
+    top_down: bool = False
+    backbone: str = setting("none", choices=BACKBONES)
+    backbone_rate_factor: float = setting(1.0, minimum=0.0)
+    frozen_stages: int = setting(3, minimum=0)
+    scale_crops: tuple[float, float] | None = setting(None, positive=True, ordered=True)
+    batch_size: int = positive(16)
+    steps: int = positive(1500)
+    learning_rate: float = positive(3e-3)
+    warmup_steps: int = setting(100, minimum=0)
+    weight_decay: float = setting(1e-4, minimum=0.0)
+    expand_ratio: float = setting(2.0, minimum=1.0)
+    expand_probability: float = share(0.3)
+    white_balance: float = setting(0.0, minimum=0.0)
+    grayscale: float = share(0.0)
+    iou_threshold: float = share(0.5)
+    checkpoint_every: int = positive(250)
+    sample_every: int = setting(250, minimum=0)
+
+    def check(self):
+        for name, value in (("top_down", self.top_down), ("backbone", self.backbone != "none"),
+                            ("scale_crops", self.scale_crops is not None)):
+            if value and self.architecture != "light":
+                raise ValueError(f"{name}: only the light network takes it (a pretrained body, top-down fusion, "
+                                 f"whole images); {self.architecture} does not")
+        check_input_size(self.architecture, self.input_size)
+
+
+#: CPU budget: generation + training within 30 minutes on 2 cores (the light network at
+#: :data:`DEFAULT_INPUT_SIZE`).
+QUICK = SSDConfig()
+#: The paper's SSD300 (VGG16, random initialisation) for a GPU.
+FULL = SSDConfig(architecture="ssd300", input_size=300, batch_size=32, steps=120000, learning_rate=1e-3,
+                 warmup_steps=1000, weight_decay=5e-4, expand_ratio=4.0, expand_probability=0.5,
+                 checkpoint_every=5000, sample_every=5000)
+CONFIGS = {"quick": QUICK, "full": FULL}
 
 #: Data set formats ``paz6d train ssd --format`` reads (``paz6d.ssd.dataset.FORMATS``, kept here light).
 DATASET_FORMATS = ("auto", "generated", "voc", "coco", "openimages")
@@ -81,7 +134,7 @@ FIXED_SETTINGS = ("architecture", "input_size", "width", "top_down", "scale_crop
 
 @dataclass
 class SSDTraining:
-    """One ``paz6d train ssd`` run (each field but ``overrides`` is a flag, see :mod:`paz6d.cli_options`)."""
+    """One ``paz6d train ssd`` run (each field but ``settings`` is a flag, see :mod:`paz6d.cli_options`)."""
 
     dataset: Path = option(help="data set: a `paz6d generate` output, a VOC devkit year folder (or folder of "
                                 "XML files), a COCO folder (or instances JSON file) or an Open Images folder")
@@ -103,44 +156,23 @@ class SSDTraining:
                                         "unless given) or none (its own, from scratch; default: the config's)",
                                   choices=BACKBONES)
     progress: bool = option(True, "progress bar")
-    overrides: dict = field(default_factory=dict)  # settings replacing the config's (e.g. a tiny network in tests)
+    settings: SSDConfig | None = field(default=None)  # replaces the config's preset (e.g. a tiny network in tests)
 
     def __post_init__(self):
         self.dataset, self.out = Path(self.dataset), Path(self.out)
-        self.settings()
+        self.model_config  # checks the preset and the flags
 
-    def settings(self) -> dict:
-        """The config's settings with the backbone's (:data:`BACKBONE_SETTINGS`), ``overrides``, ``steps``,
-        ``batch_size`` and ``input_size`` applied, in that order.
+    @property
+    def model_config(self) -> SSDConfig:
+        """``settings`` (default: the preset ``config``) with the backbone's (:data:`BACKBONE_SETTINGS`), then
+        ``steps``, ``batch_size``, ``input_size`` and ``scale_crops`` applied.
 
         Raises:
-            ValueError: a non-positive value, an ``input_size`` the network cannot take, or a backbone for
-                another network than the light one.
+            ValueError: a bad flag value, an ``input_size`` the network cannot take, or a backbone, top-down
+                fusion or ``scale_crops`` for another network than the light one.
         """
-        settings = preset_settings(CONFIGS, self.config, {}, check_overrides=False)
-        backbone = self.backbone or self.overrides.get("backbone") or settings.get("backbone") or "none"
-        if backbone not in BACKBONES:
-            raise ValueError(f"backbone: expected one of {BACKBONES}, got {backbone!r}")
-        if backbone != "none":
-            if settings["architecture"] != "light":
-                raise ValueError(f"backbone: only the light network takes a pretrained body; the {self.config!r} "
-                                 f"config's is {settings['architecture']}")
-            settings.update(BACKBONE_SETTINGS[backbone])
-        settings = apply_positive_integers({**settings, **self.overrides},
-                                           {"steps": self.steps, "batch_size": self.batch_size,
-                                            "input_size": self.input_size})
-        if backbone == "none":
-            settings.pop("backbone", None)
-        else:
-            settings["backbone"] = backbone
-        settings["input_size"] = check_input_size(settings["architecture"], settings["input_size"])
-        if self.scale_crops is not None:
-            settings["scale_crops"] = [float(v) for v in self.scale_crops]
-        scale_crops = settings.get("scale_crops")
-        if scale_crops is not None:
-            if settings["architecture"] != "light":
-                raise ValueError(f"scale_crops: only the light network runs on whole images; the {self.config!r} "
-                                 f"config's {settings['architecture']} takes square inputs")
-            if len(scale_crops) != 2 or not 0 < float(scale_crops[0]) <= float(scale_crops[1]):
-                raise ValueError(f"scale_crops: expected a factor range 0 < LOW <= HIGH, got {scale_crops}")
-        return settings
+        settings = run_settings(CONFIGS, self.config, self.settings)
+        if self.backbone is not None:
+            settings = settings.replace(**BACKBONE_SETTINGS.get(self.backbone, {"backbone": self.backbone}))
+        return with_flags(settings, steps=self.steps, batch_size=self.batch_size, input_size=self.input_size,
+                          scale_crops=self.scale_crops)

@@ -35,26 +35,26 @@ from paz6d.backend.files import finite_or_none
 from paz6d.backend.image import load_image, resize, save_image
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.dataset import load_detection_set, training_batch
-from paz6d.ssd.config import FIXED_SETTINGS, SSDTraining
+from paz6d.ssd.config import FIXED_SETTINGS, SSDConfig, SSDTraining
 from paz6d.ssd.pipeline import DetectSingleShot, draw_detections
 from paz6d.synthesis.box_augment import ssd_augmentation
-from paz6d.training.presets import check_same_run
+from paz6d.training.settings import check_same_run
 
-def _prepare_run_dir(job: SSDTraining, settings: dict, class_names: tuple[str, ...]) -> None:
+def _prepare_run_dir(job: SSDTraining, settings: SSDConfig, class_names: tuple[str, ...]) -> None:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"dataset": str(job.dataset.resolve()), "split": job.split, "config": job.config, "seed": job.seed,
-              "class_names": list(class_names), "settings": settings}
-    check_same_run(job.out, run_files.read_config(job.out), config, ("dataset", "config", "seed", "class_names"),
-                   FIXED_SETTINGS)
+              "class_names": list(class_names), "settings": settings.to_dict()}
+    check_same_run(job.out / run_files.CONFIG_FILE, run_files.read_config(job.out), config,
+                   ("dataset", "config", "seed", "class_names"), settings, FIXED_SETTINGS)
     run_files.write_config(job.out, config)
 
 
-def _schedule(keras, settings: dict):
+def _schedule(keras, settings: SSDConfig):
     """Linear warm-up to ``learning_rate`` then cosine decay to 1 % of it."""
-    steps, warmup = int(settings["steps"]), min(int(settings["warmup_steps"]), int(settings["steps"]) - 1)
+    steps, warmup = settings.steps, min(settings.warmup_steps, settings.steps - 1)
     return keras.optimizers.schedules.CosineDecay(
-        0.0 if warmup else settings["learning_rate"], max(steps - warmup, 1), alpha=0.01,
-        warmup_target=settings["learning_rate"] if warmup else None, warmup_steps=warmup)
+        0.0 if warmup else settings.learning_rate, max(steps - warmup, 1), alpha=0.01,
+        warmup_target=settings.learning_rate if warmup else None, warmup_steps=warmup)
 
 
 def _sample_drawer(images: list[np.ndarray], detector: dict):
@@ -75,22 +75,20 @@ def _sample_drawer(images: list[np.ndarray], detector: dict):
     return draw
 
 
-def augmentation_factory(settings: dict):
-    """A factory of :func:`ssd_augmentation` chains (one per batch) with a run's settings: the config's expand
-    ratio and probability, the optional ``white_balance`` strength and ``grayscale`` probability
-    (``SSDTraining.overrides``; 0: off) and ``scale_crops`` (a factor range: input-sized windows of
-    rescaled images instead of whole images)."""
-    scale_crops = settings.get("scale_crops")
-    return partial(ssd_augmentation, settings["expand_ratio"], settings["expand_probability"],
-                   white_balance=settings.get("white_balance", 0.0), grayscale=settings.get("grayscale", 0.0),
-                   scale_crops=None if scale_crops is None else tuple(scale_crops), crop_size=settings["input_size"])
+def augmentation_factory(settings: SSDConfig):
+    """A factory of :func:`ssd_augmentation` chains (one per batch) with a run's settings: the expand ratio and
+    probability, the ``white_balance`` strength and ``grayscale`` probability (0: off) and ``scale_crops`` (a
+    factor range: input-sized windows of rescaled images instead of whole images)."""
+    return partial(ssd_augmentation, settings.expand_ratio, settings.expand_probability,
+                   white_balance=settings.white_balance, grayscale=settings.grayscale,
+                   scale_crops=settings.scale_crops, crop_size=settings.input_size)
 
 
-def image_scale(settings: dict) -> float | None:
+def image_scale(settings: SSDConfig) -> float | None:
     """The factor whole images are scaled by for detection: the geometric mean of ``scale_crops``
     (``None`` without it: images are resized to the square input)."""
-    scale_crops = settings.get("scale_crops")
-    return None if scale_crops is None else float(np.sqrt(float(scale_crops[0]) * float(scale_crops[1])))
+    scale_crops = settings.scale_crops
+    return None if scale_crops is None else float(np.sqrt(scale_crops[0] * scale_crops[1]))
 
 
 def train_ssd(job: SSDTraining) -> dict:
@@ -107,28 +105,28 @@ def train_ssd(job: SSDTraining) -> dict:
     from paz6d.training.scaled_rates import ScaledRateAdamW, keras
     from paz6d.training.trainer import Trainer
 
-    settings = job.settings()
+    settings = job.model_config
     started = time.perf_counter()
     data = load_detection_set(job.dataset, job.split, dataset_format=job.format)
     job.out.mkdir(parents=True, exist_ok=True)
     _prepare_run_dir(job, settings, data.class_names)
     keras.utils.set_random_seed(job.seed)
     scale = image_scale(settings)
-    model, spec = build_ssd(len(data.class_names) + 1, settings["architecture"], settings["input_size"],
-                            settings["width"], settings.get("top_down", False), any_size=scale is not None,
-                            backbone=settings.get("backbone"), frozen_stages=settings.get("frozen_stages", 3))
+    model, spec = build_ssd(len(data.class_names) + 1, settings.architecture, settings.input_size, settings.width,
+                            settings.top_down, any_size=scale is not None, backbone=settings.backbone,
+                            frozen_stages=settings.frozen_stages)
     priors = priors_for(spec)
-    normalization = input_normalization(settings.get("backbone"))
-    run_files.write_detector(job.out, settings["architecture"], data.class_names, spec.to_dict(), SSD_VARIANCES,
+    normalization = input_normalization(settings.backbone)
+    run_files.write_detector(job.out, settings.architecture, data.class_names, spec.to_dict(), SSD_VARIANCES,
                              image_scale=scale, normalization=normalization)
-    optimizer = ScaledRateAdamW(backbone_variables(model), settings.get("backbone_rate_factor", 1.0),
-                                learning_rate=_schedule(keras, settings), weight_decay=settings["weight_decay"],
+    optimizer = ScaledRateAdamW(backbone_variables(model), settings.backbone_rate_factor,
+                                learning_rate=_schedule(keras, settings), weight_decay=settings.weight_decay,
                                 global_clipnorm=10.0)
     augmentation = augmentation_factory(settings)
 
     def make_batch(step: int):
-        images, targets = training_batch(data, augmentation, job.seed, step, settings["batch_size"],
-                                         spec.input_size, priors, settings["iou_threshold"])
+        images, targets = training_batch(data, augmentation, job.seed, step, settings.batch_size,
+                                         spec.input_size, priors, settings.iou_threshold)
         return normalize_images(images, normalization), targets
 
     def loss_fn(model, batch):
@@ -137,15 +135,14 @@ def train_ssd(job: SSDTraining) -> dict:
         return {"loss": terms["classification"] + terms["localization"], **terms}
 
     sample_images = [load_image(sample.path) for sample in data.samples[:4]]
-    trainer = Trainer(model, optimizer, loss_fn, make_batch, job.out, settings["steps"],
-                      checkpoint_every=settings["checkpoint_every"], log_every=10,
-                      sample_every=settings["sample_every"],
+    trainer = Trainer(model, optimizer, loss_fn, make_batch, job.out, settings.steps,
+                      checkpoint_every=settings.checkpoint_every, log_every=10, sample_every=settings.sample_every,
                       sample_callback=_sample_drawer(sample_images, run_files.read_detector(job.out)),
                       progress=job.progress, prefetch=2, prefetch_workers=1)
     training = trainer.fit()
     save_ssd(model, run_files.model_path(job.out))
-    summary = {"config": job.config, "architecture": settings["architecture"],
-               "backbone": settings.get("backbone", "none"), "steps": training.final_step,
+    summary = {"config": job.config, "architecture": settings.architecture,
+               "backbone": settings.backbone, "steps": training.final_step,
                "train_seconds": round(time.perf_counter() - started, 1), "images": len(data),
                "class_names": list(data.class_names), "final_losses": training.metrics,
                "loader_samples_per_second": finite_or_none(training.loader_samples_per_second, 1),

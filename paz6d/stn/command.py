@@ -11,7 +11,7 @@ from paz6d.stn.config import STNTraining
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Adds the ``paz6d train stn`` flags (the fields of :class:`STNTraining`)."""
-    add_config_arguments(parser, STNTraining, exclude=("overrides",))
+    add_config_arguments(parser, STNTraining, exclude=("settings",))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -26,12 +26,12 @@ import numpy as np
 from paz6d.backend.files import save_keras_model_atomically
 from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
                                             output_names)
+from paz6d.stn.config import PADDINGS
 
 tf = import_tensorflow()
 keras = import_keras()
 
 PACKAGE = "paz6d"
-PADDINGS = ("zeros", "border")
 IDENTITY = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], np.float32)
 #: Output names of a classifier with the transformer (without it: only the first two).
 OUTPUT_NAMES = ("logits", "probabilities", "theta", "crop")

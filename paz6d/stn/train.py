@@ -11,7 +11,6 @@ TensorFlow is loaded inside :func:`train_stn`.
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -22,33 +21,27 @@ from paz6d.backend.files import finite_or_none
 from paz6d.backend.image import save_image
 from paz6d.processors.predict import predict_in_batches
 from paz6d.stn import run_dir as run_files
-from paz6d.stn.config import FIXED_SETTINGS, STNTraining
+from paz6d.stn.config import FIXED_SETTINGS, STNConfig, STNTraining
 from paz6d.stn.digits import CLASS_NAMES, TEST, TRAIN, ClutteredDigits, DigitCanvas
-from paz6d.training.presets import check_same_run
+from paz6d.training.settings import check_same_run
 
 #: Canvases and crops drawn in ``crops.png`` and the training samples.
 PREVIEW_COUNT = 16
 PREVIEW_SCALE = 3  # pixels per canvas pixel in the PNGs
 
 
-def _canonical(value):
-    """``value`` as it reads back from JSON (tuples become lists)."""
-    return json.loads(json.dumps(value))
-
-
-def _prepare_run_dir(job: STNTraining, settings: dict) -> None:
+def _prepare_run_dir(job: STNTraining, settings: STNConfig) -> None:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
-    config = _canonical({"method": "stn", "config": job.config, "transformer": job.transformer, "seed": job.seed,
-                         "settings": settings})
-    check_same_run(job.out, run_files.read_config(job.out), config, ("method", "config", "transformer", "seed"),
-                   FIXED_SETTINGS)
+    config = {"method": "stn", "config": job.config, "transformer": job.transformer, "seed": job.seed,
+              "settings": settings.to_dict()}
+    check_same_run(job.out / run_files.CONFIG_FILE, run_files.read_config(job.out), config,
+                   ("method", "config", "transformer", "seed"), settings, FIXED_SETTINGS)
     run_files.write_config(job.out, config)
 
 
-def canvas_settings(settings: dict) -> DigitCanvas:
+def canvas_settings(settings: STNConfig) -> DigitCanvas:
     """The :class:`DigitCanvas` of a run's settings."""
-    return DigitCanvas(int(settings["canvas_size"]), tuple(settings["scale"]), int(settings["clutter"]),
-                       int(settings["fragment_size"]))
+    return DigitCanvas(settings.canvas_size, settings.scale, settings.clutter, settings.fragment_size)
 
 
 def _tile(image: np.ndarray, factor: int) -> np.ndarray:
@@ -110,19 +103,19 @@ def train_stn(job: STNTraining, digits: ClutteredDigits | None = None) -> dict:
     from paz6d.stn.model import build_classifier, keras, save_classifier, tf
     from paz6d.training.trainer import Trainer
 
-    settings = job.settings()
+    settings = job.model_config
     started = time.perf_counter()
     data = digits if digits is not None else ClutteredDigits(canvas_settings(settings))
     job.out.mkdir(parents=True, exist_ok=True)
     _prepare_run_dir(job, settings)
     keras.utils.set_random_seed(job.seed)
-    model = build_classifier(len(CLASS_NAMES), settings["canvas_size"], job.transformer, settings["crop_size"],
-                             settings["filters"], settings["padding"], settings["theta_scale"])
-    run_files.write_classifier(job.out, settings["canvas_size"], settings["crop_size"], job.transformer,
-                               CLASS_NAMES, settings["padding"])
-    schedule = keras.optimizers.schedules.CosineDecay(settings["learning_rate"], settings["steps"], alpha=0.05)
+    model = build_classifier(len(CLASS_NAMES), settings.canvas_size, job.transformer, settings.crop_size,
+                             settings.filters, settings.padding, settings.theta_scale)
+    run_files.write_classifier(job.out, settings.canvas_size, settings.crop_size, job.transformer, CLASS_NAMES,
+                               settings.padding)
+    schedule = keras.optimizers.schedules.CosineDecay(settings.learning_rate, settings.steps, alpha=0.05)
     optimizer = keras.optimizers.Adam(schedule, global_clipnorm=5.0)
-    batch_size = int(settings["batch_size"])
+    batch_size = settings.batch_size
 
     def make_batch(step: int):
         images, labels, _ = data.batch(TRAIN, step * batch_size, batch_size, job.seed)
@@ -140,10 +133,9 @@ def train_stn(job: STNTraining, digits: ClutteredDigits | None = None) -> dict:
     def sample(model, step, path):
         draw_crops(model, preview_images, preview_labels, path)
 
-    trainer = Trainer(model, optimizer, loss_fn, make_batch, job.out, settings["steps"],
-                      checkpoint_every=settings["checkpoint_every"], log_every=10,
-                      sample_every=settings["sample_every"], sample_callback=sample, progress=job.progress,
-                      prefetch=2)
+    trainer = Trainer(model, optimizer, loss_fn, make_batch, job.out, settings.steps,
+                      checkpoint_every=settings.checkpoint_every, log_every=10, sample_every=settings.sample_every,
+                      sample_callback=sample, progress=job.progress, prefetch=2)
     previous = run_files.read_metrics(job.out)
     training = trainer.fit()
     train_seconds = time.perf_counter() - started
@@ -155,6 +147,6 @@ def train_stn(job: STNTraining, digits: ClutteredDigits | None = None) -> dict:
         figures = {key: previous.get(key) for key in figures}
     summary = {"config": job.config, "transformer": job.transformer, "steps": training.final_step,
                "batch_size": batch_size, **figures, "parameters": int(model.count_params()),
-               **test_accuracy(model, data, int(settings["test_samples"]), job.seed)}
+               **test_accuracy(model, data, settings.test_samples, job.seed)}
     run_files.write_metrics(job.out, summary)
     return summary
