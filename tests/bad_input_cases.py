@@ -1321,7 +1321,7 @@ def run_cases() -> list[Case]:
         "--bop-scene-id": [(("2",), "without --run"), (("x",), "")],
     })
     found += _flag_cases("run-detector-", RUN_DETECTOR, {
-        "--detector": [(("{case}/none",), "none"), (("{world}/runs/aae",), "aae run directory, not an SSD")],
+        "--detector": [(("{case}/none",), "none"), (("{world}/runs/aae",), "aae run directory, not a detector")],
         "--run": [(("1={case}/none",), "none"), (("x={world}/runs/aae",), "OBJ_ID=RUN_DIR"),
                   (("0={world}/runs/aae",), "positive BOP object id")],
         "--camera": [((), "--camera: --run needs")],

@@ -32,7 +32,6 @@ from pathlib import Path
 
 from paz6d.backend.files import write_json_atomically
 from paz6d.backend.paths import check_outputs
-from paz6d.ssd import run_dir as ssd_run_dir
 from paz6d.video.bop_results import write_bop_results
 from paz6d.video.records import read_records
 from paz6d.video.smoothing import PoseSmoother
@@ -135,16 +134,17 @@ def check_runs(detector: Path, runs: dict[int, Path]) -> None:
     Raises:
         ValueError: naming the flag and the run directory.
     """
-    from paz6d.run_dirs import method_of
+    from paz6d import methods as registry
 
-    found = method_of(detector)
-    if found != "ssd":
-        raise ValueError(f"--detector: {detector} is a {found} run directory, not an SSD detector (paz6d train ssd)")
-    class_names = ssd_run_dir.read_detector(detector)["class_names"]
+    found = registry.method_of(detector)
+    if found.task != "detection":
+        raise ValueError(f"--detector: {detector} is a {found.name} run directory, not a detector (paz6d train ssd)")
+    class_names = list(found.run_dir.class_names(detector))
     for obj_id, run_dir in runs.items():
-        method = method_of(run_dir)
-        if method not in ("aae", "keypointnet"):
-            raise ValueError(f"--run: {run_dir} is a {method} run directory, not a pose model (aae or keypointnet)")
+        method = registry.method_of(run_dir)
+        if method.task != "pose":
+            pose = ", ".join(known.name for known in registry.methods("pose"))
+            raise ValueError(f"--run: {run_dir} is a {method.name} run directory, not a pose model ({pose})")
         if f"obj_{obj_id:06d}" not in class_names:
             raise ValueError(f"--run {obj_id}={run_dir}: the detector {detector} does not detect obj_{obj_id:06d} "
                              f"(its classes: {class_names})")
