@@ -177,10 +177,10 @@ def test_training_refuses_a_folder_of_a_different_run(trained, generated):
     from paz6d.segmentation.train import train_segmentation
 
     before = (trained / run_files.CONFIG_FILE).read_text()
-    for change, differ in (({"seed": 1}, "seed"), ({"overrides": {**TINY, "input_size": 48}}, "input_size")):
+    for change, differ in (({"seed": 1}, "seed"), ({"settings": TINY.replace(input_size=48)}, "input_size")):
         job = SegmentationTraining(**{"dataset": generated, "out": trained, "steps": 40, "progress": False,
-                                      "overrides": TINY, **change})
-        with pytest.raises(ValueError, match=rf"out: .*config.json holds a different run \({differ} differ\); "
+                                      "settings": TINY, **change})
+        with pytest.raises(ValueError, match=rf"out: .* holds a different run \({differ} differ\); "
                                              r"choose another --out"):
             train_segmentation(job)
     assert (trained / run_files.CONFIG_FILE).read_text() == before
