@@ -11,8 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data_gen.config import GenerationConfig
-from data_gen.generator import generate
 from paz6d.cli import build_parser
 from paz6d.cli_options import config_from_args
 from paz6d.ssd import run_dir as run_files
@@ -26,15 +24,8 @@ TINY_BACKBONE = TINY.replace(backbone=BACKBONE, backbone_rate_factor=0.1, frozen
 
 
 @pytest.fixture(scope="module")
-def generated(tmp_path_factory, shared_data) -> Path:
-    """Six 160x120 images of two LM-O meshes, as `paz6d generate` writes them."""
-    out = tmp_path_factory.mktemp("ssd_backbone_data")
-    models = shared_data / "bop_lmo" / "models"
-    config = GenerationConfig(meshes=(models / "obj_000005.ply", models / "obj_000008.ply"), out=out, num_images=6,
-                              width=160, height=120, mesh_scale=0.001, objects_per_image=(2, 2), distractors=1,
-                              seed=3)
-    generate(config, workers=1, show_progress=False)
-    return out
+def generated(two_object_scenes) -> Path:
+    return two_object_scenes
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data_gen.config import GenerationConfig
-from data_gen.generator import generate
 from paz6d.abstract import Box2D
 from paz6d.cli import build_parser, main
 from paz6d.datasets.bop.coco_ground_truth import bop_split_to_coco, coco_image_id
@@ -27,15 +25,8 @@ TINY = QUICK.replace(input_size=128, width=0.25, learning_rate=5e-3, warmup_step
 
 
 @pytest.fixture(scope="module")
-def generated(tmp_path_factory, shared_data) -> Path:
-    """Six 160x120 images of two LM-O meshes, as `paz6d generate` writes them."""
-    out = tmp_path_factory.mktemp("ssd_data")
-    models = shared_data / "bop_lmo" / "models"
-    config = GenerationConfig(meshes=(models / "obj_000005.ply", models / "obj_000008.ply"), out=out, num_images=6,
-                              width=160, height=120, mesh_scale=0.001, objects_per_image=(2, 2), distractors=1,
-                              seed=3)
-    generate(config, workers=1, show_progress=False)
-    return out
+def generated(two_object_scenes) -> Path:
+    return two_object_scenes
 
 
 @pytest.fixture(scope="module")
