@@ -86,6 +86,8 @@ GOOD = "0a1b2c3d4e5f6071,xclick,/m/01yrx,1,0.25,0.5,0.25,0.5,0,0,0,0,0"
      r"line 3, field YMin: expected a fraction of the image size in \[0, 1\], got '1.25'"),
     (f"{HEADER}\n{GOOD[:-2]}\n", r"line 2: expected 13 fields, got 12"),
     (f"{HEADER}\n{GOOD[:-1]}7\n", r"line 2, field IsInside: expected 0, 1 or -1 \(unknown\), got '7'"),
+    (f"{HEADER}\n{GOOD[:-1]}999999999999\n",  # beyond the flag's integer type (the fuzz run found it)
+     r"line 2, field IsInside: expected 0, 1 or -1 \(unknown\), got '999999999999'"),
     (f"{HEADER.replace('XMin', 'Xmin')}\n{GOOD}\n", r"header lacks \['XMin'\]"),
     (f"{HEADER}\n{GOOD.replace('0.25,0.5,0.25', '0.75,0.5,0.25')}\n", r"line 2, field XMax/YMax: XMax < XMin"),
 ])

@@ -112,14 +112,14 @@ def _checked(path: Path, values: list[str], lines: list[int], name: str, dtype, 
     try:
         array = np.array(values, dtype=dtype)
         bad = ~check(array)
-    except ValueError:
+    except (ValueError, OverflowError):  # text, or a whole number beyond the column's integer type
         array, bad = None, None
     if bad is None or bad.any():
         for line, value in zip(lines, values):
             try:
                 if check(np.array([value], dtype=dtype))[0]:
                     continue
-            except ValueError:
+            except (ValueError, OverflowError):
                 pass
             raise ValueError(f"{path}, line {line}, field {name}: expected {expected}, got {value!r}")
     return array
