@@ -3,6 +3,7 @@ TensorFlow/OpenGL ordering."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -32,16 +33,23 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 
 
 @pytest.fixture(scope="session")
-def two_object_scenes(tmp_path_factory, shared_data) -> Path:
-    """Six 160x120 images of two LM-O meshes (the can and the driller), as `paz6d generate` writes them
-    (read-only: the SSD tests train on them)."""
+def two_object_scenes(tmp_path_factory, shared_data) -> Callable[[int], Path]:
+    """``scenes(seed)``: the folder of six 160x120 images of two LM-O meshes (the can and the driller) with
+    visible masks, as `paz6d generate` writes them with that seed; made once per seed, read-only."""
     from data_gen.config import GenerationConfig
     from data_gen.generator import generate
 
-    out = tmp_path_factory.mktemp("two_object_scenes")
-    models = shared_data / "bop_lmo" / "models"
-    config = GenerationConfig(meshes=(models / "obj_000005.ply", models / "obj_000008.ply"), out=out, num_images=6,
-                              width=160, height=120, mesh_scale=0.001, objects_per_image=(2, 2), distractors=1,
-                              seed=3)
-    generate(config, workers=1, show_progress=False)
-    return out
+    made: dict[int, Path] = {}
+
+    def scenes(seed: int) -> Path:
+        if seed not in made:
+            out = tmp_path_factory.mktemp(f"two_object_scenes_{seed}")
+            models = shared_data / "bop_lmo" / "models"
+            config = GenerationConfig(meshes=(models / "obj_000005.ply", models / "obj_000008.ply"), out=out,
+                                      num_images=6, width=160, height=120, mesh_scale=0.001,
+                                      objects_per_image=(2, 2), distractors=1, seed=seed)
+            generate(config, workers=1, show_progress=False)
+            made[seed] = out
+        return made[seed]
+
+    return scenes

@@ -11,8 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data_gen.config import GenerationConfig
-from data_gen.generator import generate
 from paz6d.abstract import Box2D
 from paz6d.cli import main
 from paz6d.datasets.coco import mask_from_counts
@@ -27,15 +25,8 @@ TINY = QUICK.replace(input_size=32, widths=(8, 16), batch_size=8, learning_rate=
 
 
 @pytest.fixture(scope="module")
-def generated(tmp_path_factory, shared_data) -> Path:
-    """Six 160x120 images of two LM-O meshes with visible masks, as `paz6d generate` writes them."""
-    out = tmp_path_factory.mktemp("segmentation_data")
-    models = shared_data / "bop_lmo" / "models"
-    config = GenerationConfig(meshes=(models / "obj_000005.ply", models / "obj_000008.ply"), out=out, num_images=6,
-                              width=160, height=120, mesh_scale=0.001, objects_per_image=(2, 2), distractors=1,
-                              seed=5)
-    generate(config, workers=1, show_progress=False)
-    return out
+def generated(two_object_scenes) -> Path:
+    return two_object_scenes(5)
 
 
 @pytest.fixture(scope="module")

@@ -25,7 +25,7 @@ TINY_BACKBONE = TINY.replace(backbone=BACKBONE, backbone_rate_factor=0.1, frozen
 
 @pytest.fixture(scope="module")
 def generated(two_object_scenes) -> Path:
-    return two_object_scenes
+    return two_object_scenes(3)
 
 
 @pytest.fixture(scope="module")

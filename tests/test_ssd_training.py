@@ -26,7 +26,7 @@ TINY = QUICK.replace(input_size=128, width=0.25, learning_rate=5e-3, warmup_step
 
 @pytest.fixture(scope="module")
 def generated(two_object_scenes) -> Path:
-    return two_object_scenes
+    return two_object_scenes(3)
 
 
 @pytest.fixture(scope="module")
