@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from paz6d.benchmark.lmo import DEFAULT_LMO, METHODS, Benchmark, run_benchmark
-from paz6d.ssd.config import BACKBONES
+from paz6d.backbones import BACKBONES
 from paz6d.cli_options import add_config_arguments, config_from_args, flags_in_errors, option
 from paz6d.datasets.bop.fields import BOX_FIELDS
 from paz6d.run_dirs import run_output

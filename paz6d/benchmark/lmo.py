@@ -59,7 +59,7 @@ from paz6d.estimate import estimate
 from paz6d.keypointnet.config import CONFIGS as KEYPOINT_CONFIGS, KeypointTraining
 from paz6d.keypointnet.orientation import is_single_half_turn
 from paz6d.keypointnet.train import train_keypointnet
-from paz6d.ssd.config import BACKBONES, SSDTraining
+from paz6d.ssd.config import SSDTraining
 
 #: Scale of the LM-O meshes (millimetres) to the library's metres.
 MESH_SCALE = units_per_mm("m")
@@ -130,11 +130,10 @@ class BenchmarkSettings:
     def __post_init__(self):
         check_crop_box(self.aae_crop_box)
         check_backbone(self.aae_encoder_backbone, "aae_encoder_backbone")
+        check_backbone(self.detector_backbone, "detector_backbone")
         share = self.neutral_distractors
         if isinstance(share, bool) or not isinstance(share, (int, float)) or not 0 <= share <= 1:
             raise ValueError(f"neutral_distractors: expected a share in [0, 1], got {share!r:.40}")
-        if self.detector_backbone not in BACKBONES:
-            raise ValueError(f"detector_backbone: expected one of {BACKBONES}, got {self.detector_backbone!r}")
 
 
 #: Most AAE training steps a benchmark accepts (the full sizes train 5,000).
@@ -154,6 +153,10 @@ QUICK = BenchmarkSettings(images=1500, backgrounds=200, detector_steps=1500, aae
 FULL = BenchmarkSettings(images=2500, backgrounds=300, detector_steps=1500, aae_steps=5000, aae_in_plane=72,
                          keypointnet_steps=5000, keypointnet_views=4000, detector_input_size=640,
                          aae_lr_drop_steps=500)
+
+
+#: Fields of :class:`Benchmark` that replace the sizes' setting of the same name unless ``None``.
+SETTINGS_OF_FLAGS = ("aae_crop_box", "detector_backbone", "neutral_distractors", "aae_encoder_backbone")
 
 
 @dataclass
@@ -203,14 +206,8 @@ class Benchmark:
             if not is_whole_number(self.aae_lr_drop_steps) or self.aae_lr_drop_steps < 0:
                 raise ValueError(f"aae_lr_drop_steps: expected 0 or a number of steps, got {self.aae_lr_drop_steps!r}")
             self.settings = replace(self.settings, aae_lr_drop_steps=int(self.aae_lr_drop_steps))
-        if self.aae_crop_box is not None:
-            self.settings = replace(self.settings, aae_crop_box=self.aae_crop_box)
-        if self.detector_backbone is not None:
-            self.settings = replace(self.settings, detector_backbone=self.detector_backbone)
-        if self.neutral_distractors is not None:
-            self.settings = replace(self.settings, neutral_distractors=self.neutral_distractors)
-        if self.aae_encoder_backbone is not None:
-            self.settings = replace(self.settings, aae_encoder_backbone=self.aae_encoder_backbone)
+        chosen = {name: getattr(self, name) for name in SETTINGS_OF_FLAGS if getattr(self, name) is not None}
+        self.settings = replace(self.settings, **chosen)  # checked by BenchmarkSettings
         if self.settings.aae_lr_drop_steps > self.settings.aae_steps:
             raise ValueError(f"aae_lr_drop_steps: expected at most aae_steps ({self.settings.aae_steps}), got "
                              f"{self.settings.aae_lr_drop_steps}")
