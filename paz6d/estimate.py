@@ -74,7 +74,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="with --images: the camera JSON file of the images (BOP camera.json fields, optional "
                              "distortion 'dist', as `paz6d calibrate` writes; with 'dist' the images are undistorted "
                              "first)")
-    parser.add_argument("--split", default="test", help="split folder of --dataset")
+    parser.add_argument("--split", default=None, help="split folder of --dataset (default: test)")
     parser.add_argument("--object-id", type=int, default=None, help="object of a bare --run RUN_DIR")
     parser.add_argument("--out", type=Path, required=True, help="results CSV to write (all objects)")
     parser.add_argument("--detector", type=Path, default=None,
@@ -109,14 +109,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="AAE runs: answer only with views whose in-plane angle (the model's z axis in the "
                              "image against image-up) lies within ±D degrees, as `paz6d generate` draws it "
                              "(default: 180, every view)")
-    parser.add_argument("--box", choices=sorted(BOX_FIELDS), default="obj",
+    parser.add_argument("--box", choices=sorted(BOX_FIELDS), default=None,
                         help="without --detector, the ground-truth box given to the model: of the whole projected "
-                             "object (obj) or of its visible part (visib, what a detector would see)")
+                             "object (obj, the default) or of its visible part (visib, what a detector would see)")
     parser.add_argument("--targets-out", type=Path, default=None,
                         help="also write the BOP'19 targets of the images estimated (for `evaluate bop --targets` "
                              "when only some images of the split have RGB files); with --detector, the data "
                              "set's test_targets_bop19.json entries of those images")
-    parser.add_argument("--min-visible", type=float, default=TARGET_MIN_VISIBLE_FRACTION,
+    parser.add_argument("--min-visible", type=float, default=None,
                         help=f"without --detector, skip instances whose visible fraction is below this (default "
                              f"{TARGET_MIN_VISIBLE_FRACTION}, as BOP'19 targets)")
     parser.add_argument("--depth", action="store_true",
@@ -263,9 +263,23 @@ def check_source(args: argparse.Namespace) -> None:
         raise ValueError("--camera: --images needs the camera's intrinsics (a camera JSON file, as `paz6d calibrate` "
                          "writes; a BOP camera.json is one)")
     for flag, given, reason in (("--targets-out", args.targets_out is not None, "no ground truth to score against"),
-                                ("--depth", args.depth, "no depth images")):
+                                ("--depth", args.depth, "no depth images"),
+                                ("--split", args.split is not None, "no splits")):
         if given:
             raise ValueError(f"{flag}: not with --images (a folder of images has {reason})")
+
+
+def check_ground_truth_flags(args: argparse.Namespace) -> None:
+    """Refuses the flags that choose ground-truth boxes (``--box``, ``--min-visible``) where boxes come from
+    ``--detector``, then gives the unset ones their defaults (``--split`` test, ``--box`` obj, ``--min-visible``
+    the BOP'19 targets' fraction)."""
+    for flag, value in (("--box", args.box), ("--min-visible", args.min_visible)):
+        if value is not None and args.detector is not None:
+            raise ValueError(f"{flag}: only without --detector (it chooses the ground-truth boxes; with --detector "
+                             f"the boxes are its detections)")
+    args.split = "test" if args.split is None else args.split
+    args.box = "obj" if args.box is None else args.box
+    args.min_visible = TARGET_MIN_VISIBLE_FRACTION if args.min_visible is None else args.min_visible
 
 
 # ------------------------------------------------------------------------------------------ command
@@ -287,6 +301,7 @@ def check_arguments(args: argparse.Namespace) -> tuple[dict[int, tuple[Path, str
     before any image is read; returns ``({obj_id: (run_dir, method)}, viewpoint_range(args))``. Bad input
     raises ``ValueError`` naming the flag or file."""
     check_source(args)
+    check_ground_truth_flags(args)
     check_plain_name(args.split, "--split")
     if not 0.0 <= args.min_visible <= 1.0:
         raise ValueError(f"--min-visible: expected a visible fraction in [0, 1], got {args.min_visible}")

@@ -37,6 +37,7 @@ import numpy as np
 
 from paz6d.backend.checks import integer_field, number_field
 from paz6d.backend.files import check_run_files, load_json_object, load_run_json, write_json_atomically
+from paz6d.training.settings import Settings, recorded_settings
 
 
 class RunDir:
@@ -58,6 +59,8 @@ class RunDir:
     MODEL_FILE: ClassVar[str] = "model.keras"
     #: The ``config.json`` fields recording the training mesh and its scale to metres (``None``: no mesh).
     MESH_FIELDS: ClassVar[tuple[str, str] | None] = ("mesh_path", "mesh_scale")
+    #: The method's typed settings, recorded as the ``"settings"`` object of ``config.json`` (``None``: none).
+    SETTINGS: ClassVar[type[Settings] | None] = None
 
     # -- paths ----------------------------------------------------------------------------------
     @classmethod
@@ -119,11 +122,14 @@ class RunDir:
     @classmethod
     def check_config(cls, config: dict[str, Any], path: Path) -> dict[str, Any]:
         """The validator of ``config.json``: ``config`` (the file's JSON object) checked field by field;
-        returns it. A method implements it with its settings' own check; the base accepts any object.
+        returns it. The base checks the recorded ``"settings"`` object, when the run has one, with
+        :attr:`SETTINGS`' own checks; a method extends it for its other fields.
 
         Raises:
             ValueError: naming ``path``, the field and what was expected.
         """
+        if cls.SETTINGS is not None and "settings" in config:
+            recorded_settings(cls.SETTINGS, path, config)
         return config
 
     @classmethod
@@ -203,7 +209,9 @@ class CropRunDir(RunDir):
 
     @classmethod
     def check_config(cls, config: dict[str, Any], path: Path) -> dict[str, Any]:
-        """``config`` checked for ``input_size``, ``margin`` and ``downsample``."""
+        """``config`` checked for its settings (:meth:`RunDir.check_config`), ``input_size``, ``margin`` and
+        ``downsample``."""
+        super().check_config(config, path)
         for name in ("input_size", "downsample"):
             integer_field(config, name, str(path), minimum=1)
         number_field(config, "margin", str(path), positive=True)

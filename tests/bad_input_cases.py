@@ -954,6 +954,9 @@ def estimate_images_cases() -> list[Case]:
         "--images": [(("{case}/none",), "none"), (("{world}/results.csv",), "not a folder")],
         "--dataset": [(("{world}/bop",), "--images: not with --dataset")],
         "--targets-out": [(("{out}/targets.json",), "--targets-out: not with --images")],
+        "--split": [(("test",), "--split: not with --images")],
+        "--box": [(("visib",), "--box: only without --detector")],
+        "--min-visible": [(("0.5",), "--min-visible: only without --detector")],
     }, detector_stand_in())
     found += [
         Case("estimate-images-depth", ESTIMATE_IMAGES + ("--depth",), detector_stand_in(),

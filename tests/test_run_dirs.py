@@ -205,6 +205,30 @@ def test_opening_a_run_directory_checks_its_config_through_the_methods_hook(tmp_
         Checked.read_config(tmp_path)  # what a resumed training reads
 
 
+SETTINGS_METHODS = ("hrnet", "keypointnet", "probabilistic-keypoints", "segmentation", "ssd", "stn")
+
+
+def test_the_methods_with_typed_settings_name_them_on_their_run_directory():
+    assert sorted(method.name for method in methods() if method.run_dir.SETTINGS is not None) == list(SETTINGS_METHODS)
+
+
+@pytest.mark.parametrize("method", SETTINGS_METHODS)
+def test_opening_a_run_directory_checks_its_recorded_settings(tmp_path, method):
+    run_dir = get(method).run_dir
+    for name in run_dir.REQUIRED_FILES:
+        (tmp_path / name).write_bytes(b"not read before config.json")
+    base = {"input_size": 32, "margin": 1.25, "downsample": 2, "mesh_path": "m.ply", "seed": 0, "config": "quick"}
+    good = run_dir.SETTINGS().to_dict()
+    (tmp_path / "config.json").write_text(json.dumps({**base, "settings": good}))
+    assert run_dir.read_config(tmp_path)["settings"] == good
+    numeric = next(name for name, value in good.items() if type(value) in (int, float))
+    for bad, expected in (({**good, numeric: -1e300}, numeric), ({**good, "unknown_field": 1}, "unknown_field"),
+                          ([1, 2], "settings")):
+        (tmp_path / "config.json").write_text(json.dumps({**base, "settings": bad}))
+        with pytest.raises(ValueError, match=rf"config.json: settings: .*{expected}"):
+            run_dir.validate(tmp_path)  # opening the run for inference, before its model is read
+
+
 def test_a_resumed_run_is_opened_with_its_config_and_trainer_files_checked(tmp_path):
     from paz6d.run_dirs import OWNER_FILE, run_output
 

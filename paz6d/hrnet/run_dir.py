@@ -29,6 +29,7 @@ import numpy as np
 
 from paz6d.backend.checks import as_array
 from paz6d.backend.files import load_run_json, write_json_atomically
+from paz6d.hrnet.config import HRNetConfig
 from paz6d.run_dir import RunDir
 
 DESCRIPTION_FILE = "hrnet.json"
@@ -47,16 +48,17 @@ class HRNetRunDir(RunDir):
     """A ``paz6d train hrnet`` run directory (files in the module docstring)."""
 
     KIND = "an HRNet"
+    SETTINGS = HRNetConfig
     MARKER_FILES = (DESCRIPTION_FILE,)
     REQUIRED_FILES = (DESCRIPTION_FILE, RunDir.MODEL_FILE)
 
     @classmethod
     def check_config(cls, config: dict[str, Any], path: Path) -> dict[str, Any]:
-        """``config.json`` checked for the fields a resumed run compares."""
+        """``config.json`` checked for the fields a resumed run compares and its settings."""
         for key in CONFIG_KEYS:
             if key not in config:
                 raise ValueError(f"{path}: missing field {key!r} (not an HRNet run configuration)")
-        return config
+        return super().check_config(config, path)
 
     @classmethod
     def validate(cls, run_dir: str | Path) -> dict[str, Any]:

@@ -23,6 +23,7 @@ import numpy as np
 
 from paz6d.backend.checks import as_array, number_field
 from paz6d.backend.files import load_run_json, null_non_finite, write_json_atomically
+from paz6d.keypointnet.config import KeypointConfig
 from paz6d.run_dir import CropRunDir, RunDir
 
 KEYPOINTS_FILE = "keypoints.json"
@@ -34,6 +35,7 @@ class KeypointNetRunDir(CropRunDir):
     """A ``paz6d train keypointnet`` run directory (files in the module docstring)."""
 
     KIND = "a KeypointNet"
+    SETTINGS = KeypointConfig
     MARKER_FILES = (RunDir.CONFIG_FILE, KEYPOINTS_FILE)
     REQUIRED_FILES = (RunDir.CONFIG_FILE, RunDir.MODEL_FILE, KEYPOINTS_FILE)
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from paz6d.backend.checks import as_array, number_field
 from paz6d.backend.files import load_run_json, write_json_atomically
+from paz6d.probabilistic_keypoints.config import ProbabilisticConfig
 from paz6d.run_dir import CropRunDir, RunDir
 
 KEYPOINTS_FILE = "gaussian_keypoints.json"
@@ -39,6 +40,7 @@ class ProbabilisticKeypointsRunDir(CropRunDir):
     """A ``paz6d train probabilistic-keypoints`` run directory (files in the module docstring)."""
 
     KIND = "a probabilistic-keypoints"
+    SETTINGS = ProbabilisticConfig
     MARKER_FILES = (RunDir.CONFIG_FILE, KEYPOINTS_FILE)
     REQUIRED_FILES = (RunDir.CONFIG_FILE, RunDir.MODEL_FILE, KEYPOINTS_FILE)
 

@@ -19,6 +19,7 @@ from typing import Any
 
 from paz6d.backend.files import load_run_json, write_json_atomically
 from paz6d.run_dir import RunDir
+from paz6d.segmentation.config import SegmentationConfig
 
 SEGMENTER_FILE = "segmenter.json"
 #: Fields of ``segmenter.json``.
@@ -29,6 +30,7 @@ class SegmentationRunDir(RunDir):
     """A ``paz6d train segmentation`` run directory (files in the module docstring)."""
 
     KIND = "a segmentation"
+    SETTINGS = SegmentationConfig
     MARKER_FILES = (SEGMENTER_FILE,)
     REQUIRED_FILES = (SEGMENTER_FILE, RunDir.MODEL_FILE)
     MESH_FIELDS = None

@@ -25,7 +25,7 @@ from paz6d.backend.boxes import SSD_VARIANCES
 from paz6d.backend.checks import short_repr
 from paz6d.backend.files import load_run_json, write_json_atomically
 from paz6d.run_dir import RunDir
-from paz6d.ssd.config import ARCHITECTURES, check_input_size
+from paz6d.ssd.config import ARCHITECTURES, SSDConfig, check_input_size
 
 DETECTOR_FILE = "detector.json"
 #: Fields of ``detector.json``.
@@ -36,6 +36,7 @@ class SSDRunDir(RunDir):
     """A ``paz6d train ssd`` run directory (files in the module docstring)."""
 
     KIND = "an SSD"
+    SETTINGS = SSDConfig
     MARKER_FILES = (DETECTOR_FILE,)
     REQUIRED_FILES = (DETECTOR_FILE, RunDir.MODEL_FILE)
     MESH_FIELDS = None

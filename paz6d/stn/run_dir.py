@@ -20,6 +20,7 @@ from typing import Any
 from paz6d.backend.checks import integer_field
 from paz6d.backend.files import load_run_json, write_json_atomically
 from paz6d.run_dir import RunDir
+from paz6d.stn.config import STNConfig
 
 CLASSIFIER_FILE = "classifier.json"
 CROPS_FILE = "crops.png"
@@ -31,6 +32,7 @@ class STNRunDir(RunDir):
     """A ``paz6d train stn`` run directory (files in the module docstring)."""
 
     KIND = "a spatial-transformer"
+    SETTINGS = STNConfig
     MARKER_FILES = (CLASSIFIER_FILE,)
     REQUIRED_FILES = (CLASSIFIER_FILE, RunDir.MODEL_FILE)
     MESH_FIELDS = None
