@@ -21,6 +21,11 @@ two-image BOP data set, a results CSV, COCO and VOC files, run directories) and 
   the command's inputs, or an output folder holding a symbolic link;
 * ``run``: an AAE or KeypointNet run directory with one file's JSON values or bytes mutated, given to
   ``paz6d estimate``;
+* ``detector``: an SSD run directory whose ``detector.json`` has one value mutated (priors, class names,
+  variances, image scale, architecture), given to ``paz6d detect``;
+* ``trainer``: an AAE run as a killed training leaves it with one of the files a resume reads
+  (``checkpoint.json``, ``log.csv``, the checkpoint's ``optimizer.npz``) mutated in its JSON values or
+  bytes, resumed with ``paz6d train aae``;
 * ``output``: an output of ``detect``, ``estimate``, any ``train <method>`` or ``benchmark lmo`` aimed at
   one of the call's inputs (a data set's file or folder, an image, a run directory's file, another
   method's run, a symbolic link): refused before anything is written;
@@ -294,6 +299,42 @@ def run_case(world: cases.World, rng: random.Random, number: int):
     return cases.Case(f"fuzz-{number}-run-{method}-{name}-{what}", argv, setup)
 
 
+def detector_case(world: cases.World, rng: random.Random, number: int):
+    """An SSD run directory whose ``detector.json`` has one value mutated, given to ``paz6d detect``."""
+    detector, what = mutate_json(cases.SSD_DETECTOR, rng)
+    valid = cases._ssd_run(lambda data: None)
+
+    def setup(w, folder):
+        valid(w, folder)
+        (folder / "ssd" / "detector.json").write_text(_dumps(detector))
+
+    return cases.Case(f"fuzz-{number}-detector-{what}", cases.DETECT, setup)
+
+
+TRAINER_FILES = ("checkpoint.json", "log.csv", f"{cases.CHECKPOINT}/optimizer.npz")  # what a resume reads
+
+
+def trainer_case(world: cases.World, rng: random.Random, number: int):
+    """A killed AAE training's checkpoint pointer, log or optimizer file with its JSON values or its
+    bytes mutated (by a generator seeded now, so the case is the same each run), then resumed."""
+    relative = rng.choice(TRAINER_FILES)
+    as_json = relative.endswith(".json") and rng.random() < 0.7
+    state = random.Random(rng.getrandbits(32))
+    killed = cases._resumed_aae_run("checkpoint.json", lambda pointer: pointer)  # as the killed run left it
+
+    def setup(w, folder):
+        killed(w, folder)
+        path = folder / "run" / relative
+        if as_json:
+            path.write_text(_dumps(mutate_json(json.loads(path.read_text()), state)[0]))
+        else:
+            path.write_bytes(mutate_bytes(path.read_bytes(), state)[0])
+
+    argv = cases.replace_flag(cases.TRAIN_AAE, "--out", "{case}/run")
+    what = "json" if as_json else "bytes"
+    return cases.Case(f"fuzz-{number}-trainer-{relative.rsplit('/', 1)[-1]}-{what}", argv, setup)
+
+
 def output_case(world: cases.World, rng: random.Random, number: int):
     """An output flag aimed at one of the call's own inputs, or an output folder of another kind."""
     ssd_run = {f"ssd/{name}": content for name, content in cases.FOREIGN_RUNS["ssd"].items()}
@@ -431,9 +472,10 @@ class ApiCase:
 
 
 KINDS = {"json": json_case, "bytes": bytes_case, "csv": csv_case, "flag": flag_case, "path": path_case,
-         "run": run_case, "output": output_case, "sample": sample_case}
-WEIGHTS = {"json": 0.22, "bytes": 0.06, "csv": 0.16, "flag": 0.14, "path": 0.06, "run": 0.08, "output": 0.12,
-           "sample": 0.16}
+         "run": run_case, "detector": detector_case, "trainer": trainer_case, "output": output_case,
+         "sample": sample_case}
+WEIGHTS = {"json": 0.2, "bytes": 0.05, "csv": 0.14, "flag": 0.12, "path": 0.05, "run": 0.07, "detector": 0.07,
+           "trainer": 0.07, "output": 0.1, "sample": 0.13}
 
 
 # ------------------------------------------------------------------------------------------------ judging
@@ -510,6 +552,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=30.0, help="seconds a case may take (a hang beyond)")
     parser.add_argument("--world", type=Path, help="folder for the world and the cases (default: a temporary one)")
     parser.add_argument("--report", type=Path, help="write every case's verdict to this JSON file")
+    parser.add_argument("--kinds", nargs="+", choices=sorted(KINDS), default=None,
+                        help="draw only these kinds of case (default: all, weighted)")
     args = parser.parse_args(argv)
 
     from paz6d.backend.tensorflow_guard import import_tensorflow
@@ -519,7 +563,8 @@ def main(argv: list[str] | None = None) -> int:
         root = args.world or Path(temporary)
         world = cases.build_world(root / "world")
         rng = random.Random(args.seed)
-        kinds = rng.choices(list(WEIGHTS), weights=list(WEIGHTS.values()), k=args.cases)
+        drawn = {kind: weight for kind, weight in WEIGHTS.items() if args.kinds is None or kind in args.kinds}
+        kinds = rng.choices(list(drawn), weights=list(drawn.values()), k=args.cases)
         counts, by_kind, failures, report = collections.Counter(), collections.Counter(), [], []
         started = time.perf_counter()
         for number, kind in enumerate(kinds):

@@ -201,7 +201,8 @@ def _losses(run_dir) -> list[float]:
         return [float(row["loss"]) for row in csv.DictReader(handle)]
 
 
-@pytest.mark.parametrize("mode", ["supervised", "discovery"])
+# discovery mode also trains in tests/test_keypointnet_discovery.py (tiny run from anchors)
+@pytest.mark.parametrize("mode", ["supervised", pytest.param("discovery", marks=pytest.mark.slow)])
 def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path, tmp_path):
     from paz6d.keypointnet.pipeline import KeypointPose6D
     from paz6d.keypointnet.config import KeypointTraining
@@ -234,6 +235,7 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
         assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
 
 
+@pytest.mark.slow  # the preset's photos and lights; the training loop itself runs in the tiny training tests
 def test_the_robust_preset_trains_on_photos_and_mixed_lights(mesh_path, tmp_path, monkeypatch):
     from paz6d.keypointnet.config import ROBUST, KeypointTraining
     from paz6d.keypointnet.train import train_keypointnet
@@ -398,6 +400,7 @@ def test_bop_object_views_crop_around_visible_instances(mesh_path, tmp_path):
         bop_object_views(tmp_path, input_size=32, max_views=1)
 
 
+@pytest.mark.slow  # the demo's keypoint path end to end; tests/test_demo.py runs the demo's default path
 def test_keypoint_demo_trains_evaluates_and_reports(mesh_path, tmp_path, capsys):
     from paz6d.demo.keypoint_demo import run_keypoint_demo
 

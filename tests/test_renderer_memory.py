@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 
 from paz6d.backend import quaternion
@@ -18,6 +19,7 @@ def resident_megabytes() -> float:
     raise RuntimeError("VmRSS not in /proc/self/status")
 
 
+@pytest.mark.slow  # 2,000 renders
 def test_two_thousand_frames_do_not_grow_memory():
     meshes = [trimesh.creation.icosphere(subdivisions=2, radius=0.03), trimesh.creation.box((0.04, 0.05, 0.03))]
     K = np.array([[80.0, 0, 31.5], [0, 80.0, 31.5], [0, 0, 1]])

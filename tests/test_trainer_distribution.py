@@ -63,6 +63,7 @@ SCRIPT = textwrap.dedent('''
 ''')
 
 
+@pytest.mark.slow  # two logical devices in a subprocess; one-device training runs in every trainer's tests
 @pytest.mark.timeout(300)
 def test_two_logical_devices_give_the_loss_curve_of_one_device(tmp_path):
     result = subprocess.run([sys.executable, "-c", SCRIPT, str(tmp_path)], capture_output=True, text=True,
