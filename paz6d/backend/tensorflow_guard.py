@@ -58,12 +58,17 @@ def import_keras() -> ModuleType:
     return keras
 
 
-def load_keras_model(path: str | Path, error: type[ValueError] = ValueError):
+def load_keras_model(path: str | Path, error: type[ValueError] = ValueError, *,
+                     outputs: tuple[tuple[str, ...], ...] | None = None, kind: str = "a model"):
     """Loads a native ``.keras`` model in safe mode (no Lambda layers, no pickled code), uncompiled.
 
+    Args:
+        outputs: the accepted sets of output names (a model with dict outputs); ``None``: any outputs.
+        kind: how the error names the expected model (``"a KeypointNet"``).
+
     Raises:
-        error: (a ``ValueError`` subclass) the file is missing, not a ``.keras`` archive, or not a model
-            Keras can rebuild; the message names the file.
+        error: (a ``ValueError`` subclass) the file is missing, not a ``.keras`` archive, not a model
+            Keras can rebuild, or a model with other outputs than ``outputs``; the message names the file.
     """
     path = Path(path)
     if not path.is_file():
@@ -72,9 +77,13 @@ def load_keras_model(path: str | Path, error: type[ValueError] = ValueError):
         raise error(f"{path}: not a readable .keras model archive (corrupt or wrong file)")
     keras = import_keras()
     try:
-        return keras.saving.load_model(path, safe_mode=True, compile=False)
+        model = keras.saving.load_model(path, safe_mode=True, compile=False)
     except Exception as cause:  # Keras raises many types for damaged archives
         raise error(f"{path}: not a readable .keras model ({type(cause).__name__}: {cause})") from cause
+    if outputs is not None and output_names(model) not in [set(names) for names in outputs]:
+        expected = " or ".join(str(sorted(names)) for names in outputs)
+        raise error(f"{path}: expected {kind} with outputs {expected}, got {sorted(output_names(model))}")
+    return model
 
 
 def output_names(model) -> set[str]:

@@ -25,8 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
-                                            output_names)
+from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model)
 from paz6d.hrnet.config import STRIDE
 from paz6d.training.precision import body_policy
 
@@ -154,12 +153,7 @@ def load_hrnet(path: str | Path):
     Raises:
         HRNetError: missing, corrupt or non-HRNet file (the message names the file).
     """
-    path = Path(path)
-    model = load_keras_model(path, HRNetError)
-    names = output_names(model)
-    if names != {OUTPUT_NAME}:
-        raise HRNetError(f"{path}: expected an HRNet with the output {OUTPUT_NAME!r}, got {sorted(names)}")
-    return model
+    return load_keras_model(path, HRNetError, outputs=((OUTPUT_NAME,),), kind="an HRNet")
 
 
 def inference_function(model):

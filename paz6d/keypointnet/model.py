@@ -253,13 +253,8 @@ def load_keypointnet(path: str | Path):
     Raises:
         KeypointNetError: missing, corrupt or non-KeypointNet file (message names the file).
     """
-    path = Path(path)
-    model = load_keras_model(path, KeypointNetError)
-    names = output_names(model)
-    if names not in (set(OUTPUT_NAMES), set(OUTPUT_NAMES) | set(ORIENTATION_OUTPUTS)):
-        raise KeypointNetError(f"{path}: expected a KeypointNet with outputs {OUTPUT_NAMES} (and optionally "
-                               f"{ORIENTATION_OUTPUTS}), got {sorted(names)}")
-    return model
+    return load_keras_model(path, KeypointNetError, outputs=(OUTPUT_NAMES, OUTPUT_NAMES + ORIENTATION_OUTPUTS),
+                            kind="a KeypointNet")
 
 
 def inference_function(model):

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.backend.tensorflow_guard import compiled_inference, load_keras_model, output_names
+from paz6d.backend.tensorflow_guard import compiled_inference, load_keras_model
 from paz6d.keypointnet.model import build_keypointnet, keras, tf
 
 PACKAGE = "paz6d"
@@ -141,13 +141,8 @@ def load_model(path: str | Path):
     Raises:
         ProbabilisticKeypointsError: missing, corrupt or foreign file (the message names the file).
     """
-    path = Path(path)
-    model = load_keras_model(path, ProbabilisticKeypointsError)
-    names = output_names(model)
-    if names != set(OUTPUT_NAMES):
-        raise ProbabilisticKeypointsError(f"{path}: expected a probabilistic KeypointNet with outputs {OUTPUT_NAMES}, "
-                                          f"got {sorted(names)}")
-    return model
+    return load_keras_model(path, ProbabilisticKeypointsError, outputs=(OUTPUT_NAMES,),
+                            kind="a probabilistic KeypointNet")
 
 
 def inference_function(model):

@@ -24,8 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
-                                            output_names)
+from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model)
 from paz6d.stn.config import PADDINGS
 
 tf = import_tensorflow()
@@ -255,13 +254,7 @@ def load_classifier(path: str | Path):
     Raises:
         STNModelError: missing, corrupt or foreign file (the message names the file).
     """
-    path = Path(path)
-    model = load_keras_model(path, STNModelError)
-    names = output_names(model)
-    if names not in (set(OUTPUT_NAMES), set(OUTPUT_NAMES[:2])):
-        raise STNModelError(f"{path}: expected a classifier with outputs {OUTPUT_NAMES} (or the first two), "
-                            f"got {sorted(names)}")
-    return model
+    return load_keras_model(path, STNModelError, outputs=(OUTPUT_NAMES, OUTPUT_NAMES[:2]), kind="a classifier")
 
 
 def inference_function(model):
