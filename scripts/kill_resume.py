@@ -27,6 +27,7 @@ import argparse
 import csv
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -75,7 +76,8 @@ from paz6d.segmentation.config import QUICK, SegmentationTraining
 from paz6d.segmentation.train import train_segmentation
 settings = QUICK.replace(input_size=32, widths=(8, 16), batch_size=4, learning_rate=1e-2, checkpoint_every=every,
                          sample_every=0, steps=steps)
-train_segmentation(SegmentationTraining(dataset=world / "bop", out=out, progress=False, settings=settings))
+train_segmentation(SegmentationTraining(dataset=world / "bop", out=out, split="test", progress=False,
+                                        settings=settings))
 """,
     "stn": """
 from paz6d.stn.config import QUICK, STNTraining
@@ -122,7 +124,10 @@ train_aae(world / "obj_000001.ply", out, config, workers=0, progress=False)
     "emotion": """
 from paz6d.faces.emotion_config import EmotionTraining
 from paz6d.faces.emotion_train import train_emotion
-train_emotion(EmotionTraining(data=world / "fer.csv", out=out, epochs=steps, batch_size=4, input_size=24,
+rows = (world / "fer.csv").read_text().splitlines()  # the world's 14 faces, the last 4 held out
+faces = out.parent / "fer_held_out.csv"
+faces.write_text("\\n".join(rows[:-4] + [row.rsplit(",", 1)[0] + ",PublicTest" for row in rows[-4:]]) + "\\n")
+train_emotion(EmotionTraining(data=faces, out=out, epochs=steps, batch_size=4, input_size=24,
                               checkpoint_every=every, validate_every=0, seed=0, progress=False))
 """,
 }
@@ -180,6 +185,8 @@ def check(method: str, world: Path, folder: Path, steps: int, every: int, delay:
     """One method: the reference, the killed and resumed run, their comparison."""
     log = folder / f"{method}.log"
     reference, resumed = folder / f"{method}_reference", folder / f"{method}_killed"
+    for run in (reference, resumed):  # runs of an earlier call of the script
+        shutil.rmtree(run, ignore_errors=True)
     started = time.perf_counter()
     _run(_command(method, reference, world, 0.0, steps, every), log)
     command = _command(method, resumed, world, delay, steps, every)
@@ -217,6 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="paz6d-kill-") as temporary:
         folder = args.work or Path(temporary)
         folder.mkdir(parents=True, exist_ok=True)
+        shutil.rmtree(folder / "world", ignore_errors=True)
         world = cases.build_world(folder / "world").root
         failures = 0
         for method in args.methods:
