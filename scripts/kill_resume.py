@@ -5,9 +5,10 @@ For each method's trainer (``paz6d train <method>`` through its Python entry poi
 checkpoint every ``--checkpoint-every`` steps:
 
 1. a reference run of ``--steps`` steps, uninterrupted, in its own process;
-2. the same run in another process, killed with SIGKILL once its ``checkpoint.json`` points at a step
-   from ``--checkpoint-every`` on (each step is slowed by ``--step-delay`` seconds so that the kill lands
-   part-way), then run again in a third process, which resumes from that checkpoint;
+2. the same run in another process, killed with SIGKILL a random time (``--seed``) after its
+   ``checkpoint.json`` first points at a checkpoint (each step is slowed by ``--step-delay`` seconds so that
+   the kill lands part-way: during later steps or while the next checkpoint is written), then run again in
+   a third process, which resumes from the checkpoint the pointer names;
 3. the last checkpoint's ``model.weights.h5`` of both compared array by array, and both ``log.csv`` step
    columns.
 
@@ -27,6 +28,7 @@ import argparse
 import csv
 import json
 import os
+import random
 import shutil
 import signal
 import subprocess
@@ -155,14 +157,15 @@ def _pointer_step(run: Path) -> int:
         return 0
 
 
-def _killed_part_way(command: list[str], run: Path, every: int, log: Path, timeout: float) -> int:
-    """Runs ``command`` until ``run``'s checkpoint pointer reaches ``every``, kills it (SIGKILL); the step it
-    points at then."""
+def _killed_part_way(command: list[str], run: Path, every: int, log: Path, timeout: float, wait: float) -> int:
+    """Runs ``command`` until ``run``'s checkpoint pointer reaches ``every``, then ``wait`` seconds more (mid-way
+    through later steps, or through writing the next checkpoint), kills it (SIGKILL); the step it points at then."""
     with log.open("a") as handle:
         process = subprocess.Popen(command, stdout=handle, stderr=handle, env=_environment(), cwd=REPO)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline and process.poll() is None and _pointer_step(run) < every:
             time.sleep(0.01)
+        time.sleep(wait)
         process.send_signal(signal.SIGKILL)
         process.wait()
     return _pointer_step(run)
@@ -181,7 +184,8 @@ def _log_steps(run: Path) -> list[int]:
         return [int(row["step"]) for row in csv.DictReader(handle)]
 
 
-def check(method: str, world: Path, folder: Path, steps: int, every: int, delay: float, timeout: float) -> dict:
+def check(method: str, world: Path, folder: Path, steps: int, every: int, delay: float, timeout: float,
+          wait: float) -> dict:
     """One method: the reference, the killed and resumed run, their comparison."""
     log = folder / f"{method}.log"
     reference, resumed = folder / f"{method}_reference", folder / f"{method}_killed"
@@ -190,7 +194,7 @@ def check(method: str, world: Path, folder: Path, steps: int, every: int, delay:
     started = time.perf_counter()
     _run(_command(method, reference, world, 0.0, steps, every), log)
     command = _command(method, resumed, world, delay, steps, every)
-    killed_at = _killed_part_way(command, resumed, every, log, timeout)
+    killed_at = _killed_part_way(command, resumed, every, log, timeout, wait)
     _run(command, log)
     pointer = json.loads((reference / "checkpoint.json").read_text())  # emotion counts epochs: its own total
     steps, last = int(pointer["step"]), Path(pointer["path"]) / "model.weights.h5"
@@ -200,7 +204,8 @@ def check(method: str, world: Path, folder: Path, steps: int, every: int, delay:
     differing = sorted(name for name in want if name not in got or not np.array_equal(want[name], got[name]))
     largest = max((float(np.max(np.abs(want[name] - got[name]))) for name in differing if name in got
                    and want[name].shape == got[name].shape), default=0.0)
-    return {"method": method, "killed_at": killed_at, "steps": steps, "arrays": len(want),
+    return {"method": method, "killed_at": killed_at, "killed_seconds_later": round(wait, 2), "steps": steps,
+            "arrays": len(want),
             "differing": len(differing), "largest_difference": largest,
             "log_steps_equal": _log_steps(reference) == _log_steps(resumed),
             "seconds": round(time.perf_counter() - started, 1),
@@ -214,6 +219,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--checkpoint-every", type=int, default=10, help="steps between checkpoints (default 10)")
     parser.add_argument("--step-delay", type=float, default=0.2, help="seconds added to each step of the killed run")
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds to wait for the first checkpoint")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of how long after the first checkpoint each run is killed: up to as long as "
+                             "--checkpoint-every delayed steps take (default 0)")
     parser.add_argument("--work", type=Path, help="folder for the world and the runs (default: a temporary one)")
     args = parser.parse_args(argv)
     if not 0 < args.checkpoint_every < args.steps:
@@ -226,11 +234,12 @@ def main(argv: list[str] | None = None) -> int:
         folder.mkdir(parents=True, exist_ok=True)
         shutil.rmtree(folder / "world", ignore_errors=True)
         world = cases.build_world(folder / "world").root
-        failures = 0
+        failures, waits = 0, random.Random(args.seed)
         for method in args.methods:
+            wait = waits.uniform(0.0, args.checkpoint_every * args.step_delay)
             try:
                 result = check(method, world, folder, args.steps, args.checkpoint_every, args.step_delay,
-                               args.timeout)
+                               args.timeout, wait)
             except RuntimeError as error:
                 result = {"method": method, "ok": False, "error": str(error)}
             failures += not result["ok"]
