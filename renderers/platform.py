@@ -24,15 +24,22 @@ class PlatformUnavailableError(RuntimeError):
     """Neither EGL nor OSMesa can create an offscreen OpenGL context on this machine."""
 
 
+def _load_library(stem: str) -> tuple[ctypes.CDLL | None, str]:
+    """``(library, its file name)`` of ``lib<stem>``, or ``(None, the reason it did not load)``."""
+    name = ctypes.util.find_library(stem)
+    if name is None:
+        return None, f"lib{stem} not found"
+    try:
+        return ctypes.CDLL(name), name
+    except OSError as error:
+        return None, f"cannot load {name}: {error}"
+
+
 def _probe_egl() -> str | None:
     """Returns ``None`` when an EGL display initializes, else the reason it did not."""
-    name = ctypes.util.find_library("EGL")
-    if name is None:
-        return "libEGL not found"
-    try:
-        egl = ctypes.CDLL(name)
-    except OSError as error:
-        return f"cannot load {name}: {error}"
+    egl, name = _load_library("EGL")
+    if egl is None:
+        return name
     egl.eglGetProcAddress.restype = ctypes.c_void_p
     egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
     egl.eglGetDisplay.restype = ctypes.c_void_p
@@ -63,13 +70,9 @@ def _probe_egl() -> str | None:
 
 def _probe_osmesa() -> str | None:
     """Returns ``None`` when libOSMesa loads, else the reason it did not."""
-    name = ctypes.util.find_library("OSMesa")
-    if name is None:
-        return "libOSMesa not found"
-    try:
-        library = ctypes.CDLL(name)
-    except OSError as error:
-        return f"cannot load {name}: {error}"
+    library, name = _load_library("OSMesa")
+    if library is None:
+        return name
     if not hasattr(library, "OSMesaCreateContextAttribs"):
         return f"{name} lacks OSMesaCreateContextAttribs (too old)"
     return None

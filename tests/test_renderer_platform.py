@@ -74,3 +74,10 @@ def test_real_probes_find_both_platforms_on_this_machine():
     # run.sh setup installs both; a failure here means the machine lacks a package it lists.
     assert platform._probe_egl() is None
     assert platform._probe_osmesa() is None
+
+
+def test_a_missing_or_unloadable_library_is_named_with_the_reason(monkeypatch):
+    assert platform._load_library("paz6d_no_such_library") == (None, "libpaz6d_no_such_library not found")
+    monkeypatch.setattr(platform.ctypes.util, "find_library", lambda stem: f"lib{stem}.so.9")
+    library, reason = platform._load_library("Gone")
+    assert library is None and reason.startswith("cannot load libGone.so.9: ")
