@@ -1,7 +1,8 @@
 """AAE inference speed on the CPU: encoding + codebook lookup per crop, single and batched.
 
-Measures, for the encoders of the quick config (64x64, latent 128, batch norm) and of the full, paper
-config (128x128, latent 128) with a 10,000-entry codebook:
+Measures, for the encoders of the quick config (64x64, latent 128, batch norm), of the quick config on the
+frozen pretrained EfficientNet-Lite0 (``encoder_backbone="efficientnet-lite0"``, as ``paz6d benchmark lmo
+--quick`` trains them) and of the full, paper config (128x128, latent 128) with a 10,000-entry codebook:
 
 * single crop: ``ImplicitPose6D.encode`` + ``Codebook.nearest`` per crop (target <= 20 ms);
 * batched: 64 crops per call;
@@ -32,7 +33,8 @@ def measure(config, entries: int, batch: int, repeats: int) -> dict:
     keras.utils.set_random_seed(0)
     crop_size, latent_size = config.crop_size, config.latent_size
     encoder = encode_function(build_encoder(crop_size, latent_size, config.filters, config.kernel_size,
-                                            config.batch_norm, resolve_precision(config.precision)))  # as trained
+                                            config.batch_norm, resolve_precision(config.precision),
+                                            config.encoder_backbone))  # as trained
     rng = np.random.default_rng(0)
     codebook = Codebook(rng.normal(size=(entries, latent_size)), np.broadcast_to(np.eye(3), (entries, 3, 3)),
                         np.tile([0.0, 0.0, 10.0, 10.0], (entries, 1)), np.eye(3), 1.0)
@@ -58,11 +60,14 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20)
     args = parser.parse_args()
     print(f"CPU cores: {os.cpu_count()}, load average (1 min) at start: {os.getloadavg()[0]:.1f}")
+    from dataclasses import replace
+
     from paz6d.aae.config import FULL, QUICK
 
-    for name, config in (("quick", QUICK), ("full", FULL)):
+    pretrained = replace(QUICK, encoder_backbone="efficientnet-lite0")
+    for name, config in (("quick", QUICK), ("quick, pretrained encoder", pretrained), ("full", FULL)):
         r = measure(config, args.entries, args.batch, args.repeats)
-        print(f"{name:5s} {r['crop']}x{r['crop']} latent {r['latent']}, {r['entries']} entries: "
+        print(f"{name} {r['crop']}x{r['crop']} latent {r['latent']}, {r['entries']} entries: "
               f"single crop {r['single_ms']:.2f} ms (encode {r['encode_single_ms']:.2f} ms, "
               f"lookup {r['lookup_single_us']:.0f} us), "
               f"batch of {args.batch} {r['batched_ms_per_crop']:.2f} ms/crop "
