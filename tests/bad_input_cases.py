@@ -1131,6 +1131,7 @@ def train_cases() -> list[Case]:
         "--method": [(("pvnet",), "")],
         "--aae-crop-box": [(("whole",), "whole")],
         "--detector-backbone": [(("resnet50",), "resnet50")],
+        "--detector-input-size": [(("416",), "416"), (("0",), "0"), (("65536",), "65536")],
         "--neutral-distractors": [(("1.5",), "1.5"), (("nan",), "nan")],
         "--aae-encoder-backbone": [(("resnet50",), "resnet50")],
         "--out": [(("{world}/results.csv",), "results.csv")],

@@ -352,6 +352,9 @@ def test_quick_and_full_sizes_and_the_generator_settings(tmp_path, shared_data):
     for bad in (1.5, -0.1, float("nan"), "0.3"):
         with pytest.raises(ValueError, match="neutral_distractors"):
             Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo", quick=True, neutral_distractors=bad)
+    for bad in (416, 0, "448", 4096 * 64):
+        with pytest.raises(ValueError, match="detector_input_size: expected"):
+            Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo", quick=True, detector_input_size=bad)
     assert Benchmark(out=tmp_path / "b", lmo=shared_data / "bop_lmo").settings == lmo.FULL
 
 
@@ -406,6 +409,9 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-encoder-backbone",
                  "none", "--quick", "--no-progress"]) == 0
     assert jobs[6].settings == replace(lmo.QUICK, aae_encoder_backbone="none")
+    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--detector-input-size",
+                 "448", "--quick", "--no-progress"]) == 0
+    assert jobs[7].settings == replace(lmo.QUICK, detector_input_size=448)
     assert lmo.QUICK.aae_encoder_backbone == "efficientnet-lite0" and lmo.FULL.aae_encoder_backbone == "none"
     assert (lmo.QUICK.neutral_distractors, lmo.FULL.neutral_distractors) == (0.3, 0.0)
     for bad in ("5", "x=aae", "5=aae 5=keypointnet"):

@@ -42,6 +42,8 @@ class LmoOptions:
     detector_backbone: str | None = option(None, "the detector's body: efficientnet-lite0 (pretrained on ImageNet, "
                                                  "docs/backbones.md) or none (the light network from scratch) "
                                                  "(default: the sizes' own)", choices=BACKBONES)
+    detector_input_size: int | None = option(None, "the detector's square input side in pixels, a multiple of 64 "
+                                                   "(default: the sizes' own: 320 quick, 640 full; docs/backbones.md)")
     neutral_distractors: float | None = option(None, "share of the synthetic images' distractors coloured white "
                                                      "to mid grey, hard negatives for the white objects (default: "
                                                      "the sizes' own: 0.3 quick, 0 full)")
@@ -79,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
         job = Benchmark(out=options.out, lmo=options.lmo, quick=options.quick, method=options.method,
                         progress=options.progress, seed=options.seed, aae_steps=options.aae_steps,
                         aae_lr_drop_steps=options.aae_lr_drop_steps, aae_crop_box=options.aae_crop_box,
-                        detector_backbone=options.detector_backbone, neutral_distractors=options.neutral_distractors,
+                        detector_backbone=options.detector_backbone, detector_input_size=options.detector_input_size,
+                        neutral_distractors=options.neutral_distractors,
                         aae_encoder_backbone=options.aae_encoder_backbone,
                         object_methods=parse_object_methods(options.object_method), jobs=options.jobs)
         report = run_benchmark(job)

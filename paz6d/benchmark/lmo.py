@@ -59,7 +59,7 @@ from paz6d.estimate import estimate
 from paz6d.keypointnet.config import CONFIGS as KEYPOINT_CONFIGS, KeypointTraining
 from paz6d.keypointnet.orientation import is_single_half_turn
 from paz6d.keypointnet.train import train_keypointnet
-from paz6d.ssd.config import SSDTraining
+from paz6d.ssd.config import SSDTraining, check_input_size
 
 #: Scale of the LM-O meshes (millimetres) to the library's metres.
 MESH_SCALE = units_per_mm("m")
@@ -131,6 +131,10 @@ class BenchmarkSettings:
         check_crop_box(self.aae_crop_box)
         check_backbone(self.aae_encoder_backbone, "aae_encoder_backbone")
         check_backbone(self.detector_backbone, "detector_backbone")
+        try:
+            check_input_size("light", self.detector_input_size)
+        except ValueError as error:
+            raise ValueError(f"detector_{error}") from None  # "detector_input_size: expected ..."
         share = self.neutral_distractors
         if isinstance(share, bool) or not isinstance(share, (int, float)) or not 0 <= share <= 1:
             raise ValueError(f"neutral_distractors: expected a share in [0, 1], got {share!r:.40}")
@@ -156,7 +160,8 @@ FULL = BenchmarkSettings(images=2500, backgrounds=300, detector_steps=1500, aae_
 
 
 #: Fields of :class:`Benchmark` that replace the sizes' setting of the same name unless ``None``.
-SETTINGS_OF_FLAGS = ("aae_crop_box", "detector_backbone", "neutral_distractors", "aae_encoder_backbone")
+SETTINGS_OF_FLAGS = ("aae_crop_box", "detector_backbone", "detector_input_size", "neutral_distractors",
+                     "aae_encoder_backbone")
 
 
 @dataclass
@@ -176,6 +181,7 @@ class Benchmark:
     aae_lr_drop_steps: int | None = None  # default: the settings'
     aae_crop_box: str | None = None  # default: the settings'
     detector_backbone: str | None = None  # default: the settings'
+    detector_input_size: int | None = None  # default: the settings'
     neutral_distractors: float | None = None  # default: the settings'
     aae_encoder_backbone: str | None = None  # default: the settings'
     object_methods: dict[int, str] = field(default_factory=dict)
