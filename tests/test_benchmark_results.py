@@ -47,7 +47,7 @@ def test_lmo_report_becomes_the_command_the_scores_and_the_per_object_table(lmo_
     page = results.results_page([lmo_report], cpu="test CPU (2 cores)")
     assert "## LM-O benchmark (quick)" in page
     assert ("`paz6d benchmark lmo --quick --method aae --aae-steps 4 --aae-lr-drop-steps 1 --aae-crop-box obj "
-            "--detector-backbone none --neutral-distractors 0.0 --aae-encoder-backbone none "
+            "--detector-backbone none --detector-input-size 128 --neutral-distractors 0.0 --aae-encoder-backbone none "
             "--out OUT`") in page
     assert "CPU: test CPU (2 cores)" in page and "Total stage time 2.0 min" in page
     # mean of AR_MSSD 0.2 and AR_MSPD 0.4; held-out synthetic images: 0.7 and 0.4

@@ -27,8 +27,8 @@ LMO_CONDITIONS = {
 }
 #: Benchmark settings that have a ``paz6d benchmark lmo`` flag; they are spelled out in the command.
 LMO_FLAGS = {"aae_steps": "--aae-steps", "aae_lr_drop_steps": "--aae-lr-drop-steps", "aae_crop_box": "--aae-crop-box",
-             "detector_backbone": "--detector-backbone", "neutral_distractors": "--neutral-distractors",
-             "aae_encoder_backbone": "--aae-encoder-backbone"}
+             "detector_backbone": "--detector-backbone", "detector_input_size": "--detector-input-size",
+             "neutral_distractors": "--neutral-distractors", "aae_encoder_backbone": "--aae-encoder-backbone"}
 
 
 class ReportError(ValueError):
