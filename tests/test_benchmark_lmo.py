@@ -410,8 +410,9 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
                  "none", "--quick", "--no-progress"]) == 0
     assert jobs[6].settings == replace(lmo.QUICK, aae_encoder_backbone="none")
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--detector-input-size",
-                 "448", "--quick", "--no-progress"]) == 0
-    assert jobs[7].settings == replace(lmo.QUICK, detector_input_size=448)
+                 "320", "--quick", "--no-progress"]) == 0
+    assert jobs[7].settings == replace(lmo.QUICK, detector_input_size=320)
+    assert (lmo.QUICK.detector_input_size, lmo.FULL.detector_input_size) == (448, 640)
     assert lmo.QUICK.aae_encoder_backbone == "efficientnet-lite0" and lmo.FULL.aae_encoder_backbone == "none"
     assert (lmo.QUICK.neutral_distractors, lmo.FULL.neutral_distractors) == (0.3, 0.0)
     for bad in ("5", "x=aae", "5=aae 5=keypointnet"):

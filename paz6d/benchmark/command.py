@@ -43,7 +43,7 @@ class LmoOptions:
                                                  "docs/backbones.md) or none (the light network from scratch) "
                                                  "(default: the sizes' own)", choices=BACKBONES)
     detector_input_size: int | None = option(None, "the detector's square input side in pixels, a multiple of 64 "
-                                                   "(default: the sizes' own: 320 quick, 640 full; docs/backbones.md)")
+                                                   "(default: the sizes' own: 448 quick, 640 full; docs/backbones.md)")
     neutral_distractors: float | None = option(None, "share of the synthetic images' distractors coloured white "
                                                      "to mid grey, hard negatives for the white objects (default: "
                                                      "the sizes' own: 0.3 quick, 0 full)")
