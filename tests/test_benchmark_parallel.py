@@ -57,7 +57,7 @@ def test_a_benchmark_stage_runs_in_a_spawned_process_and_leaves_its_marker(tmp_p
     (tmp_path / "lmo" / "models" / "obj_000001.ply").write_text("ply\n")
     (tmp_path / "lmo" / "test").mkdir()
     settings = BenchmarkSettings(images=2, backgrounds=2, detector_steps=1, aae_steps=1, aae_in_plane=1,
-                                 keypointnet_steps=1, keypointnet_views=1, detector_input_size=64)
+                                 keypointnet_steps=1, keypointnet_views=1, detector_input_size=128)
     job = Benchmark(out=tmp_path / "bench", lmo=tmp_path / "lmo", settings=settings, progress=False, jobs=2)
     _run_side_by_side(job, ["backgrounds"])
     name, _, outputs = stages(job)[0]
