@@ -515,6 +515,11 @@ def _check_settings(job: Benchmark) -> None:
             write_json_atomically(path, current, indent=2)
             return
         differing = sorted(key for key in current if stored.get(key) != current[key])
+        if "settings" in differing and isinstance(stored.get("settings"), dict):  # name the settings inside
+            earlier = stored["settings"]
+            differing.remove("settings")
+            differing += [f"settings.{name} ({earlier.get(name)!r} there, {value!r} now)"
+                          for name, value in current["settings"].items() if earlier.get(name) != value]
         if differing:
             raise ValueError(f"out: {job.out} holds a benchmark with other settings ({', '.join(differing)} differ; "
                              f"see {path}); use another --out or the same flags")
