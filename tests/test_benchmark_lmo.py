@@ -397,21 +397,15 @@ def test_command_passes_the_aae_schedule_on(mocked, tmp_path, monkeypatch):
     assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--jobs", "1",
                  "--no-progress"]) == 0
     assert jobs[2].jobs == 1 and jobs[2].settings.aae_crop_box == lmo.FULL.aae_crop_box
-    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-crop-box", "visib",
-                 "--quick", "--no-progress"]) == 0
-    assert jobs[3].settings == replace(lmo.QUICK, aae_crop_box="visib")
-    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--detector-backbone",
-                 "none", "--quick", "--no-progress"]) == 0
-    assert jobs[4].settings == replace(lmo.QUICK, detector_backbone="none")
-    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--neutral-distractors",
-                 "0.25", "--quick", "--no-progress"]) == 0
-    assert jobs[5].settings == replace(lmo.QUICK, neutral_distractors=0.25)
-    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--aae-encoder-backbone",
-                 "none", "--quick", "--no-progress"]) == 0
-    assert jobs[6].settings == replace(lmo.QUICK, aae_encoder_backbone="none")
-    assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), "--detector-input-size",
-                 "320", "--quick", "--no-progress"]) == 0
-    assert jobs[7].settings == replace(lmo.QUICK, detector_input_size=320)
+    for flag, value, setting in (("--aae-crop-box", "visib", {"aae_crop_box": "visib"}),
+                                 ("--detector-backbone", "none", {"detector_backbone": "none"}),
+                                 ("--neutral-distractors", "0.25", {"neutral_distractors": 0.25}),
+                                 ("--aae-encoder-backbone", "none", {"aae_encoder_backbone": "none"}),
+                                 ("--detector-input-size", "320", {"detector_input_size": 320})):
+        assert main(["benchmark", "lmo", "--out", str(tmp_path / "b"), "--lmo", str(data), flag, value, "--quick",
+                     "--no-progress"]) == 0
+        assert jobs[-1].settings == replace(lmo.QUICK, **setting), flag
+    assert len(jobs) == 8
     assert (lmo.QUICK.detector_input_size, lmo.FULL.detector_input_size) == (448, 640)
     assert lmo.QUICK.aae_encoder_backbone == "efficientnet-lite0" and lmo.FULL.aae_encoder_backbone == "none"
     assert (lmo.QUICK.neutral_distractors, lmo.FULL.neutral_distractors) == (0.3, 0.0)
