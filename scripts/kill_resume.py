@@ -204,12 +204,11 @@ def check(method: str, world: Path, folder: Path, steps: int, every: int, delay:
     differing = sorted(name for name in want if name not in got or not np.array_equal(want[name], got[name]))
     largest = max((float(np.max(np.abs(want[name] - got[name]))) for name in differing if name in got
                    and want[name].shape == got[name].shape), default=0.0)
+    same_log = _log_steps(reference) == _log_steps(resumed)
     return {"method": method, "killed_at": killed_at, "killed_seconds_later": round(wait, 2), "steps": steps,
-            "arrays": len(want),
-            "differing": len(differing), "largest_difference": largest,
-            "log_steps_equal": _log_steps(reference) == _log_steps(resumed),
-            "seconds": round(time.perf_counter() - started, 1),
-            "ok": 0 < killed_at < steps and not differing and _log_steps(reference) == _log_steps(resumed)}
+            "arrays": len(want), "differing": len(differing), "largest_difference": largest,
+            "log_steps_equal": same_log, "seconds": round(time.perf_counter() - started, 1),
+            "ok": 0 < killed_at < steps and not differing and same_log}
 
 
 def main(argv: list[str] | None = None) -> int:
