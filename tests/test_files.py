@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from paz6d.backend.files import (TEMPORARY_PREFIX, atomic_output, finite_or_none, load_json, null_non_finite,
-                                 save_npz_atomically, write_csv_atomically, write_json_atomically)
+                                 read_input_bytes, save_npz_atomically, write_csv_atomically, write_json_atomically)
 
 
 def leftovers(folder):
@@ -136,3 +136,17 @@ def test_load_run_json_names_the_file_and_the_run_directory(tmp_path):
     with pytest.raises(ValueError, match=r"thing.json: missing field\(s\) \['b'\]"):
         load_run_json(path, ("a", "b"), "a toy")
     assert load_run_json(path, ("a",), "a toy") == {"a": 1}
+
+
+def test_input_files_that_cannot_be_read_are_named_with_what_they_should_be(tmp_path):
+    from paz6d.backend.image import image_size_from_header
+    from paz6d.datasets.openimages import read_boxes
+
+    readers = {"image file": image_size_from_header, "Open Images box CSV": lambda path: read_boxes(path, {}),
+               "training log": lambda path: read_input_bytes(path, "training log")}
+    for what, read in readers.items():
+        with pytest.raises(ValueError, match=f"^{tmp_path / 'gone'}: {what} not found"):
+            read(tmp_path / "gone")
+        article = "an" if what[0] in "iO" else "a"
+        with pytest.raises(ValueError, match=f"^{tmp_path}: expected {article} {what}, found a folder"):
+            read(tmp_path)

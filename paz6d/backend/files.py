@@ -127,17 +127,29 @@ def _excerpt(text: str) -> str:
     return text if len(text) <= EXCERPT_LIMIT else text[:EXCERPT_LIMIT] + " ..."
 
 
-def read_input_bytes(path: str | Path, what: str = "file") -> bytes:
-    """The bytes of an input file; ``ValueError`` naming it when it is missing, a folder or unreadable."""
-    path = Path(path)
+@contextmanager
+def input_file_errors(path: str | Path, what: str = "file") -> Iterator[None]:
+    """Turns the ``OSError`` of opening or reading the input file ``path`` inside the block into a
+    ``ValueError`` naming it and ``what`` it should be: missing, a folder, or unreadable."""
     try:
-        return path.read_bytes()
+        yield
     except FileNotFoundError as error:
         raise ValueError(f"{path}: {what} not found") from error
     except IsADirectoryError as error:
-        raise ValueError(f"{path}: expected a {what}, found a folder") from error
+        raise ValueError(f"{path}: expected {_article(what)} {what}, found a folder") from error
     except OSError as error:
         raise ValueError(f"{path}: cannot read the {what} ({error.strerror or error})") from error
+
+
+def _article(noun: str) -> str:
+    return "an" if noun[:1].lower() in "aeiou" else "a"
+
+
+def read_input_bytes(path: str | Path, what: str = "file") -> bytes:
+    """The bytes of an input file; ``ValueError`` naming it when it is missing, a folder or unreadable."""
+    path = Path(path)
+    with input_file_errors(path, what):
+        return path.read_bytes()
 
 
 def read_input_text(path: str | Path, what: str = "file") -> str:

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from paz6d.backend.checks import as_array
-from paz6d.backend.files import write_bytes_atomically
+from paz6d.backend.files import input_file_errors, write_bytes_atomically
 
 COLOR_SPACES = ("RGB", "BGR", "HSV", "LAB", "GRAY")
 INTERPOLATIONS = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC,
@@ -87,14 +87,8 @@ def image_size_from_header(path: str | Path) -> tuple[int, int]:
     """``(width, height)`` of an image from its PNG ``IHDR`` or JPEG ``SOF`` header (other formats:
     decoded with OpenCV). Raises ``ValueError`` naming the file when it cannot be read."""
     path = Path(path)
-    try:
+    with input_file_errors(path, "image file"):
         size = _header_size(path)
-    except FileNotFoundError:
-        raise ValueError(f"{path}: image file not found") from None
-    except IsADirectoryError:
-        raise ValueError(f"{path}: expected an image file, found a folder") from None
-    except OSError as error:
-        raise ValueError(f"{path}: cannot read the image ({error.strerror or error})") from None
     if size is not None:
         return size
     with path.open("rb") as handle:

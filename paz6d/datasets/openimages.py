@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.files import read_input_text
+from paz6d.backend.files import input_file_errors, read_input_text
 from paz6d.backend.image import image_size_from_header
 from paz6d.backend.paths import path_inside
 from paz6d.datasets.sample import Sample, SampleSequence
@@ -154,14 +154,8 @@ def read_boxes(path: str | Path, label_index: dict[str, int]) -> dict:
         ValueError: naming the file, the line and the field.
     """
     path = Path(path)
-    try:
+    with input_file_errors(path, "Open Images box CSV"):
         handle = path.open(newline="", encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise ValueError(f"{path}: Open Images box CSV not found") from None
-    except IsADirectoryError:
-        raise ValueError(f"{path}: expected an Open Images box CSV, found a folder") from None
-    except OSError as error:
-        raise ValueError(f"{path}: cannot read the Open Images box CSV ({error.strerror or error})") from None
     image_codes, source_codes, image_ids, sources = {}, {}, [], []
     rows_image, rows_class, rows_source = array("q"), array("q"), array("q")  # 8 bytes a row, not a Python int
     parts: dict[str, list[np.ndarray]] = {}
