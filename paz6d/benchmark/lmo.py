@@ -72,6 +72,10 @@ LMO_INTRINSICS = (572.4114, 573.57043, 325.2611, 242.04899)
 #: report.json).
 CONDITIONS = {"gt": "gt_visible_boxes", "detections": "detections", "synthetic": "synthetic_gt_visible_boxes",
               "synthetic_detections": "synthetic_detections"}
+#: The detection score below which the scored conditions drop a detection: COCO AP ranks detections by score and
+#: BOP scores each object's best estimates only, so a threshold can only drop detections that might match
+#: (0.01, as detectors are commonly scored; `paz6d estimate`'s own default, 0.1, suits an application).
+SCORED_DETECTION_THRESHOLD = 0.01
 #: The conditions whose boxes come from the benchmark's detector.
 DETECTOR_CONDITIONS = ("detections", "synthetic_detections")
 #: Seed offset of the held-out synthetic images (image i of seed s + 1000 shares nothing with the training set's).
@@ -414,6 +418,7 @@ def _estimate_args(job: Benchmark, condition: str) -> list[str]:
         # LM-O shows each object once: BOP scores each object's best estimate, so only the best detection per class
         # needs a pose, and that makes the AAEs' box search cheap (1.2 s per frame; it adds 0.015 to the mean AR)
         argv += ["--detector", str(job.out / "detector"), "--flip", "--poses-per-class", "1", "--box-search",
+                 "--score-threshold", f"{SCORED_DETECTION_THRESHOLD:g}",
                  "--detections-out", str(job.result(condition, "_detections.json"))]
     return argv + ([] if job.progress else ["--no-progress"])
 
