@@ -23,16 +23,16 @@ from timing import median_seconds
 
 def _run_dir(folder: Path, backbone: str) -> Path:
     """A run directory with a network of the ``quick`` settings (with ``backbone``) for 8 classes."""
-    from paz6d.ssd import run_dir as run_files
     from paz6d.ssd.config import SSDTraining
     from paz6d.ssd.model import build_ssd, input_normalization, save_ssd
+    from paz6d.ssd.run_dir import SSDRunDir, write_detector
 
     settings = SSDTraining(dataset=folder, out=folder, backbone=backbone).model_config
     model, spec = build_ssd(9, settings.architecture, settings.input_size, settings.width, backbone=settings.backbone,
                             frozen_stages=settings.frozen_stages)
-    save_ssd(model, run_files.model_path(folder))
-    run_files.write_detector(folder, settings.architecture, [f"obj_{i:06d}" for i in range(1, 9)], spec.to_dict(),
-                             normalization=input_normalization(settings.backbone))
+    save_ssd(model, SSDRunDir.model_path(folder))
+    write_detector(folder, settings.architecture, [f"obj_{i:06d}" for i in range(1, 9)], spec.to_dict(),
+                   normalization=input_normalization(settings.backbone))
     return folder
 
 

@@ -24,13 +24,13 @@ from timing import median_seconds
 def default_ssd_run(folder: Path) -> Path:
     """A light SSD run directory at 320 px, 8 classes, random weights."""
     from paz6d.backend.tensorflow_guard import import_keras
-    from paz6d.ssd import run_dir
     from paz6d.ssd.model import build_ssd, save_ssd
+    from paz6d.ssd.run_dir import SSDRunDir, write_detector
 
     import_keras().utils.set_random_seed(0)
     model, spec = build_ssd(9, "light", input_size=320)
-    run_dir.write_detector(folder, "light", [f"obj_{index:06d}" for index in range(1, 9)], spec.to_dict())
-    save_ssd(model, run_dir.model_path(folder))
+    write_detector(folder, "light", [f"obj_{index:06d}" for index in range(1, 9)], spec.to_dict())
+    save_ssd(model, SSDRunDir.model_path(folder))
     return folder
 
 

@@ -53,10 +53,10 @@ def oracle_recall(run_dir: Path, test, points: np.ndarray, diameter: float, came
     from paz6d.backend.camera import transform_and_project
     from paz6d.backend.pnp import PnPError
     from paz6d.demo.report import score_poses
-    from paz6d.keypointnet import run_dir as run_files
+    from paz6d.keypointnet.run_dir import KeypointNetRunDir
     from paz6d.processors.pose import SolvePnP
 
-    keypoints, usable = run_files.read_keypoints(run_dir)
+    keypoints, usable = KeypointNetRunDir.read_keypoints(run_dir)
     keypoints = keypoints[usable]
     rng = np.random.default_rng(seed)
     solve = SolvePnP(method="epnp", ransac=True)
@@ -134,9 +134,9 @@ def main() -> None:
     sampling = ViewSampling()
     test = render_test_images(mesh_path, report["test_images"], args.seed + TEST_SEED_OFFSET, sampling, scale,
                               progress=False)
-    from paz6d.keypointnet import run_dir as run_files
+    from paz6d.keypointnet.run_dir import KeypointNetRunDir
 
-    keypoints, usable = run_files.read_keypoints(run_dir)
+    keypoints, usable = KeypointNetRunDir.read_keypoints(run_dir)
     usable_points = keypoints[usable]
     distances = np.linalg.norm(usable_points[:, None] - usable_points[None], axis=-1)
     report["keypoint_spread_m"] = float(np.median(distances[np.triu_indices(len(usable_points), 1)]))

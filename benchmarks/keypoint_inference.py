@@ -27,17 +27,17 @@ from timing import median_seconds
 def _random_run(folder: Path, settings) -> Path:
     """A run directory with a randomly initialised KeypointNet of ``settings`` and a random 3D keypoint set."""
     from paz6d.keypointnet.model import build_keypointnet, save_keypointnet
-    from paz6d.keypointnet import run_dir as run_files
+    from paz6d.keypointnet.run_dir import KeypointNetRunDir, write_keypoints
     from paz6d.training.precision import resolve_precision
 
     model = build_keypointnet(settings.num_keypoints, settings.input_size, settings.filters, settings.downsample,
                               settings.dilations, context_stride=settings.context_stride,
                               compute_dtype=resolve_precision(settings.precision))
-    save_keypointnet(model, run_files.model_path(folder))
-    run_files.write_config(folder, {"input_size": settings.input_size, "margin": 1.25,
-                                    "downsample": settings.downsample})
+    save_keypointnet(model, KeypointNetRunDir.model_path(folder))
+    KeypointNetRunDir.write_config(folder, {"input_size": settings.input_size, "margin": 1.25,
+                                            "downsample": settings.downsample})
     points = np.random.default_rng(0).uniform(-0.05, 0.05, (settings.num_keypoints, 3))
-    run_files.write_keypoints(folder, points, np.ones(len(points), bool), "farthest-point")
+    write_keypoints(folder, points, np.ones(len(points), bool), "farthest-point")
     return folder
 
 

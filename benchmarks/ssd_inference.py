@@ -25,14 +25,14 @@ from timing import median_seconds
 
 def _random_run(folder: Path, config: str) -> Path:
     """A run directory holding a randomly initialised network of ``config`` for 8 classes."""
-    from paz6d.ssd import run_dir as run_files
     from paz6d.ssd.model import build_ssd, save_ssd
     from paz6d.ssd.config import CONFIGS
+    from paz6d.ssd.run_dir import SSDRunDir, write_detector
 
     settings = CONFIGS[config]
     model, spec = build_ssd(9, settings.architecture, settings.input_size, settings.width)
-    save_ssd(model, run_files.model_path(folder))
-    run_files.write_detector(folder, settings.architecture, [f"obj_{i:06d}" for i in range(1, 9)], spec.to_dict())
+    save_ssd(model, SSDRunDir.model_path(folder))
+    write_detector(folder, settings.architecture, [f"obj_{i:06d}" for i in range(1, 9)], spec.to_dict())
     return folder
 
 

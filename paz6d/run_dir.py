@@ -10,8 +10,10 @@ readers of its method-specific files); this base owns the parts they share::
     RUN_DIR/metrics.json   the training summary (a JSON object)
     RUN_DIR/model.keras    the network (loaded in Keras safe mode by the method)
 
-Every method is a set of class methods taking the run directory (a ``str`` or ``Path``), so a
-method's ``run_dir`` module can export them as plain functions (``read_config = AAERunDir.read_config``).
+The readers and writers here are class methods taking the run directory (a ``str`` or ``Path``), called on
+the method's class (``AAERunDir.read_config(run_dir)``); a method's ``run_dir`` module keeps as plain functions
+only the readers and writers of its own files. :class:`DescribedRunDir` is the base of a run described by one JSON
+file besides the network, :class:`CropRunDir` that of a keypoint network on box crops.
 Every reader raises ``ValueError`` naming the file and what is missing or malformed.
 
 Each file has one validator, run when the run directory is opened: :meth:`RunDir.validate` (a pipeline
@@ -186,6 +188,41 @@ class RunDir:
                              f"not a file; depth refinement samples the object's surface from the mesh the run was "
                              f"trained on")
         return sample_points(load_mesh(found[0], found[1]), count, seed)
+
+
+class DescribedRunDir(RunDir):
+    """A run directory described by one JSON file besides the network: :attr:`DESCRIPTION_FILE` (what the
+    pipeline needs besides the weights) marks it, it and ``model.keras`` are required, and :meth:`validate`
+    returns the description.
+
+    Subclasses set :attr:`DESCRIPTION_FILE` (:attr:`MARKER_FILES` and :attr:`REQUIRED_FILES` follow from it
+    unless they set them) and provide :meth:`read_description`.
+    """
+
+    #: The JSON file describing the network (``detector.json``, ``classifier.json``, ...).
+    DESCRIPTION_FILE: ClassVar[str]
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Derives :attr:`MARKER_FILES` and :attr:`REQUIRED_FILES` of a class that sets :attr:`DESCRIPTION_FILE`
+        from it, unless the class sets them itself."""
+        super().__init_subclass__(**kwargs)
+        if "DESCRIPTION_FILE" in vars(cls):
+            if "MARKER_FILES" not in vars(cls):
+                cls.MARKER_FILES = (cls.DESCRIPTION_FILE,)
+            if "REQUIRED_FILES" not in vars(cls):
+                cls.REQUIRED_FILES = (cls.DESCRIPTION_FILE, cls.MODEL_FILE)
+
+    @classmethod
+    def read_description(cls, run_dir: str | Path) -> dict[str, Any]:
+        """:attr:`DESCRIPTION_FILE`, checked field by field (``ValueError`` naming the file and the field
+        when it is missing or malformed)."""
+        raise NotImplementedError(f"{cls.__name__} does not read its description file")
+
+    @classmethod
+    def validate(cls, run_dir: str | Path) -> dict[str, Any]:
+        """:meth:`RunDir.validate` (the description and ``model.keras`` present, ``config.json`` checked), then
+        the description (:meth:`read_description`); returns it."""
+        return cls.read_description(super().validate(run_dir))
 
 
 class CropRunDir(RunDir):

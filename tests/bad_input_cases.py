@@ -81,21 +81,23 @@ def _write_results(world_bop: Path, path: Path) -> None:
 def _write_runs(root: Path) -> tuple[Path, Path]:
     from paz6d.aae import run_dir as aae_run
     from paz6d.aae.codebook import Codebook
+    from paz6d.aae.run_dir import AAERunDir
     from paz6d.keypointnet import run_dir as keypointnet_run
+    from paz6d.keypointnet.run_dir import KeypointNetRunDir
 
     hull = np.array([[x, y, z] for x in (-0.025, 0.025) for y in (-0.02, 0.02) for z in (-0.015, 0.015)])
     aae = root / "runs" / "aae"
-    aae_run.write_config(aae, {"crop_size": 16, "padding": 1.2, "latent_size": 8}, root / "obj_000001.ply", 1.0, 0,
-                         None)
+    AAERunDir.write_config(aae, {"crop_size": 16, "padding": 1.2, "latent_size": 8}, root / "obj_000001.ply", 1.0, 0,
+                           None)
     aae_run.write_object(aae, hull, hull * 0.9, 0.07, hull)
     Codebook(np.eye(2, 8), np.stack([np.eye(3)] * 2), np.array([[0.0, 0, 10, 10]] * 2),
              np.diag([100.0, 100.0, 1.0]), 0.5).save(aae_run.codebook_path(aae))
-    aae_run.model_path(aae).write_bytes(b"not a keras model")
+    AAERunDir.model_path(aae).write_bytes(b"not a keras model")
     keypoints = root / "runs" / "keypointnet"
-    keypointnet_run.write_config(keypoints, {"input_size": 32, "margin": 1.25, "downsample": 2, "mode": "supervised"})
+    KeypointNetRunDir.write_config(keypoints, {"input_size": 32, "margin": 1.25, "downsample": 2, "mode": "supervised"})
     keypointnet_run.write_keypoints(keypoints, hull, np.ones(8, bool), "farthest-point")
     keypointnet_run.write_object(keypoints, 0.07, hull)
-    keypointnet_run.model_path(keypoints).write_bytes(b"not a keras model")
+    KeypointNetRunDir.model_path(keypoints).write_bytes(b"not a keras model")
     return aae, keypoints
 
 
@@ -934,10 +936,10 @@ def detector_stand_in(*more: Callable[[World, Path], None]) -> Callable[[World, 
     stand-in model), then each of ``more``."""
 
     def setup(world: World, folder: Path) -> None:
-        from paz6d.ssd.run_dir import model_path, write_detector
+        from paz6d.ssd.run_dir import SSDRunDir, write_detector
 
         write_detector(folder / "ssd", "light", ["obj_000001"], SSD_DETECTOR["priors"])
-        model_path(folder / "ssd").write_bytes(b"not a keras model")
+        SSDRunDir.model_path(folder / "ssd").write_bytes(b"not a keras model")
         for step in more:
             step(world, folder)
 

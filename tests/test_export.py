@@ -23,8 +23,8 @@ def ssd_run(tmp_path_factory) -> Path:
     """An SSD run directory (light network, 128 px input, random weights; the heads' kernels scaled up so
     that the outputs are of order 1, not the near-zero outputs of fresh heads)."""
     from paz6d.backend.tensorflow_guard import import_keras
-    from paz6d.ssd import run_dir
     from paz6d.ssd.model import build_ssd, save_ssd
+    from paz6d.ssd.run_dir import SSDRunDir, write_detector
 
     import_keras().utils.set_random_seed(0)
     run = tmp_path_factory.mktemp("export") / "ssd"
@@ -32,8 +32,8 @@ def ssd_run(tmp_path_factory) -> Path:
     for weight in model.weights:
         if weight.path.startswith(("conf_", "loc_")) and weight.path.endswith("pointwise_kernel"):
             weight.assign(weight.numpy() * 1000)
-    run_dir.write_detector(run, "light", CLASS_NAMES, spec.to_dict())
-    save_ssd(model, run_dir.model_path(run))
+    write_detector(run, "light", CLASS_NAMES, spec.to_dict())
+    save_ssd(model, SSDRunDir.model_path(run))
     return run
 
 
@@ -43,9 +43,9 @@ def aae_run(tmp_path_factory) -> Path:
     40 random crops, each with its own rotation."""
     from scipy.spatial.transform import Rotation
 
-    from paz6d.aae import run_dir
     from paz6d.aae.codebook import Codebook
     from paz6d.aae.model import build_autoencoder, encode_function, encoder_of
+    from paz6d.aae.run_dir import AAERunDir, codebook_path, write_object
     from paz6d.backend.files import save_keras_model_atomically
     from paz6d.backend.tensorflow_guard import import_keras
 
@@ -53,14 +53,14 @@ def aae_run(tmp_path_factory) -> Path:
     run = tmp_path_factory.mktemp("export") / "aae"
     model = build_autoencoder(16, 8, filters=(8, 16))
     hull = np.array([[x, y, z] for x in (-0.025, 0.025) for y in (-0.02, 0.02) for z in (-0.015, 0.015)])
-    run_dir.write_config(run, {"crop_size": 16, "padding": 1.2, "latent_size": 8}, run / "mesh.ply", 1.0, 0, None)
-    run_dir.write_object(run, hull, hull * 0.9, 0.07, hull)
+    AAERunDir.write_config(run, {"crop_size": 16, "padding": 1.2, "latent_size": 8}, run / "mesh.ply", 1.0, 0, None)
+    write_object(run, hull, hull * 0.9, 0.07, hull)
     crops = np.random.default_rng(1).uniform(0, 1, (40, 16, 16, 3)).astype(np.float32)
     codes = encode_function(encoder_of(model))(crops)
     codes /= np.linalg.norm(codes, axis=1, keepdims=True)
     Codebook(codes, Rotation.random(40, random_state=2).as_matrix(), np.tile([40.0, 40, 60, 60], (40, 1)),
-             np.diag([100.0, 100.0, 1.0]), 0.5).save(run_dir.codebook_path(run))
-    save_keras_model_atomically(model, run_dir.model_path(run))
+             np.diag([100.0, 100.0, 1.0]), 0.5).save(codebook_path(run))
+    save_keras_model_atomically(model, AAERunDir.model_path(run))
     return run
 
 

@@ -14,6 +14,7 @@ from paz6d.backend.tensorflow_guard import import_tensorflow
 from paz6d.hrnet import run_dir as run_files
 from paz6d.hrnet.config import QUICK, HRNetTraining
 from paz6d.hrnet.heatmaps import gaussian_heatmaps
+from paz6d.hrnet.run_dir import HRNetRunDir
 from paz6d.run_dirs import is_run_dir
 
 import_tensorflow()  # the renderer shares this process with TensorFlow (workers=0)
@@ -160,7 +161,7 @@ def test_corrupt_run_directories_are_clear_errors(trained, tmp_path):
         HRNetKeypoints2D(run)
     (run / "config.json").write_text(json.dumps({"seed": 0}))
     with pytest.raises(ValueError, match="config.json: missing field 'mesh_path'"):
-        run_files.read_config(run)
+        HRNetRunDir.read_config(run)
     assert is_run_dir(job.out, "hrnet") and not is_run_dir(tmp_path, "hrnet")
 
 

@@ -14,7 +14,7 @@ from paz6d.backend.pnp import PnPError
 from paz6d.backend.square_crop import (crop_intrinsics, crop_square, crop_transform, projected_box, square_window,
                                       to_full_image)
 from paz6d.keypointnet.keypoints import keypoint_spread, lift_keypoints
-from paz6d.keypointnet.run_dir import read_keypoints, read_object, write_keypoints, write_object
+from paz6d.keypointnet.run_dir import KeypointNetRunDir, read_object, write_keypoints, write_object
 from paz6d.processors.pose import DepthFromBox
 
 K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
@@ -121,14 +121,14 @@ def test_keypoint_spread_is_the_standard_deviation():
 def test_keypoints_file_round_trip_and_errors(tmp_path):
     points = np.arange(12.0).reshape(4, 3) / 100
     write_keypoints(tmp_path, points, [True, True, False, True], "farthest-point")
-    read_points, usable = read_keypoints(tmp_path)
+    read_points, usable = KeypointNetRunDir.read_keypoints(tmp_path)
     np.testing.assert_allclose(read_points, points)
     assert usable.tolist() == [True, True, False, True]
     (tmp_path / "keypoints.json").write_text(json.dumps({"points_model": [[0, 0]], "usable": [True]}))
     with pytest.raises(ValueError, match="points_model"):
-        read_keypoints(tmp_path)
+        KeypointNetRunDir.read_keypoints(tmp_path)
     with pytest.raises(ValueError, match="not found"):
-        read_keypoints(tmp_path / "missing")
+        KeypointNetRunDir.read_keypoints(tmp_path / "missing")
 
 
 # ----------------------------------------------------------------------------- farthest points

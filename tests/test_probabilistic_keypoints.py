@@ -11,6 +11,7 @@ import pytest
 
 from paz6d.probabilistic_keypoints.config import QUICK
 from paz6d.probabilistic_keypoints import run_dir as run_files
+from paz6d.probabilistic_keypoints.run_dir import ProbabilisticKeypointsRunDir
 from paz6d.run_dirs import is_run_dir
 from paz6d.probabilistic_keypoints.model import (CholeskyFromMaps, ProbabilisticKeypointsError,
                                                  build_probabilistic_keypointnet, covariance_from_cholesky,
@@ -123,8 +124,8 @@ def test_covariance_scale_and_occluders_are_seeded():
 def tiny_run(tmp_path):
     """A run directory with an untrained tiny model and 5 keypoints."""
     run = tmp_path / "run"
-    run_files.write_config(run, {"input_size": 32, "margin": 1.25, "downsample": 4})
-    save_model(tiny_model(5), run / run_files.MODEL_FILE)
+    ProbabilisticKeypointsRunDir.write_config(run, {"input_size": 32, "margin": 1.25, "downsample": 4})
+    save_model(tiny_model(5), run / ProbabilisticKeypointsRunDir.MODEL_FILE)
     points = np.array([[0.03, 0, 0], [0, 0.03, 0], [0, 0, 0.03], [-0.02, -0.02, 0.01], [0.02, -0.01, -0.02]])
     run_files.write_keypoints(run, points, 2.0)
     return run
@@ -153,12 +154,13 @@ def test_pipeline_steps_covariances_in_image_pixels_and_a_pose(tiny_run):
 
 
 def test_corrupt_run_directories_are_reported_by_file(tiny_run, tmp_path):
-    assert run_files.validate(tiny_run) == tiny_run and is_run_dir(tiny_run, "probabilistic-keypoints")
+    assert ProbabilisticKeypointsRunDir.validate(tiny_run) == tiny_run
+    assert is_run_dir(tiny_run, "probabilistic-keypoints")
     with pytest.raises(ValueError, match="is not a directory"):
-        run_files.validate(tmp_path / "absent")
+        ProbabilisticKeypointsRunDir.validate(tmp_path / "absent")
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match="config.json: file not found"):
-        run_files.validate(tmp_path / "empty")
+        ProbabilisticKeypointsRunDir.validate(tmp_path / "empty")
     path = tiny_run / run_files.KEYPOINTS_FILE
     for data, message in (({"points_model": [[0, 0, 0]]}, "missing field"),
                           ({"points_model": [[0, 0]] * 5, "covariance_scale": 1.0}, "points_model"),
@@ -166,13 +168,13 @@ def test_corrupt_run_directories_are_reported_by_file(tiny_run, tmp_path):
                           ({"points_model": "abc", "covariance_scale": 1.0}, "points_model")):
         path.write_text(json.dumps(data))
         with pytest.raises(ValueError, match=message):
-            run_files.read_keypoints(tiny_run)
+            ProbabilisticKeypointsRunDir.read_keypoints(tiny_run)
     path.write_text("{broken")
     with pytest.raises(ValueError, match="invalid JSON"):
-        run_files.validate(tiny_run)
-    (tiny_run / run_files.CONFIG_FILE).write_text(json.dumps({"input_size": 32, "margin": 1.25}))
+        ProbabilisticKeypointsRunDir.validate(tiny_run)
+    (tiny_run / ProbabilisticKeypointsRunDir.CONFIG_FILE).write_text(json.dumps({"input_size": 32, "margin": 1.25}))
     with pytest.raises(ValueError, match="downsample"):
-        run_files.read_config(tiny_run)
+        ProbabilisticKeypointsRunDir.read_config(tiny_run)
     with pytest.raises(ValueError, match="covariance_scale"):
         run_files.write_keypoints(tiny_run, np.zeros((5, 3)), float("nan"))
 

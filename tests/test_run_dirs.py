@@ -9,9 +9,12 @@ import pytest
 
 from paz6d.aae import run_dir as aae_run
 from paz6d.aae.codebook import Codebook
+from paz6d.aae.run_dir import AAERunDir
 from paz6d.keypointnet import run_dir as keypointnet_run
+from paz6d.keypointnet.run_dir import KeypointNetRunDir
 from paz6d.methods import get, methods
 from paz6d.probabilistic_keypoints import run_dir as probabilistic_run
+from paz6d.probabilistic_keypoints.run_dir import ProbabilisticKeypointsRunDir
 from paz6d.run_dir import RunDir
 from paz6d.run_dirs import RUN_DIR_MODULES, is_run_dir, method_of
 
@@ -19,34 +22,34 @@ HULL = np.array([[x, y, z] for x in (-0.04, 0.04) for y in (-0.03, 0.03) for z i
 
 
 def write_aae_run(folder):
-    aae_run.write_config(folder, {"crop_size": 16, "padding": 1.2, "latent_size": 8}, folder / "mesh.ply", 0.001, 3,
-                         None)
+    AAERunDir.write_config(folder, {"crop_size": 16, "padding": 1.2, "latent_size": 8}, folder / "mesh.ply", 0.001,
+                           3, None)
     aae_run.write_object(folder, HULL, HULL * 0.9, 0.1, HULL)
     codebook = Codebook(np.eye(2, 8), np.stack([np.eye(3)] * 2), np.array([[0.0, 0, 10, 10]] * 2),
                         np.diag([100.0, 100.0, 1.0]), 0.5)
     codebook.save(aae_run.codebook_path(folder))
-    aae_run.model_path(folder).write_bytes(b"model")
+    AAERunDir.model_path(folder).write_bytes(b"model")
     return folder
 
 
 def write_keypointnet_run(folder):
-    keypointnet_run.write_config(folder, {"input_size": 32, "margin": 1.25, "downsample": 2, "mode": "supervised"})
+    KeypointNetRunDir.write_config(folder, {"input_size": 32, "margin": 1.25, "downsample": 2, "mode": "supervised"})
     keypointnet_run.write_keypoints(folder, HULL, np.ones(8, bool), "farthest-point")
     keypointnet_run.write_object(folder, 0.1, HULL)
-    keypointnet_run.model_path(folder).write_bytes(b"model")
+    KeypointNetRunDir.model_path(folder).write_bytes(b"model")
     return folder
 
 
 def write_probabilistic_run(folder):
-    probabilistic_run.write_config(folder, {"input_size": 32, "margin": 1.25, "downsample": 2})
+    ProbabilisticKeypointsRunDir.write_config(folder, {"input_size": 32, "margin": 1.25, "downsample": 2})
     probabilistic_run.write_keypoints(folder, HULL, 1.5, HULL)
-    probabilistic_run.path_of(folder, probabilistic_run.MODEL_FILE).write_bytes(b"model")
+    ProbabilisticKeypointsRunDir.model_path(folder).write_bytes(b"model")
     return folder
 
 
 def test_aae_run_directory_round_trip(tmp_path):
     folder = write_aae_run(tmp_path / "aae")
-    config = aae_run.read_config(folder)
+    config = AAERunDir.read_config(folder)
     assert config["config"] == {"crop_size": 16, "padding": 1.2, "latent_size": 8}
     assert (config["mesh_scale"], config["seed"], config["dataset"]) == (0.001, 3, None)
     assert config["mesh"] == str((folder / "mesh.ply").resolve())
@@ -55,21 +58,21 @@ def test_aae_run_directory_round_trip(tmp_path):
     np.testing.assert_array_equal(geometry["surface_points"], HULL * 0.9)
     assert geometry["diameter"] == 0.1
     assert len(aae_run.read_codebook(folder)) == 2
-    assert aae_run.validate(folder) == folder
+    assert AAERunDir.validate(folder) == folder
     assert is_run_dir(folder, "aae") and not is_run_dir(folder, "keypointnet")
 
 
 def test_aae_run_directory_errors_name_the_file(tmp_path):
     folder = write_aae_run(tmp_path / "aae")
     with pytest.raises(ValueError, match="not a directory"):
-        aae_run.read_config(tmp_path / "absent")
-    config = aae_run.config_path(folder)
+        AAERunDir.read_config(tmp_path / "absent")
+    config = AAERunDir.config_path(folder)
     config.write_text(json.dumps({"config": {"crop_size": 16}, "mesh": "m", "mesh_scale": 1, "seed": 0}))
     with pytest.raises(ValueError, match=r"config.json: missing key\(s\) \['config.padding'\]"):
-        aae_run.read_config(folder)
+        AAERunDir.read_config(folder)
     config.write_text("{not json")
     with pytest.raises(ValueError, match="config.json: invalid JSON"):
-        aae_run.validate(folder)
+        AAERunDir.validate(folder)
     np.savez(aae_run.object_path(folder), hull_points=HULL, diameter=0.1)
     with pytest.raises(ValueError, match=r"object.npz: missing key\(s\) \['surface_points', 'vertices'\]"):
         aae_run.read_object(folder)
@@ -80,28 +83,28 @@ def test_aae_run_directory_errors_name_the_file(tmp_path):
     with pytest.raises(ValueError, match="codebook.npz: missing; is .* an AAE run directory"):
         aae_run.read_codebook(folder)
     with pytest.raises(ValueError, match=r"config: missing key\(s\) \['padding'\]"):
-        aae_run.write_config(folder, {"crop_size": 16}, "mesh.ply", 1.0, 0, None)
+        AAERunDir.write_config(folder, {"crop_size": 16}, "mesh.ply", 1.0, 0, None)
 
 
 def test_keypointnet_run_directory_round_trip_and_errors(tmp_path):
     folder = write_keypointnet_run(tmp_path / "keypointnet")
-    assert keypointnet_run.read_config(folder)["mode"] == "supervised"
-    points, usable = keypointnet_run.read_keypoints(folder)
+    assert KeypointNetRunDir.read_config(folder)["mode"] == "supervised"
+    points, usable = KeypointNetRunDir.read_keypoints(folder)
     np.testing.assert_array_equal(points, HULL)
     assert usable.all()
     np.testing.assert_array_equal(keypointnet_run.read_object(folder)["hull_points"], HULL)
-    assert keypointnet_run.validate(folder) == folder
-    keypointnet_run.config_path(folder).write_text(json.dumps({"input_size": 32}))
+    assert KeypointNetRunDir.validate(folder) == folder
+    KeypointNetRunDir.config_path(folder).write_text(json.dumps({"input_size": 32}))
     with pytest.raises(ValueError, match=r"config.json: missing field\(s\) \['margin', 'downsample'\]"):
-        keypointnet_run.validate(folder)
-    keypointnet_run.config_path(folder).write_text("[1, 2]")
+        KeypointNetRunDir.validate(folder)
+    KeypointNetRunDir.config_path(folder).write_text("[1, 2]")
     with pytest.raises(ValueError, match="config.json: expected a JSON object"):
-        keypointnet_run.read_config(folder)
-    keypointnet_run.model_path(folder).unlink()
+        KeypointNetRunDir.read_config(folder)
+    KeypointNetRunDir.model_path(folder).unlink()
     with pytest.raises(ValueError, match="model.keras: file not found"):
-        keypointnet_run.validate(folder)
+        KeypointNetRunDir.validate(folder)
     with pytest.raises(ValueError, match=r"config: missing key\(s\) \['downsample'\]"):
-        keypointnet_run.write_config(folder, {"input_size": 32, "margin": 1.25})
+        KeypointNetRunDir.write_config(folder, {"input_size": 32, "margin": 1.25})
 
 
 def test_method_of_tells_the_run_directories_apart(tmp_path):
@@ -126,15 +129,15 @@ def test_keypointnet_and_probabilistic_keypoints_runs_are_told_apart_and_refused
 
     keypointnet = write_keypointnet_run(tmp_path / "keypointnet")
     probabilistic = write_probabilistic_run(tmp_path / "probabilistic")
-    assert keypointnet_run.read_config(probabilistic) == probabilistic_run.read_config(probabilistic)
+    assert KeypointNetRunDir.read_config(probabilistic) == ProbabilisticKeypointsRunDir.read_config(probabilistic)
     assert method_of(keypointnet) == "keypointnet" and method_of(probabilistic) == "probabilistic-keypoints"
-    assert keypointnet_run.validate(keypointnet) == keypointnet
-    assert probabilistic_run.validate(probabilistic) == probabilistic
-    assert probabilistic_run.read_keypoints(probabilistic)[1] == 1.5
+    assert KeypointNetRunDir.validate(keypointnet) == keypointnet
+    assert ProbabilisticKeypointsRunDir.validate(probabilistic) == probabilistic
+    assert ProbabilisticKeypointsRunDir.read_keypoints(probabilistic)[1] == 1.5
     with pytest.raises(ValueError, match=r"gaussian_keypoints.json: file not found \(is .* a probabilistic-keypoints "):
-        probabilistic_run.validate(keypointnet)
+        ProbabilisticKeypointsRunDir.validate(keypointnet)
     with pytest.raises(ValueError, match=r"/keypoints.json: file not found \(is .* a KeypointNet run directory"):
-        keypointnet_run.validate(probabilistic)
+        KeypointNetRunDir.validate(probabilistic)
     (tmp_path / "set").mkdir()
     for run, other in ((keypointnet, "probabilistic-keypoints"), (probabilistic, "keypointnet")):
         assert main(["estimate", "--run", f"1={run}", "--method", other, "--dataset", str(tmp_path / "set"),
@@ -148,7 +151,7 @@ def test_keypointnet_and_probabilistic_keypoints_runs_are_told_apart_and_refused
 
 @pytest.mark.parametrize("method", sorted(RUN_DIR_MODULES))
 def test_each_method_is_recognised_by_its_own_marker_files_only(tmp_path, method):
-    for name in RUN_DIR_MODULES[method].MARKER_FILES:
+    for name in get(method).run_dir.MARKER_FILES:
         (tmp_path / name).write_text("{}")
     assert method_of(tmp_path) == method
     assert [other for other in RUN_DIR_MODULES if is_run_dir(tmp_path, other)] == [method]
@@ -160,9 +163,27 @@ def test_the_registry_lists_every_method_once_with_its_run_directory_class():
     assert [record.name for record in records] == list(RUN_DIR_MODULES)
     for record in records:
         assert issubclass(record.run_dir, RunDir) and record.run_dir.__module__ == RUN_DIR_MODULES[record.name].__name__
-        assert record.run_dir.MARKER_FILES == RUN_DIR_MODULES[record.name].MARKER_FILES
     assert [record.name for record in methods("pose")] == ["aae", "keypointnet", "hrnet", "probabilistic-keypoints"]
     assert get("keypoints") is get("keypointnet")
+
+
+def test_a_run_described_by_one_file_is_marked_by_it_and_opened_to_its_description(tmp_path):
+    from paz6d.run_dir import DescribedRunDir
+
+    class TinyRunDir(DescribedRunDir):
+        KIND = "a tiny"
+        DESCRIPTION_FILE = "tiny.json"
+
+        @classmethod
+        def read_description(cls, run_dir):
+            return json.loads((run_dir / cls.DESCRIPTION_FILE).read_text())
+
+    assert TinyRunDir.MARKER_FILES == ("tiny.json",) and TinyRunDir.REQUIRED_FILES == ("tiny.json", "model.keras")
+    (tmp_path / "tiny.json").write_text('{"side": 3}')
+    with pytest.raises(ValueError, match=r"model.keras: file not found \(is .* a tiny run directory\?\)"):
+        TinyRunDir.validate(tmp_path)
+    (tmp_path / "model.keras").write_bytes(b"")
+    assert TinyRunDir.is_run_dir(tmp_path) and TinyRunDir.validate(tmp_path) == {"side": 3}
 
 
 def test_run_dir_base_reads_settings_metrics_and_the_training_mesh(tmp_path):
@@ -184,9 +205,9 @@ def test_run_dir_base_reads_settings_metrics_and_the_training_mesh(tmp_path):
     with pytest.raises(ValueError, match="metrics.json: expected a JSON object"):
         Tiny.read_metrics(tmp_path / "run")
     aae = write_aae_run(tmp_path / "aae")
-    assert aae_run.AAERunDir.training_mesh(aae) == ((aae / "mesh.ply").resolve(), 0.001)
+    assert AAERunDir.training_mesh(aae) == ((aae / "mesh.ply").resolve(), 0.001)
     keypointnet = write_keypointnet_run(tmp_path / "keypointnet")
-    assert keypointnet_run.KeypointNetRunDir.training_mesh(keypointnet) is None  # the config names no mesh
+    assert KeypointNetRunDir.training_mesh(keypointnet) is None  # the config names no mesh
 
 
 @pytest.mark.parametrize("method", sorted(RUN_DIR_MODULES))
@@ -233,13 +254,13 @@ def test_a_resumed_run_is_opened_with_its_config_and_trainer_files_checked(tmp_p
     from paz6d.run_dirs import OWNER_FILE, run_output
 
     run = write_aae_run(tmp_path / "run")
-    config = json.loads(aae_run.config_path(run).read_text())
-    aae_run.config_path(run).write_text(json.dumps({**config, "config": {**config["config"], "crop_size": -16}}))
+    config = json.loads(AAERunDir.config_path(run).read_text())
+    AAERunDir.config_path(run).write_text(json.dumps({**config, "config": {**config["config"], "crop_size": -16}}))
     with pytest.raises(ValueError, match=r"config.json: config: AAEConfig.crop_size: expected a positive multiple "
                                          r"of 2\*\*len\(filters\) = 16 pixels, got -16"):
         with run_output(run, "aae"):
             pass
-    aae_run.config_path(run).write_text(json.dumps(config))
+    AAERunDir.config_path(run).write_text(json.dumps(config))
     (run / "log.csv").write_text("step,loss\n10,0.5\nten,0.4\n")
     with pytest.raises(ValueError, match="log.csv: line 3"):
         with run_output(run, "aae"):
@@ -318,5 +339,5 @@ def test_keypoints_that_could_not_be_lifted_are_written_with_a_null_error(tmp_pa
     keypointnet_run.write_keypoints(tmp_path, HULL, np.isfinite(error), "triangulated", error)
     data = json.loads((tmp_path / keypointnet_run.KEYPOINTS_FILE).read_text())
     assert data["error"] == [0.5, None, 1.5, None, 0.1, 0.2, 0.3, 0.4]
-    points, usable = keypointnet_run.read_keypoints(tmp_path)
+    points, usable = KeypointNetRunDir.read_keypoints(tmp_path)
     assert usable.tolist() == np.isfinite(error).tolist() and np.allclose(points, HULL)

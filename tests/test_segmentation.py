@@ -19,6 +19,7 @@ from paz6d.segmentation import run_dir as run_files
 from paz6d.segmentation.config import QUICK, SegmentationTraining
 from paz6d.segmentation.dataset import crop_batch, load_mask_set
 from paz6d.segmentation.masks import blank_background, jitter_box, paste_mask, rle_from_mask
+from paz6d.segmentation.run_dir import SegmentationRunDir
 
 TINY = QUICK.replace(input_size=32, widths=(8, 16), batch_size=8, learning_rate=1e-2, checkpoint_every=20,
                      sample_every=40)
@@ -167,14 +168,14 @@ def test_pipelines_segment_inside_the_boxes_and_score(trained, generated, tmp_pa
 def test_training_refuses_a_folder_of_a_different_run(trained, generated):
     from paz6d.segmentation.train import train_segmentation
 
-    before = (trained / run_files.CONFIG_FILE).read_text()
+    before = (trained / SegmentationRunDir.CONFIG_FILE).read_text()
     for change, differ in (({"seed": 1}, "seed"), ({"settings": TINY.replace(input_size=48)}, "input_size")):
         job = SegmentationTraining(**{"dataset": generated, "out": trained, "steps": 40, "progress": False,
                                       "settings": TINY, **change})
         with pytest.raises(ValueError, match=rf"out: .* holds a different run \({differ} differ\); "
                                              r"choose another --out"):
             train_segmentation(job)
-    assert (trained / run_files.CONFIG_FILE).read_text() == before
+    assert (trained / SegmentationRunDir.CONFIG_FILE).read_text() == before
 
 
 def test_corrupt_run_directories_are_named(trained, tmp_path):

@@ -15,6 +15,7 @@ from paz6d.cli import build_parser
 from paz6d.cli_options import config_from_args
 from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.config import BACKBONE_SETTINGS, QUICK, SSDTraining
+from paz6d.ssd.run_dir import SSDRunDir
 
 BACKBONE = "efficientnet-lite0"
 TINY = QUICK.replace(input_size=128, width=0.25, learning_rate=5e-3, warmup_steps=0, expand_probability=0.0,
@@ -80,7 +81,7 @@ def test_backbone_ssd_maps_match_the_priors_its_body_is_partly_frozen_and_it_loa
     np.testing.assert_allclose(scaled, (pixels - 127.0) / 128.0, atol=1e-6)
     with pytest.raises(ValueError, match="backbone: only the light network"):
         build_ssd(3, "ssd300", backbone=BACKBONE)
-    save_ssd(model, run_files.model_path(tmp_path))  # a run directory, read back in safe mode
+    save_ssd(model, SSDRunDir.model_path(tmp_path))  # a run directory, read back in safe mode
     run_files.write_detector(tmp_path, "light", ["a", "b"], spec.to_dict(),
                              normalization=input_normalization(BACKBONE))
     detect = DetectSingleShot(tmp_path, score_threshold=0.0)

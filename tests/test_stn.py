@@ -13,6 +13,7 @@ from paz6d.run_dirs import is_run_dir
 from paz6d.stn import run_dir as run_files
 from paz6d.stn.model import (IDENTITY, AffineFromParameters, BilinearSampler, STNModelError, affine_sample,
                              build_classifier, load_classifier, save_classifier, tf, theta_to_pixel_matrix)
+from paz6d.stn.run_dir import STNRunDir
 
 
 def numpy_sampler(image: np.ndarray, theta: np.ndarray, size: tuple[int, int], padding: str) -> np.ndarray:
@@ -193,16 +194,16 @@ def test_tiny_training_lowers_the_loss_and_the_pipeline_reads_the_run(tmp_path):
 
 def test_corrupt_run_directories_are_reported_by_file(tmp_path):
     with pytest.raises(ValueError, match="is not a directory"):
-        run_files.validate(tmp_path / "missing")
+        STNRunDir.validate(tmp_path / "missing")
     with pytest.raises(ValueError, match="classifier.json: file not found"):
-        run_files.validate(tmp_path)
+        STNRunDir.validate(tmp_path)
     run_files.write_classifier(tmp_path, 32, 24, True, [str(d) for d in range(10)], "zeros")
     with pytest.raises(ValueError, match="model.keras: file not found"):
-        run_files.validate(tmp_path)
-    (tmp_path / run_files.MODEL_FILE).write_bytes(b"garbage")
+        STNRunDir.validate(tmp_path)
+    (tmp_path / STNRunDir.MODEL_FILE).write_bytes(b"garbage")
     with pytest.raises(ValueError, match="model.keras"):
         run_files.read_model(tmp_path)
-    save_classifier(build_classifier(10, 40, transformer=True, filters=2), tmp_path / run_files.MODEL_FILE)
+    save_classifier(build_classifier(10, 40, transformer=True, filters=2), tmp_path / STNRunDir.MODEL_FILE)
     with pytest.raises(ValueError, match="canvas_size 32"):
         run_files.read_model(tmp_path)
     path = tmp_path / run_files.CLASSIFIER_FILE

@@ -30,6 +30,7 @@ import numpy as np
 from paz6d.aae import run_dir as run_files
 from paz6d.aae.codebook import Codebook
 from paz6d.aae.model import encode_function, encoder_of, to_model_input
+from paz6d.aae.run_dir import AAERunDir
 from paz6d.abstract import Box2D, KeyedStep, Pose6D, Processor, SequentialProcessor
 from paz6d.backend import quaternion
 from paz6d.backend.boxes import check_box_in_image, overlaps_image
@@ -317,7 +318,7 @@ class ImplicitPose6D(SequentialProcessor):
                  neighbour_radius_deg: float = 15.0, top_k: int = 1, class_name: str | None = None,
                  box_variants: BoxVariants | None = None, viewpoints: ViewpointRange | None = None):
         super().__init__(name="ImplicitPose6D")
-        config = run_files.read_config(run_dir)["config"]
+        config = AAERunDir.read_config(run_dir)["config"]
         self.crop_size, self.padding = int(config["crop_size"]), float(config["padding"])
         if int(top_k) < 1 or int(neighbours) < 1:
             raise ValueError(f"top_k/neighbours: expected at least 1, got {top_k}, {neighbours}")

@@ -131,14 +131,6 @@ class AAERunDir(RunDir):
         return run_dir
 
 
-# the module's functions, as its callers use them
-KIND, MARKER_FILES, REQUIRED_FILES = AAERunDir.KIND, AAERunDir.MARKER_FILES, AAERunDir.REQUIRED_FILES
-CONFIG_FILE, MODEL_FILE, SUMMARY_FILE = AAERunDir.CONFIG_FILE, AAERunDir.MODEL_FILE, AAERunDir.METRICS_FILE
-config_path, model_path = AAERunDir.config_path, AAERunDir.model_path
-read_config, write_config, validate = AAERunDir.read_config, AAERunDir.write_config, AAERunDir.validate
-write_summary = AAERunDir.write_metrics
-
-
 def object_path(run_dir: str | Path) -> Path:
     """Where the object geometry is (or will be) saved."""
     return Path(run_dir) / OBJECT_FILE
@@ -188,4 +180,4 @@ def read_codebook(run_dir: str | Path) -> Codebook:
 
 def read_model(run_dir: str | Path):
     """The trained autoencoder (imports TensorFlow)."""
-    return load_model(_required(model_path(run_dir)))
+    return load_model(_required(AAERunDir.model_path(run_dir)))

@@ -21,6 +21,7 @@ import numpy as np
 from paz6d.aae import run_dir as run_files
 from paz6d.aae.codebook import fibonacci_sphere, look_at_rotations
 from paz6d.aae.config import QUICK, AAEConfig, check_crop_box
+from paz6d.aae.run_dir import AAERunDir
 from paz6d.backend.files import read_cache, save_npz_atomically
 from paz6d.training.precision import resolve_precision
 
@@ -29,9 +30,9 @@ def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEC
                  dataset: Path | None, crop_box: str) -> tuple[AAEConfig, int]:
     """Writes ``config.json`` for a new run (``precision`` resolved), or reads the stored one (only ``steps``
     may change)."""
-    path = run_files.config_path(run_dir)
+    path = AAERunDir.config_path(run_dir)
     if path.exists():
-        stored = run_files.read_config(run_dir)  # every setting checked (AAERunDir.check_config)
+        stored = AAERunDir.read_config(run_dir)  # every setting checked (AAERunDir.check_config)
         stored_config = AAEConfig.from_dict(stored["config"])
         if Path(stored["mesh"]).resolve() != mesh_path.resolve() or stored["mesh_scale"] != mesh_scale:
             raise ValueError(f"{path}: this run directory was trained on {stored['mesh']} (scale "
@@ -46,7 +47,7 @@ def _prepare_run(run_dir: Path, mesh_path: Path, mesh_scale: float, config: AAEC
         config, seed = replace(stored_config, steps=config.steps), int(stored["seed"])
     else:
         config = replace(config, precision=resolve_precision(config.precision))
-    run_files.write_config(run_dir, config.to_dict(), mesh_path, mesh_scale, seed, dataset, crop_box)
+    AAERunDir.write_config(run_dir, config.to_dict(), mesh_path, mesh_scale, seed, dataset, crop_box)
     return config, seed
 
 
@@ -200,7 +201,7 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
     tick = time.perf_counter()
     training = trainer.fit()
     timings["training_seconds"] = time.perf_counter() - tick
-    model_path = run_files.model_path(run_dir)
+    model_path = AAERunDir.model_path(run_dir)
     save_model(model, model_path)
 
     tick = time.perf_counter()
@@ -216,5 +217,5 @@ def train_aae(mesh_path: str | Path, run_dir: str | Path, config: AAEConfig = QU
                "model_samples_per_second": training.model_samples_per_second,
                "precision": config.precision, "codebook_size": len(codebook),
                "dataset_pairs": 0 if pairs is None else len(pairs), **timings}
-    run_files.write_summary(run_dir, summary)
+    AAERunDir.write_metrics(run_dir, summary)
     return summary

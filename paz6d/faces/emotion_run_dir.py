@@ -30,12 +30,6 @@ class EmotionRunDir(RunDir):
     MESH_FIELDS = None
 
 
-# the module's functions, as its callers use them
-KIND, MARKER_FILES, REQUIRED_FILES = EmotionRunDir.KIND, EmotionRunDir.MARKER_FILES, EmotionRunDir.REQUIRED_FILES
-MODEL_FILE, METRICS_FILE = EmotionRunDir.MODEL_FILE, EmotionRunDir.METRICS_FILE
-model_path, validate = EmotionRunDir.model_path, EmotionRunDir.validate
-
-
 def read_model(run_dir: str | Path):
     """The trained mini-Xception (Keras safe mode; imports TensorFlow).
 
@@ -44,4 +38,4 @@ def read_model(run_dir: str | Path):
     """
     from paz6d.backend.tensorflow_guard import load_keras_model
 
-    return load_keras_model(model_path(validate(run_dir)))
+    return load_keras_model(EmotionRunDir.model_path(EmotionRunDir.validate(run_dir)))

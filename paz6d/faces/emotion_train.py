@@ -38,6 +38,7 @@ from paz6d.datasets import ferplus as ferplus_data
 from paz6d.datasets.fer2013 import CSV_FILE, FER2013_CLASSES, load_fer2013_csv, load_image_folder
 from paz6d.faces import emotion_run_dir as run_files
 from paz6d.faces.emotion_config import EmotionTraining
+from paz6d.faces.emotion_run_dir import EmotionRunDir
 from paz6d.processors.image import ConvertColorSpace
 from paz6d.synthesis.augment import RandomAffine, RandomBrightness, RandomContrast, RandomFlipLeftRight
 
@@ -300,12 +301,12 @@ def train_emotion(job: EmotionTraining) -> dict:
                       progress=job.progress, compile_step=not job.eager)
     summary = trainer.fit()
     matrix = validate(model, summary.final_step, run_dir / run_files.CONFUSION_PNG)
-    save_keras_model_atomically(model, run_files.model_path(run_dir))
+    save_keras_model_atomically(model, EmotionRunDir.model_path(run_dir))
     write_json_atomically(run_dir / run_files.CLASSES_FILE, list(class_names))
     metrics = {"step": summary.final_step, "validation_accuracy": float(np.trace(matrix) / matrix.sum()),
                "validation_count": int(matrix.sum()), "confusion_matrix": matrix.tolist(),
                "class_names": list(class_names), "train_metrics": summary.metrics}
-    write_json_atomically(run_dir / run_files.METRICS_FILE, metrics, indent=2)
+    write_json_atomically(run_dir / EmotionRunDir.METRICS_FILE, metrics, indent=2)
     print(f"emotion: step {summary.final_step}, validation accuracy {metrics['validation_accuracy']:.3f} "
-          f"on {metrics['validation_count']} faces; model in {run_files.model_path(run_dir)}")
+          f"on {metrics['validation_count']} faces; model in {EmotionRunDir.model_path(run_dir)}")
     return metrics

@@ -31,6 +31,7 @@ from paz6d.backend.image import as_image
 from paz6d.backend.pnp import PnPError
 from paz6d.hrnet import run_dir as run_files
 from paz6d.hrnet.heatmaps import DECODERS, DEFAULT_DECODER, decode_heatmaps
+from paz6d.hrnet.run_dir import HRNetRunDir
 from paz6d.keypointnet.pipeline import KeypointPnP
 from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
@@ -89,7 +90,7 @@ class HRNetKeypoints2D(SequentialProcessor):
         from paz6d.hrnet.model import inference_function
 
         self.run_dir = Path(run_dir)
-        description = run_files.validate(self.run_dir)
+        description = HRNetRunDir.validate(self.run_dir)
         self.input_size, self.margin = int(description["input_size"]), float(description["margin"])
         self.stride, self.points_model = int(description["stride"]), description["points_model"]
         self.model = run_files.read_model(self.run_dir, description)
@@ -155,7 +156,7 @@ class HRNetPose6D(HRNetKeypoints2D):
         self.add(KeyedStep(KeypointPnP(self.points_model, ransac_threshold, self.input_size, 4, self.class_name),
                            ("keypoints", "windows", "cameras"), "poses", "solve_pnp", per_sample=True,
                            failures=(PnPError,)))
-        self.add(KeyedStep(RefineWithDepth(lambda: run_files.HRNetRunDir.surface_points(self.run_dir)),
+        self.add(KeyedStep(RefineWithDepth(lambda: HRNetRunDir.surface_points(self.run_dir)),
                            ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth", per_sample=True))
 
     @property

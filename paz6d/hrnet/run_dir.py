@@ -30,9 +30,8 @@ import numpy as np
 from paz6d.backend.checks import as_array
 from paz6d.backend.files import load_run_json, write_json_atomically
 from paz6d.hrnet.config import HRNetConfig
-from paz6d.run_dir import RunDir
+from paz6d.run_dir import DescribedRunDir
 
-DESCRIPTION_FILE = "hrnet.json"
 EVALUATION_FILE = "evaluation.json"
 KEYPOINTS_PLOT = "keypoints.png"
 PCK_PLOT = "pck.png"
@@ -44,13 +43,12 @@ DESCRIPTION_KEYS = ("input_size", "margin", "stride", "num_keypoints", "domain",
 CONFIG_KEYS = ("mesh_path", "seed", "config", "settings")
 
 
-class HRNetRunDir(RunDir):
+class HRNetRunDir(DescribedRunDir):
     """A ``paz6d train hrnet`` run directory (files in the module docstring)."""
 
     KIND = "an HRNet"
     SETTINGS = HRNetConfig
-    MARKER_FILES = (DESCRIPTION_FILE,)
-    REQUIRED_FILES = (DESCRIPTION_FILE, RunDir.MODEL_FILE)
+    DESCRIPTION_FILE = "hrnet.json"
 
     @classmethod
     def check_config(cls, config: dict[str, Any], path: Path) -> dict[str, Any]:
@@ -61,18 +59,29 @@ class HRNetRunDir(RunDir):
         return super().check_config(config, path)
 
     @classmethod
-    def validate(cls, run_dir: str | Path) -> dict[str, Any]:
-        """:meth:`RunDir.validate` (``hrnet.json`` and ``model.keras`` present, ``config.json`` checked), then
-        ``hrnet.json``; returns the description."""
-        return read_description(super().validate(run_dir))
-
-
-# the module's functions, as its callers use them
-KIND, MARKER_FILES, REQUIRED_FILES = HRNetRunDir.KIND, HRNetRunDir.MARKER_FILES, HRNetRunDir.REQUIRED_FILES
-CONFIG_FILE, MODEL_FILE, METRICS_FILE = HRNetRunDir.CONFIG_FILE, HRNetRunDir.MODEL_FILE, HRNetRunDir.METRICS_FILE
-model_path, views_path = HRNetRunDir.model_path, HRNetRunDir.views_path
-read_config, write_config, validate = HRNetRunDir.read_config, HRNetRunDir.write_config, HRNetRunDir.validate
-read_metrics, write_metrics = HRNetRunDir.read_metrics, HRNetRunDir.write_metrics
+    def read_description(cls, run_dir: str | Path) -> dict[str, Any]:
+        """``hrnet.json``, checked: positive ``input_size``/``stride``/``num_keypoints`` (integers) and
+        ``margin``/``sigma``, a known ``domain``, ``points_model`` finite ``(num_keypoints, 3)`` (returned
+        as an array), ``input_size`` divisible by ``stride``."""
+        path = Path(run_dir) / cls.DESCRIPTION_FILE
+        data = load_run_json(path, DESCRIPTION_KEYS, cls.KIND)
+        for name in ("input_size", "stride", "num_keypoints"):
+            _positive(data, name, path, integer=True)
+        for name in ("margin", "sigma"):
+            _positive(data, name, path, integer=False)
+        if data["input_size"] % data["stride"]:
+            raise ValueError(f"{path}: input_size: expected a multiple of stride={data['stride']}, "
+                             f"got {data['input_size']}")
+        if data["domain"] not in DOMAINS:
+            raise ValueError(f"{path}: domain: expected one of {DOMAINS}, got {data['domain']!r}")
+        try:
+            points = np.asarray(data["points_model"], dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"{path}: points_model: expected a list of numeric (x, y, z) rows") from None
+        if points.shape != (data["num_keypoints"], 3) or not np.all(np.isfinite(points)):
+            raise ValueError(f"{path}: points_model: expected finite ({data['num_keypoints']}, 3) metres, "
+                             f"got shape {points.shape}")
+        return {**data, "points_model": points}
 
 
 def held_out_crops_path(run_dir: str | Path) -> Path:
@@ -98,7 +107,7 @@ def write_description(run_dir: str | Path, input_size: int, margin: float, strid
             "num_keypoints": len(points_model), "domain": domain, "sigma": float(sigma),
             "points_model": points_model.tolist(), "units": "metres", "class_name": class_name}
     Path(run_dir).mkdir(parents=True, exist_ok=True)
-    return write_json_atomically(Path(run_dir) / DESCRIPTION_FILE, data, indent=2)
+    return write_json_atomically(Path(run_dir) / HRNetRunDir.DESCRIPTION_FILE, data, indent=2)
 
 
 def _positive(data: dict, name: str, path: Path, integer: bool) -> float:
@@ -111,28 +120,8 @@ def _positive(data: dict, name: str, path: Path, integer: bool) -> float:
 
 
 def read_description(run_dir: str | Path) -> dict[str, Any]:
-    """``hrnet.json``, checked: positive ``input_size``/``stride``/``num_keypoints`` (integers) and
-    ``margin``/``sigma``, a known ``domain``, ``points_model`` finite ``(num_keypoints, 3)`` (returned
-    as an array), ``input_size`` divisible by ``stride``."""
-    path = Path(run_dir) / DESCRIPTION_FILE
-    data = load_run_json(path, DESCRIPTION_KEYS, KIND)
-    for name in ("input_size", "stride", "num_keypoints"):
-        _positive(data, name, path, integer=True)
-    for name in ("margin", "sigma"):
-        _positive(data, name, path, integer=False)
-    if data["input_size"] % data["stride"]:
-        raise ValueError(f"{path}: input_size: expected a multiple of stride={data['stride']}, "
-                         f"got {data['input_size']}")
-    if data["domain"] not in DOMAINS:
-        raise ValueError(f"{path}: domain: expected one of {DOMAINS}, got {data['domain']!r}")
-    try:
-        points = np.asarray(data["points_model"], dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{path}: points_model: expected a list of numeric (x, y, z) rows") from None
-    if points.shape != (data["num_keypoints"], 3) or not np.all(np.isfinite(points)):
-        raise ValueError(f"{path}: points_model: expected finite ({data['num_keypoints']}, 3) metres, "
-                         f"got shape {points.shape}")
-    return {**data, "points_model": points}
+    """``hrnet.json``, checked (:meth:`HRNetRunDir.read_description`)."""
+    return HRNetRunDir.read_description(run_dir)
 
 
 def write_evaluation(run_dir: str | Path, evaluation: dict[str, Any]) -> Path:
@@ -149,12 +138,13 @@ def read_model(run_dir: str | Path, description: dict[str, Any] | None = None):
     from paz6d.hrnet.model import load_hrnet
 
     description = read_description(run_dir) if description is None else description
-    model = load_hrnet(model_path(run_dir))
+    path = HRNetRunDir.model_path(run_dir)
+    model = load_hrnet(path)
     size = model.input_shape[1]
     heatmaps = model.output["heatmaps"].shape
     expected = (description["input_size"] // description["stride"], description["num_keypoints"])
     if size != description["input_size"] or (heatmaps[1], heatmaps[3]) != expected:
-        raise ValueError(f"{model_path(run_dir)}: the model takes {size}-pixel crops and predicts {heatmaps[3]} "
-                         f"maps of {heatmaps[1]} cells, but {Path(run_dir) / DESCRIPTION_FILE} describes "
+        raise ValueError(f"{path}: the model takes {size}-pixel crops and predicts {heatmaps[3]} maps of "
+                         f"{heatmaps[1]} cells, but {Path(run_dir) / HRNetRunDir.DESCRIPTION_FILE} describes "
                          f"{description['input_size']}-pixel crops and {expected[1]} maps of {expected[0]} cells")
     return model

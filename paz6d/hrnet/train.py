@@ -30,6 +30,7 @@ from paz6d.hrnet.config import FIXED_SETTINGS, MARGIN, STRIDE, HRNetConfig, HRNe
 from paz6d.hrnet.evaluate import (HEADLINE_ALPHA, save_keypoint_grid, save_pck_plot, score_keypoints, score_poses,
                                   true_keypoints)
 from paz6d.hrnet.heatmaps import DEFAULT_DECODER, decode_heatmaps
+from paz6d.hrnet.run_dir import HRNetRunDir
 from paz6d.training.precision import resolve_precision
 from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
 from paz6d.processors.predict import predict_in_batches
@@ -47,11 +48,11 @@ def _prepare_run_dir(job: HRNetTraining, settings: HRNetConfig) -> dict:
     """Writes ``config.json``, or checks that an existing one describes the same run (``steps`` may grow)."""
     config = {"mesh_path": str(Path(job.mesh).resolve()), "mesh_scale": job.mesh_scale, "seed": job.seed,
               "config": job.config, "settings": settings.to_dict()}
-    previous = run_files.read_config(job.out)
+    previous = HRNetRunDir.read_config(job.out)
     if previous is None:
-        run_files.write_config(job.out, config)
+        HRNetRunDir.write_config(job.out, config)
         return config
-    path = Path(job.out) / run_files.CONFIG_FILE
+    path = Path(job.out) / HRNetRunDir.CONFIG_FILE
     for key in ("mesh_path", "mesh_scale", "seed", "config"):
         if previous[key] != config[key]:
             raise ValueError(f"{path}: this run directory holds a different run ({key}={previous[key]!r}, now "
@@ -64,7 +65,7 @@ def _prepare_run_dir(job: HRNetTraining, settings: HRNetConfig) -> dict:
                          f"now {getattr(settings, key)!r}); choose another --out")
     if earlier.steps != settings.steps:
         previous["settings"]["steps"] = settings.steps  # extending (or shortening) a run is allowed
-        run_files.write_config(job.out, previous)
+        HRNetRunDir.write_config(job.out, previous)
     return previous
 
 
@@ -182,8 +183,8 @@ def train_hrnet(job: HRNetTraining) -> dict:
     def render(count, seed):
         return lambda: render_views(job.mesh, count, seed, sampling, job.mesh_scale, job.workers, progress=job.progress)
 
-    train_views = cached_views(run_files.views_path(out, "train"), render(settings.views, job.seed))
-    validation_views = cached_views(run_files.views_path(out, "val"),
+    train_views = cached_views(HRNetRunDir.views_path(out, "train"), render(settings.views, job.seed))
+    validation_views = cached_views(HRNetRunDir.views_path(out, "val"),
                                     render(settings.validation_views, job.seed + VALIDATION_SEED_OFFSET))
     render_seconds = time.perf_counter() - started
 
@@ -210,7 +211,7 @@ def train_hrnet(job: HRNetTraining) -> dict:
                                                      settings),
                       progress=job.progress, prefetch=1)
     training = trainer.fit()
-    hr.save_hrnet(model, run_files.model_path(out))
+    hr.save_hrnet(model, HRNetRunDir.model_path(out))
     run_files.write_description(out, settings.input_size, MARGIN, STRIDE, domain, settings.sigma, points_model)
     train_seconds = time.perf_counter() - started - render_seconds
 
@@ -228,9 +229,9 @@ def train_hrnet(job: HRNetTraining) -> dict:
                f"pck@{HEADLINE_ALPHA}": evaluation[f"pck@{HEADLINE_ALPHA}"],
                "median_px": evaluation["decoders"][DEFAULT_DECODER]["median_px"],
                "add_recall_0.1d": evaluation["pnp"]["add_recall_0.1d"]}
-    previous = run_files.read_metrics(out)
+    previous = HRNetRunDir.read_metrics(out)
     if training.final_step == training.start_step and previous is not None:
         # a finished run re-run (e.g. to re-score it): keep the numbers of the run that trained
         summary.update({key: previous[key] for key in TRAINING_RECORD if key in previous})
-    run_files.write_metrics(out, summary)
+    HRNetRunDir.write_metrics(out, summary)
     return summary

@@ -34,6 +34,7 @@ from paz6d.backend.square_crop import square_window
 from paz6d.keypointnet import run_dir as run_files
 from paz6d.keypointnet.config import CROP_JITTERS, check_crops
 from paz6d.keypointnet.keypoints import DECODERS, decode_keypoints, keypoint_spread
+from paz6d.keypointnet.run_dir import KeypointNetRunDir
 from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
 from paz6d.processors.pose import DepthFromBox, SolvePnP, SolveWeightedPnP
@@ -234,10 +235,10 @@ class KeypointPose6D(SequentialProcessor):
 
         self.run_dir = Path(run_dir)
         self.camera = camera
-        config = run_files.read_config(self.run_dir)
+        config = KeypointNetRunDir.read_config(self.run_dir)
         self.input_size, self.margin = int(config["input_size"]), float(config["margin"])
         self.stride = int(config["downsample"])
-        self.points_model, self.usable = run_files.read_keypoints(self.run_dir)
+        self.points_model, self.usable = KeypointNetRunDir.read_keypoints(self.run_dir)
         self.model = run_files.read_model(self.run_dir)
         count = int(self.model.output["uv"].shape[1])
         if count != len(self.points_model):
@@ -270,7 +271,7 @@ class KeypointPose6D(SequentialProcessor):
         if depth_from_box:
             self.add(KeyedStep(DepthFromBox(self.hull_points), ("poses", "boxes", "cameras"), "poses",
                                "depth_from_box", per_sample=True))
-        self.add(KeyedStep(RefineWithDepth(lambda: run_files.KeypointNetRunDir.surface_points(self.run_dir)),
+        self.add(KeyedStep(RefineWithDepth(lambda: KeypointNetRunDir.surface_points(self.run_dir)),
                            ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth", per_sample=True))
 
     # -- inputs ---------------------------------------------------------------------------------

@@ -53,18 +53,6 @@ class KeypointNetRunDir(CropRunDir):
         return points, usable
 
 
-# the module's functions, as its callers use them
-KIND, MARKER_FILES, REQUIRED_FILES = (KeypointNetRunDir.KIND, KeypointNetRunDir.MARKER_FILES,
-                                      KeypointNetRunDir.REQUIRED_FILES)
-CONFIG_FILE, MODEL_FILE, METRICS_FILE = RunDir.CONFIG_FILE, RunDir.MODEL_FILE, RunDir.METRICS_FILE
-config_path, model_path, views_path = (KeypointNetRunDir.config_path, KeypointNetRunDir.model_path,
-                                       KeypointNetRunDir.views_path)
-read_config, write_config, validate = (KeypointNetRunDir.read_config, KeypointNetRunDir.write_config,
-                                       KeypointNetRunDir.validate)
-read_keypoints = KeypointNetRunDir.read_keypoints
-write_metrics = KeypointNetRunDir.write_metrics
-
-
 def _numeric_array(value, path: Path, name: str) -> np.ndarray:
     try:
         return np.asarray(value, dtype=np.float64)
@@ -101,7 +89,7 @@ def write_object(run_dir: str | Path, diameter: float, hull_points) -> Path:
 def read_object(run_dir: str | Path) -> dict:
     """``{"diameter": float, "hull_points": (M, 3)}`` (metres) from a run's ``object.json``."""
     path = Path(run_dir) / OBJECT_FILE
-    data = load_run_json(path, ("diameter", "hull_points"), KIND)
+    data = load_run_json(path, ("diameter", "hull_points"), KeypointNetRunDir.KIND)
     hull = _numeric_array(data["hull_points"], path, "hull_points")
     if hull.ndim != 2 or hull.shape[1] != 3 or len(hull) < 4 or not np.all(np.isfinite(hull)):
         raise ValueError(f"{path}: hull_points: expected finite (M >= 4, 3) metres, got shape {hull.shape}")
@@ -112,7 +100,7 @@ def read_model(run_dir: str | Path):
     """The trained KeypointNet (imports TensorFlow)."""
     from paz6d.keypointnet.model import load_keypointnet
 
-    return load_keypointnet(model_path(run_dir))
+    return load_keypointnet(KeypointNetRunDir.model_path(run_dir))
 
 
 def evaluation_path(run_dir: str | Path) -> Path:

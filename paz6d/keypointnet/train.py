@@ -42,6 +42,7 @@ from paz6d.keypointnet.config import (MAX_LIFTING_ERROR, ORIENTATION_WEIGHT, OTH
                                       SUPERVISED_WEIGHTS, KeypointConfig, KeypointTraining, anchors_due,
                                       pair_angle_at)
 from paz6d.keypointnet.orientation import canonical_poses, chart_targets, one_hot, training_charts
+from paz6d.keypointnet.run_dir import KeypointNetRunDir
 from paz6d.processors.predict import predict_in_batches
 from paz6d.training.precision import resolve_precision
 from paz6d.training.settings import changed_settings, recorded_settings
@@ -62,9 +63,9 @@ def _prepare_run_dir(job: KeypointTraining, settings: KeypointConfig, object_dia
               "input_size": settings.input_size, "margin": sampling.margin, "downsample": settings.downsample,
               "settings": settings.to_dict(), "sampling": sampling.to_dict()}
     job.out.mkdir(parents=True, exist_ok=True)
-    path = run_files.config_path(job.out)
+    path = KeypointNetRunDir.config_path(job.out)
     if path.exists():
-        previous = run_files.read_config(job.out)
+        previous = KeypointNetRunDir.read_config(job.out)
         for key in ("mode", "config", "seed", "mesh_path", "mesh_scale", "input_size", "downsample", "orientation"):
             if previous.get(key) != config[key]:
                 raise ValueError(f"{path}: this run directory holds a different run ({key}={previous.get(key)!r}, "
@@ -82,9 +83,9 @@ def _prepare_run_dir(job: KeypointTraining, settings: KeypointConfig, object_dia
                              f"now {config['sampling']!r}); resuming would mix two trainings, choose another --out")
         if earlier.steps != settings.steps:
             previous["settings"]["steps"] = settings.steps  # extending a run is allowed
-            run_files.write_config(job.out, previous)
+            KeypointNetRunDir.write_config(job.out, previous)
         return previous
-    run_files.write_config(job.out, config)
+    KeypointNetRunDir.write_config(job.out, config)
     return config
 
 
@@ -438,9 +439,9 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         return lambda: render_views(job.mesh, count, seed, sampling, job.mesh_scale, job.workers,
                                     progress=job.progress)
 
-    train_views = views if views is not None else cached_views(run_files.views_path(out, "train"),
-                                                               render(settings.views, job.seed))
-    validation_views = cached_views(run_files.views_path(out, "val"),
+    train_views = views if views is not None else cached_views(KeypointNetRunDir.views_path(out, "train"),
+                                                                 render(settings.views, job.seed))
+    validation_views = cached_views(KeypointNetRunDir.views_path(out, "val"),
                                     render(settings.validation_views, job.seed + 10_000))
     render_seconds = time.perf_counter() - started
 
@@ -491,19 +492,19 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
                       sample_callback=_sample_drawer(model, sample_images, sample_targets), progress=job.progress,
                       prefetch=1)
     training = trainer.fit()
-    kp.save_keypointnet(model, run_files.model_path(out))
+    kp.save_keypointnet(model, KeypointNetRunDir.model_path(out))
     train_seconds = time.perf_counter() - started - render_seconds
 
     if views is None:  # rendered views: lift from unseen whole images cropped as at inference
         lifting_crops = _cached_lifting_crops(
-            run_files.views_path(out, "lift"),
+            KeypointNetRunDir.views_path(out, "lift"),
             lambda: render_test_images(job.mesh, settings.lift_views, job.seed + 20_000, sampling,
                                        job.mesh_scale, job.workers, progress=job.progress),
             sampling.camera.K, sampling.margin, settings.input_size)
     else:  # crops cut from a data set's images: already made as at inference
         lifting_crops = fixed_crops(train_views, job.seed + 1, settings.lift_views)
     lifting = lift_run_keypoints(model, lifting_crops, settings, object_diameter, out, keypoints_model, symmetry)
-    points_model, usable = run_files.read_keypoints(out)
+    points_model, usable = KeypointNetRunDir.read_keypoints(out)
 
     images, K, T = fixed_crops(validation_views, job.seed + 2)
     outputs = predict_crops(model, images)
@@ -529,5 +530,5 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
         summary[f"reprojection_px_median{suffix}"] = float(np.median(reprojection)) if reprojection.size else None
     summary["spread_px_median"] = float(np.median(keypoint_spread(outputs["probabilities"], outputs["uv"], downsample)))
     summary = null_non_finite(summary)  # a keypoint that could not be lifted has no error: null
-    run_files.write_metrics(out, summary)
+    KeypointNetRunDir.write_metrics(out, summary)
     return summary

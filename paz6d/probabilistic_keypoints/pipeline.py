@@ -27,6 +27,7 @@ from paz6d.backend.image import as_image
 from paz6d.backend.pnp import PnPError
 from paz6d.probabilistic_keypoints import run_dir as run_files
 from paz6d.probabilistic_keypoints.config import RANSAC_THRESHOLD, ROBUST_SCALE
+from paz6d.probabilistic_keypoints.run_dir import ProbabilisticKeypointsRunDir
 from paz6d.processors.crops import CropToImage, SquareCrop
 from paz6d.processors.keypoints import ToKeypoints2D
 from paz6d.processors.pose import SolveWeightedPnP
@@ -105,11 +106,11 @@ class ProbabilisticKeypointPose6D(SequentialProcessor):
         super().__init__(name="ProbabilisticKeypointPose6D")
         from paz6d.probabilistic_keypoints.model import inference_function
 
-        self.run_dir = run_files.validate(run_dir)
+        self.run_dir = ProbabilisticKeypointsRunDir.validate(run_dir)
         self.camera = camera
-        config = run_files.read_config(self.run_dir)
+        config = ProbabilisticKeypointsRunDir.read_config(self.run_dir)
         self.input_size, self.margin = int(config["input_size"]), float(config["margin"])
-        self.points_model, self.covariance_scale = run_files.read_keypoints(self.run_dir)
+        self.points_model, self.covariance_scale = ProbabilisticKeypointsRunDir.read_keypoints(self.run_dir)
         self.model = run_files.read_model(self.run_dir)
         count = int(self.model.output["uv"].shape[1])
         if count != len(self.points_model):
@@ -126,7 +127,7 @@ class ProbabilisticKeypointPose6D(SequentialProcessor):
         self.add(KeyedStep(WeightedPnP(self.points_model, self.input_size, robust_scale=robust_scale,
                                        class_name=class_name), ("keypoints", "covariances", "windows", "cameras"),
                            "poses", "solve_pnp", per_sample=True, failures=(PnPError,)))
-        surface_points = run_files.ProbabilisticKeypointsRunDir.surface_points
+        surface_points = ProbabilisticKeypointsRunDir.surface_points
         self.add(KeyedStep(RefineWithDepth(lambda: surface_points(self.run_dir)),
                            ("poses", "depths", "boxes", "cameras"), "poses", "refine_with_depth", per_sample=True))
 

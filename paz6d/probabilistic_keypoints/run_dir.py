@@ -58,15 +58,6 @@ class ProbabilisticKeypointsRunDir(CropRunDir):
         return points, number_field(data, "covariance_scale", str(path), positive=True)
 
 
-# the module's functions, as its callers use them
-_RUN_DIR = ProbabilisticKeypointsRunDir
-KIND, MARKER_FILES, REQUIRED_FILES = _RUN_DIR.KIND, _RUN_DIR.MARKER_FILES, _RUN_DIR.REQUIRED_FILES
-CONFIG_FILE, MODEL_FILE, METRICS_FILE = _RUN_DIR.CONFIG_FILE, _RUN_DIR.MODEL_FILE, _RUN_DIR.METRICS_FILE
-path_of, views_path = _RUN_DIR.path_of, _RUN_DIR.views_path
-read_config, write_config, validate = _RUN_DIR.read_config, _RUN_DIR.write_config, _RUN_DIR.validate
-read_metrics, read_keypoints = _RUN_DIR.read_metrics, _RUN_DIR.read_keypoints
-
-
 def write_keypoints(run_dir: str | Path, points_model, covariance_scale: float = 1.0, targets=None,
                     method: str = "targets") -> Path:
     """Writes ``gaussian_keypoints.json``: ``points_model (N, 3)`` metres (what PnP uses), the covariance
@@ -76,18 +67,19 @@ def write_keypoints(run_dir: str | Path, points_model, covariance_scale: float =
         raise ValueError(f"covariance_scale: expected a positive factor, got {covariance_scale}")
     data = {"points_model": points_model.tolist(), "units": "metres", "covariance_scale": float(covariance_scale),
             "method": str(method), "targets": None if targets is None else as_array(targets, "targets", (3,)).tolist()}
-    return write_json_atomically(path_of(run_dir, KEYPOINTS_FILE), data, indent=2)
+    return write_json_atomically(Path(run_dir) / KEYPOINTS_FILE, data, indent=2)
 
 
 def write_json(run_dir: str | Path, name: str, data: dict[str, Any]) -> Path:
     """Writes ``metrics.json`` or ``evaluation.json``."""
-    if name not in (METRICS_FILE, EVALUATION_FILE):
-        raise ValueError(f"name: expected {METRICS_FILE} or {EVALUATION_FILE}, got {name!r}")
-    return write_json_atomically(path_of(run_dir, name), data, indent=2)
+    metrics_file = ProbabilisticKeypointsRunDir.METRICS_FILE
+    if name not in (metrics_file, EVALUATION_FILE):
+        raise ValueError(f"name: expected {metrics_file} or {EVALUATION_FILE}, got {name!r}")
+    return write_json_atomically(Path(run_dir) / name, data, indent=2)
 
 
 def read_model(run_dir: str | Path):
     """The trained network (imports TensorFlow)."""
     from paz6d.probabilistic_keypoints.model import load_model
 
-    return load_model(path_of(run_dir, MODEL_FILE))
+    return load_model(ProbabilisticKeypointsRunDir.model_path(run_dir))

@@ -32,6 +32,7 @@ from evaluation.calibration import ellipse_coverage, mahalanobis_squared, plot_c
 from evaluation.pose_errors import add_error, rotation_error_deg, translation_error
 from paz6d.backend import keypoints as keypoints_backend
 from paz6d.backend.files import finite_or_none, read_cache, save_npz_atomically
+from paz6d.probabilistic_keypoints.run_dir import ProbabilisticKeypointsRunDir
 from paz6d.training.precision import resolve_precision
 from paz6d.keypointnet.keypoints import triangulate_keypoints
 from paz6d.keypointnet.train import fixed_crops, inference_crops, supervised_keypoints
@@ -58,11 +59,11 @@ def _prepare_run_dir(job: ProbabilisticTraining, settings: ProbabilisticConfig, 
               "mesh_path": str(Path(job.mesh).resolve()), "mesh_scale": job.mesh_scale, "diameter": object_diameter,
               "input_size": settings.input_size, "margin": margin, "downsample": settings.downsample,
               "settings": settings.to_dict()}
-    path = run_files.path_of(job.out, run_files.CONFIG_FILE)
+    path = ProbabilisticKeypointsRunDir.config_path(job.out)
     if path.is_file():
-        check_same_run(path, run_files.read_config(job.out), config,
+        check_same_run(path, ProbabilisticKeypointsRunDir.read_config(job.out), config,
                        ("method", "config", "seed", "mesh_path", "mesh_scale"), settings, FIXED_SETTINGS)
-    run_files.write_config(job.out, config)
+    ProbabilisticKeypointsRunDir.write_config(job.out, config)
 
 
 def occluder(settings: ProbabilisticConfig, probability: float, margin: float,
@@ -305,11 +306,11 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
     def render(count, seed):
         return lambda: render_views(job.mesh, count, seed, sampling, job.mesh_scale, job.workers, progress=job.progress)
 
-    train_views = cached_views(run_files.views_path(out, "train"), render(settings.views, job.seed))
-    validation_views = cached_views(run_files.views_path(out, "val"),
+    train_views = cached_views(ProbabilisticKeypointsRunDir.views_path(out, "train"), render(settings.views, job.seed))
+    validation_views = cached_views(ProbabilisticKeypointsRunDir.views_path(out, "val"),
                                     render(settings.validation_views, job.seed + VALIDATION_SEED_OFFSET))
-    test = _cached_test_crops(run_files.views_path(out, "test"), job, settings, sampling, settings.test_images,
-                              job.seed + TEST_SEED_OFFSET)
+    test = _cached_test_crops(ProbabilisticKeypointsRunDir.views_path(out, "test"), job, settings, sampling,
+                              settings.test_images, job.seed + TEST_SEED_OFFSET)
     render_seconds = time.perf_counter() - started
 
     keypoints_model = supervised_keypoints(mesh, settings.num_keypoints, job.seed)
@@ -332,9 +333,9 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
                       settings.steps, checkpoint_every=settings.checkpoint_every, log_every=10,
                       sample_every=settings.sample_every,
                       sample_callback=_sample_drawer(sample_images), progress=job.progress, prefetch=1)
-    previous_metrics = run_files.read_metrics(out)
+    previous_metrics = ProbabilisticKeypointsRunDir.read_metrics(out)
     training = trainer.fit()
-    pk.save_model(model, run_files.path_of(out, run_files.MODEL_FILE))
+    pk.save_model(model, ProbabilisticKeypointsRunDir.model_path(out))
     train_seconds = time.perf_counter() - started - render_seconds
 
     images, K, T = fixed_crops(validation_views, job.seed + 2)
@@ -343,14 +344,13 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
     scale = fit_covariance_scale(projected_keypoints(keypoints_model, K, T), means, covariances)
     points_model = keypoints_model
     if settings.lifting == "triangulate":  # as KeypointNet: absorbs the network's 2D biases into the 3D model
-        lift = _cached_test_crops(run_files.views_path(out, "lift"), job, settings, sampling,
+        lift = _cached_test_crops(ProbabilisticKeypointsRunDir.views_path(out, "lift"), job, settings, sampling,
                                   settings.lift_images, job.seed + LIFT_SEED_OFFSET)
         lift_means, _ = predict_gaussians(model, lift["images"].astype(np.float32))
         points_model, _ = triangulate_keypoints(lift_means, lift["K"], lift["T_model2cam"])
     run_files.write_keypoints(out, points_model, scale, keypoints_model, settings.lifting)
     evaluation = evaluate_run(model, points_model, keypoints_model, scale, test, settings, vertices, object_diameter,
-                              job.seed, sampling.margin, run_files.path_of(out, run_files.CALIBRATION_PNG),
-                              run_files.path_of(out, run_files.EXAMPLES_PNG))
+                              job.seed, sampling.margin, out / run_files.CALIBRATION_PNG, out / run_files.EXAMPLES_PNG)
     run_files.write_json(out, run_files.EVALUATION_FILE, evaluation)
     training_figures = {"render_seconds": round(render_seconds, 1), "train_seconds": round(train_seconds, 1),
                         "total_seconds": round(time.perf_counter() - started, 1), "final_losses": training.metrics,
@@ -365,5 +365,5 @@ def train_probabilistic_keypoints(job: ProbabilisticTraining) -> dict:
                                      "weighted_pnp_add_recall_0.1d":
                                          evaluation[name]["weighted_pnp"]["add_recall_0.1d"]}
                               for name in ("clean", "occluded")}}
-    run_files.write_json(out, run_files.METRICS_FILE, summary)
+    run_files.write_json(out, ProbabilisticKeypointsRunDir.METRICS_FILE, summary)
     return summary

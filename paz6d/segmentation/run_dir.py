@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from paz6d.backend.files import load_run_json, write_json_atomically
-from paz6d.run_dir import RunDir
+from paz6d.run_dir import DescribedRunDir
 from paz6d.segmentation.config import SegmentationConfig
 
 SEGMENTER_FILE = "segmenter.json"
@@ -26,28 +26,30 @@ SEGMENTER_FILE = "segmenter.json"
 SEGMENTER_KEYS = ("input_size", "margin", "class_names", "threshold")
 
 
-class SegmentationRunDir(RunDir):
+class SegmentationRunDir(DescribedRunDir):
     """A ``paz6d train segmentation`` run directory (files in the module docstring)."""
 
     KIND = "a segmentation"
     SETTINGS = SegmentationConfig
-    MARKER_FILES = (SEGMENTER_FILE,)
-    REQUIRED_FILES = (SEGMENTER_FILE, RunDir.MODEL_FILE)
+    DESCRIPTION_FILE = SEGMENTER_FILE
     MESH_FIELDS = None
 
     @classmethod
-    def validate(cls, run_dir: str | Path) -> dict[str, Any]:
-        """:meth:`RunDir.validate` (``segmenter.json`` and ``model.keras`` present, ``config.json`` checked),
-        then ``segmenter.json``; returns the segmenter description."""
-        return read_segmenter(super().validate(run_dir))
-
-
-# the module's functions, as its callers use them
-_RUN_DIR = SegmentationRunDir
-KIND, MARKER_FILES, REQUIRED_FILES = _RUN_DIR.KIND, _RUN_DIR.MARKER_FILES, _RUN_DIR.REQUIRED_FILES
-CONFIG_FILE, MODEL_FILE, METRICS_FILE = _RUN_DIR.CONFIG_FILE, _RUN_DIR.MODEL_FILE, _RUN_DIR.METRICS_FILE
-model_path, validate = _RUN_DIR.model_path, _RUN_DIR.validate
-read_config, write_config, write_metrics = _RUN_DIR.read_config, _RUN_DIR.write_config, _RUN_DIR.write_metrics
+    def read_description(cls, run_dir: str | Path) -> dict[str, Any]:
+        """``segmenter.json`` checked field by field."""
+        path = Path(run_dir) / SEGMENTER_FILE
+        data = load_run_json(path, SEGMENTER_KEYS, cls.KIND, description="segmenter description")
+        size = data["input_size"]
+        if not isinstance(size, int) or isinstance(size, bool) or size <= 0:
+            raise ValueError(f"{path}: input_size: expected a positive integer (pixels), got {size!r}")
+        for key, low, high in (("margin", 0.0, float("inf")), ("threshold", 0.0, 1.0)):
+            value = data[key]
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not low < value < high:
+                raise ValueError(f"{path}: {key}: expected a number in ({low}, {high}), got {value!r}")
+        names = data["class_names"]
+        if not isinstance(names, list) or not names or not all(isinstance(name, str) for name in names):
+            raise ValueError(f"{path}: class_names: expected a non-empty list of names, got {names!r}")
+        return data
 
 
 def write_segmenter(run_dir: str | Path, input_size: int, margin: float, class_names, threshold: float = 0.5) -> Path:
@@ -62,20 +64,8 @@ def write_segmenter(run_dir: str | Path, input_size: int, margin: float, class_n
 
 
 def read_segmenter(run_dir: str | Path) -> dict[str, Any]:
-    """``segmenter.json`` checked field by field."""
-    path = Path(run_dir) / SEGMENTER_FILE
-    data = load_run_json(path, SEGMENTER_KEYS, KIND, description="segmenter description")
-    size = data["input_size"]
-    if not isinstance(size, int) or isinstance(size, bool) or size <= 0:
-        raise ValueError(f"{path}: input_size: expected a positive integer (pixels), got {size!r}")
-    for key, low, high in (("margin", 0.0, float("inf")), ("threshold", 0.0, 1.0)):
-        value = data[key]
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or not low < value < high:
-            raise ValueError(f"{path}: {key}: expected a number in ({low}, {high}), got {value!r}")
-    names = data["class_names"]
-    if not isinstance(names, list) or not names or not all(isinstance(name, str) for name in names):
-        raise ValueError(f"{path}: class_names: expected a non-empty list of names, got {names!r}")
-    return data
+    """``segmenter.json``, checked (:meth:`SegmentationRunDir.read_description`)."""
+    return SegmentationRunDir.read_description(run_dir)
 
 
 def read_model(run_dir: str | Path):
@@ -86,5 +76,6 @@ def read_model(run_dir: str | Path):
     """
     from paz6d.segmentation.model import load_segmenter
 
-    segmenter = validate(run_dir)
-    return load_segmenter(model_path(run_dir), segmenter["input_size"], len(segmenter["class_names"])), segmenter
+    segmenter = SegmentationRunDir.validate(run_dir)
+    path = SegmentationRunDir.model_path(run_dir)
+    return load_segmenter(path, segmenter["input_size"], len(segmenter["class_names"])), segmenter

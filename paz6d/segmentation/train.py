@@ -21,6 +21,7 @@ from paz6d.backend.image import save_image
 from paz6d.segmentation import run_dir as run_files
 from paz6d.segmentation.config import FIXED_SETTINGS, SegmentationConfig, SegmentationTraining
 from paz6d.segmentation.dataset import MaskSet, crop_batch, cut_instance, load_mask_set
+from paz6d.segmentation.run_dir import SegmentationRunDir
 from paz6d.training.settings import check_same_run
 
 
@@ -28,9 +29,9 @@ def _prepare_run_dir(job: SegmentationTraining, settings: SegmentationConfig, cl
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"dataset": str(job.dataset.resolve()), "split": job.split, "config": job.config, "seed": job.seed,
               "class_names": list(class_names), "settings": settings.to_dict()}
-    check_same_run(job.out / run_files.CONFIG_FILE, run_files.read_config(job.out), config,
+    check_same_run(job.out / SegmentationRunDir.CONFIG_FILE, SegmentationRunDir.read_config(job.out), config,
                    ("dataset", "split", "config", "seed", "class_names"), settings, FIXED_SETTINGS)
-    run_files.write_config(job.out, config)
+    SegmentationRunDir.write_config(job.out, config)
 
 
 def fixed_crops(data: MaskSet, count: int, size: int, margin: float) -> dict[str, np.ndarray]:
@@ -100,11 +101,11 @@ def train_segmentation(job: SegmentationTraining) -> dict:
                       sample_callback=_sample_drawer(fixed_crops(data, 16, size, margin)),
                       progress=job.progress, prefetch=2, prefetch_workers=1)
     training = trainer.fit()
-    save_segmenter(model, run_files.model_path(job.out))
+    save_segmenter(model, SegmentationRunDir.model_path(job.out))
     summary = {"config": job.config, "steps": training.final_step, "parameters": int(model.count_params()),
                "train_seconds": round(time.perf_counter() - started, 1), "images": len(data.images),
                "instances": len(data), "class_names": list(data.class_names), "final_losses": training.metrics,
                "loader_samples_per_second": finite_or_none(training.loader_samples_per_second, 1),
                "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1)}
-    run_files.write_metrics(job.out, summary)
+    SegmentationRunDir.write_metrics(job.out, summary)
     return summary

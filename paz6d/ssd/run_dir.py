@@ -24,7 +24,7 @@ from typing import Any
 from paz6d.backend.boxes import SSD_VARIANCES
 from paz6d.backend.checks import short_repr
 from paz6d.backend.files import load_run_json, write_json_atomically
-from paz6d.run_dir import RunDir
+from paz6d.run_dir import DescribedRunDir
 from paz6d.ssd.config import ARCHITECTURES, SSDConfig, check_input_size
 
 DETECTOR_FILE = "detector.json"
@@ -32,33 +32,24 @@ DETECTOR_FILE = "detector.json"
 DETECTOR_KEYS = ("architecture", "class_names", "priors", "variances")
 
 
-class SSDRunDir(RunDir):
+class SSDRunDir(DescribedRunDir):
     """A ``paz6d train ssd`` run directory (files in the module docstring)."""
 
     KIND = "an SSD"
     SETTINGS = SSDConfig
-    MARKER_FILES = (DETECTOR_FILE,)
-    REQUIRED_FILES = (DETECTOR_FILE, RunDir.MODEL_FILE)
+    DESCRIPTION_FILE = DETECTOR_FILE
     MESH_FIELDS = None
 
     @classmethod
-    def validate(cls, run_dir: str | Path) -> dict[str, Any]:
-        """:meth:`RunDir.validate` (``detector.json`` and ``model.keras`` present, ``config.json`` checked),
-        then ``detector.json`` (:func:`check_detector`); returns the detector description."""
-        return read_detector(super().validate(run_dir))
+    def read_description(cls, run_dir: str | Path) -> dict[str, Any]:
+        """``detector.json``, checked by :func:`check_detector`."""
+        path = Path(run_dir) / DETECTOR_FILE
+        return check_detector(load_run_json(path, DETECTOR_KEYS, cls.KIND, description="detector description"), path)
 
     @classmethod
     def class_names(cls, run_dir: str | Path) -> tuple[str, ...]:
         """The detector's class names (``detector.json``), in class-id order."""
-        return tuple(read_detector(run_dir)["class_names"])
-
-
-# the module's functions, as its callers use them
-_RUN_DIR = SSDRunDir
-KIND, MARKER_FILES, REQUIRED_FILES = _RUN_DIR.KIND, _RUN_DIR.MARKER_FILES, _RUN_DIR.REQUIRED_FILES
-CONFIG_FILE, MODEL_FILE, METRICS_FILE = _RUN_DIR.CONFIG_FILE, _RUN_DIR.MODEL_FILE, _RUN_DIR.METRICS_FILE
-model_path, validate = _RUN_DIR.model_path, _RUN_DIR.validate
-read_config, write_config, write_metrics = _RUN_DIR.read_config, _RUN_DIR.write_config, _RUN_DIR.write_metrics
+        return tuple(cls.read_description(run_dir)["class_names"])
 
 
 #: Fields of ``detector.json``'s ``priors`` (:class:`paz6d.ssd.model.PriorSpec`), one entry per feature map
@@ -183,9 +174,8 @@ def check_detector(data: dict, where: str | Path) -> dict:
 
 
 def read_detector(run_dir: str | Path) -> dict[str, Any]:
-    """``detector.json``, checked by :func:`check_detector`."""
-    path = Path(run_dir) / DETECTOR_FILE
-    return check_detector(load_run_json(path, DETECTOR_KEYS, KIND, description="detector description"), path)
+    """``detector.json``, checked by :func:`check_detector` (:meth:`SSDRunDir.read_description`)."""
+    return SSDRunDir.read_description(run_dir)
 
 
 def read_model(run_dir: str | Path):
@@ -197,6 +187,6 @@ def read_model(run_dir: str | Path):
     """
     from paz6d.ssd.model import PriorSpec, load_ssd
 
-    detector = validate(run_dir)
+    detector = SSDRunDir.validate(run_dir)
     spec = PriorSpec.from_dict(detector["priors"])
-    return load_ssd(model_path(run_dir), spec, len(detector["class_names"]) + 1), detector
+    return load_ssd(SSDRunDir.model_path(run_dir), spec, len(detector["class_names"]) + 1), detector

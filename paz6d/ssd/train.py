@@ -37,6 +37,7 @@ from paz6d.ssd import run_dir as run_files
 from paz6d.ssd.dataset import load_detection_set, training_batch
 from paz6d.ssd.config import FIXED_SETTINGS, SSDConfig, SSDTraining
 from paz6d.ssd.pipeline import DetectSingleShot, draw_detections
+from paz6d.ssd.run_dir import SSDRunDir
 from paz6d.synthesis.box_augment import ssd_augmentation
 from paz6d.training.settings import check_same_run
 
@@ -44,9 +45,9 @@ def _prepare_run_dir(job: SSDTraining, settings: SSDConfig, class_names: tuple[s
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"dataset": str(job.dataset.resolve()), "split": job.split, "config": job.config, "seed": job.seed,
               "class_names": list(class_names), "settings": settings.to_dict()}
-    check_same_run(job.out / run_files.CONFIG_FILE, run_files.read_config(job.out), config,
+    check_same_run(job.out / SSDRunDir.CONFIG_FILE, SSDRunDir.read_config(job.out), config,
                    ("dataset", "config", "seed", "class_names"), settings, FIXED_SETTINGS)
-    run_files.write_config(job.out, config)
+    SSDRunDir.write_config(job.out, config)
 
 
 def _schedule(keras, settings: SSDConfig):
@@ -140,12 +141,12 @@ def train_ssd(job: SSDTraining) -> dict:
                       sample_callback=_sample_drawer(sample_images, run_files.read_detector(job.out)),
                       progress=job.progress, prefetch=2, prefetch_workers=1)
     training = trainer.fit()
-    save_ssd(model, run_files.model_path(job.out))
+    save_ssd(model, SSDRunDir.model_path(job.out))
     summary = {"config": job.config, "architecture": settings.architecture,
                "backbone": settings.backbone, "steps": training.final_step,
                "train_seconds": round(time.perf_counter() - started, 1), "images": len(data),
                "class_names": list(data.class_names), "final_losses": training.metrics,
                "loader_samples_per_second": finite_or_none(training.loader_samples_per_second, 1),
                "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1)}
-    run_files.write_metrics(job.out, summary)
+    SSDRunDir.write_metrics(job.out, summary)
     return summary

@@ -19,7 +19,7 @@ from typing import Any
 
 from paz6d.backend.checks import integer_field
 from paz6d.backend.files import load_run_json, write_json_atomically
-from paz6d.run_dir import RunDir
+from paz6d.run_dir import DescribedRunDir
 from paz6d.stn.config import STNConfig
 
 CLASSIFIER_FILE = "classifier.json"
@@ -28,29 +28,29 @@ CROPS_FILE = "crops.png"
 CLASSIFIER_KEYS = ("canvas_size", "crop_size", "transformer", "class_names")
 
 
-class STNRunDir(RunDir):
+class STNRunDir(DescribedRunDir):
     """A ``paz6d train stn`` run directory (files in the module docstring)."""
 
     KIND = "a spatial-transformer"
     SETTINGS = STNConfig
-    MARKER_FILES = (CLASSIFIER_FILE,)
-    REQUIRED_FILES = (CLASSIFIER_FILE, RunDir.MODEL_FILE)
+    DESCRIPTION_FILE = CLASSIFIER_FILE
     MESH_FIELDS = None
 
     @classmethod
-    def validate(cls, run_dir: str | Path) -> dict[str, Any]:
-        """:meth:`RunDir.validate` (``classifier.json`` and ``model.keras`` present, ``config.json`` checked),
-        then ``classifier.json``; returns the classifier description."""
-        return read_classifier(super().validate(run_dir))
-
-
-# the module's functions, as its callers use them
-_RUN_DIR = STNRunDir
-KIND, MARKER_FILES, REQUIRED_FILES = _RUN_DIR.KIND, _RUN_DIR.MARKER_FILES, _RUN_DIR.REQUIRED_FILES
-CONFIG_FILE, MODEL_FILE, METRICS_FILE = _RUN_DIR.CONFIG_FILE, _RUN_DIR.MODEL_FILE, _RUN_DIR.METRICS_FILE
-model_path, validate = _RUN_DIR.model_path, _RUN_DIR.validate
-read_config, write_config = _RUN_DIR.read_config, _RUN_DIR.write_config
-read_metrics, write_metrics = _RUN_DIR.read_metrics, _RUN_DIR.write_metrics
+    def read_description(cls, run_dir: str | Path) -> dict[str, Any]:
+        """``classifier.json`` checked for its fields (sizes >= 16 pixels, a boolean ``transformer``,
+        at least 2 distinct string ``class_names``)."""
+        path = Path(run_dir) / CLASSIFIER_FILE
+        data = load_run_json(path, CLASSIFIER_KEYS, cls.KIND)
+        for name in ("canvas_size", "crop_size"):
+            integer_field(data, name, str(path), minimum=16)
+        if not isinstance(data["transformer"], bool):
+            raise ValueError(f"{path}: transformer: expected true or false, got {data['transformer']!r}")
+        names = data["class_names"]
+        if (not isinstance(names, list) or len(names) < 2 or not all(isinstance(name, str) for name in names)
+                or len(set(names)) != len(names)):
+            raise ValueError(f"{path}: class_names: expected a list of at least 2 distinct names, got {names!r}")
+        return data
 
 
 def crops_path(run_dir: str | Path) -> Path:
@@ -71,19 +71,8 @@ def write_classifier(run_dir: str | Path, canvas_size: int, crop_size: int, tran
 
 
 def read_classifier(run_dir: str | Path) -> dict[str, Any]:
-    """``classifier.json`` checked for its fields (sizes >= 16 pixels, a boolean ``transformer``,
-    at least 2 distinct string ``class_names``)."""
-    path = Path(run_dir) / CLASSIFIER_FILE
-    data = load_run_json(path, CLASSIFIER_KEYS, KIND)
-    for name in ("canvas_size", "crop_size"):
-        integer_field(data, name, str(path), minimum=16)
-    if not isinstance(data["transformer"], bool):
-        raise ValueError(f"{path}: transformer: expected true or false, got {data['transformer']!r}")
-    names = data["class_names"]
-    if (not isinstance(names, list) or len(names) < 2 or not all(isinstance(name, str) for name in names)
-            or len(set(names)) != len(names)):
-        raise ValueError(f"{path}: class_names: expected a list of at least 2 distinct names, got {names!r}")
-    return data
+    """``classifier.json``, checked (:meth:`STNRunDir.read_description`)."""
+    return STNRunDir.read_description(run_dir)
 
 
 def read_model(run_dir: str | Path):
@@ -95,8 +84,8 @@ def read_model(run_dir: str | Path):
     """
     from paz6d.stn.model import has_transformer, load_classifier
 
-    classifier = validate(run_dir)
-    path = model_path(run_dir)
+    classifier = STNRunDir.validate(run_dir)
+    path = STNRunDir.model_path(run_dir)
     model = load_classifier(path)
     expected = (None, classifier["canvas_size"], classifier["canvas_size"], 1)
     if tuple(model.input_shape) != expected:

@@ -23,6 +23,7 @@ from paz6d.processors.predict import predict_in_batches
 from paz6d.stn import run_dir as run_files
 from paz6d.stn.config import FIXED_SETTINGS, STNConfig, STNTraining
 from paz6d.stn.digits import CLASS_NAMES, TEST, TRAIN, ClutteredDigits, DigitCanvas
+from paz6d.stn.run_dir import STNRunDir
 from paz6d.training.settings import check_same_run
 
 #: Canvases and crops drawn in ``crops.png`` and the training samples.
@@ -34,9 +35,9 @@ def _prepare_run_dir(job: STNTraining, settings: STNConfig) -> None:
     """Writes ``config.json`` or checks that an existing one describes the same run."""
     config = {"method": "stn", "config": job.config, "transformer": job.transformer, "seed": job.seed,
               "settings": settings.to_dict()}
-    check_same_run(job.out / run_files.CONFIG_FILE, run_files.read_config(job.out), config,
+    check_same_run(job.out / STNRunDir.CONFIG_FILE, STNRunDir.read_config(job.out), config,
                    ("method", "config", "transformer", "seed"), settings, FIXED_SETTINGS)
-    run_files.write_config(job.out, config)
+    STNRunDir.write_config(job.out, config)
 
 
 def canvas_settings(settings: STNConfig) -> DigitCanvas:
@@ -136,10 +137,10 @@ def train_stn(job: STNTraining, digits: ClutteredDigits | None = None) -> dict:
     trainer = Trainer(model, optimizer, loss_fn, make_batch, job.out, settings.steps,
                       checkpoint_every=settings.checkpoint_every, log_every=10, sample_every=settings.sample_every,
                       sample_callback=sample, progress=job.progress, prefetch=2)
-    previous = run_files.read_metrics(job.out)
+    previous = STNRunDir.read_metrics(job.out)
     training = trainer.fit()
     train_seconds = time.perf_counter() - started
-    save_classifier(model, run_files.model_path(job.out))
+    save_classifier(model, STNRunDir.model_path(job.out))
     draw_crops(model, preview_images, preview_labels, run_files.crops_path(job.out))
     figures = {"train_seconds": round(train_seconds, 1), "final_losses": training.metrics,
                "model_samples_per_second": finite_or_none(training.model_samples_per_second, 1)}
@@ -148,5 +149,5 @@ def train_stn(job: STNTraining, digits: ClutteredDigits | None = None) -> dict:
     summary = {"config": job.config, "transformer": job.transformer, "steps": training.final_step,
                "batch_size": batch_size, **figures, "parameters": int(model.count_params()),
                **test_accuracy(model, data, settings.test_samples, job.seed)}
-    run_files.write_metrics(job.out, summary)
+    STNRunDir.write_metrics(job.out, summary)
     return summary
