@@ -143,7 +143,9 @@ def test_corrupt_run_directories_are_clear_errors(trained, tmp_path):
     good = json.loads((job.out / "hrnet.json").read_text())
     cases = [({**good, "stride": 0}, "stride: expected a positive integer"),
              ({**good, "domain": "prob"}, "domain: expected one of"),
-             ({**good, "points_model": [[0.0, 1.0]] * 5}, r"points_model: expected finite \(5, 3\)"),
+             ({**good, "points_model": [[0.0, 1.0]] * 5}, r"points_model \(metres\): expected shape \(\.\.\., 3\)"),
+             ({**good, "points_model": good["points_model"][:4]}, "points_model: expected num_keypoints = 5 points"),
+             ({**good, "points_model": [[0.0, 1.0, 1e400]] * 5}, r"points_model \(metres\).*finite"),
              ({**good, "points_model": "x"}, "points_model"),
              ({key: value for key, value in good.items() if key != "margin"}, r"missing field\(s\) \['margin'\]"),
              ({**good, "num_keypoints": 4, "points_model": good["points_model"][:4]}, "predicts 5 maps"),

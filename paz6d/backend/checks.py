@@ -34,7 +34,7 @@ def short_repr(value, limit: int = 60) -> str:
 def _as_shaped_array(value, name: str, trailing_shape: tuple[int, ...], min_leading: int = 0) -> np.ndarray:
     try:
         array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as error:
+    except (TypeError, ValueError, OverflowError) as error:
         raise ValueError(f"{name}: expected a numeric array of shape (..., "
                          f"{', '.join(map(str, trailing_shape))}), got {type(value).__name__}") from error
     expected = "(..., " + ", ".join(map(str, trailing_shape)) + ")"

@@ -25,9 +25,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
-from paz6d.backend.checks import as_array
+from paz6d.backend.checks import as_points
 from paz6d.backend.files import load_run_json, write_json_atomically
 from paz6d.hrnet.config import HRNetConfig
 from paz6d.run_dir import DescribedRunDir
@@ -74,13 +73,10 @@ class HRNetRunDir(DescribedRunDir):
                              f"got {data['input_size']}")
         if data["domain"] not in DOMAINS:
             raise ValueError(f"{path}: domain: expected one of {DOMAINS}, got {data['domain']!r}")
-        try:
-            points = np.asarray(data["points_model"], dtype=np.float64)
-        except (TypeError, ValueError, OverflowError):
-            raise ValueError(f"{path}: points_model: expected a list of numeric (x, y, z) rows") from None
-        if points.shape != (data["num_keypoints"], 3) or not np.all(np.isfinite(points)):
-            raise ValueError(f"{path}: points_model: expected finite ({data['num_keypoints']}, 3) metres, "
-                             f"got shape {points.shape}")
+        points = as_points(data["points_model"], f"{path}: points_model (metres)")
+        if len(points) != data["num_keypoints"]:
+            raise ValueError(f"{path}: points_model: expected num_keypoints = {data['num_keypoints']} points, "
+                             f"got {len(points)}")
         return {**data, "points_model": points}
 
 
@@ -98,9 +94,7 @@ def write_description(run_dir: str | Path, input_size: int, margin: float, strid
         domain: ``"log"`` or ``"value"`` (see :mod:`paz6d.hrnet.heatmaps`); sigma: target width in cells.
         points_model: ``(N, 3)`` metres, object frame, in heatmap order.
     """
-    points_model = as_array(points_model, "points_model", (3,))
-    if points_model.ndim != 2 or not np.all(np.isfinite(points_model)):
-        raise ValueError(f"points_model: expected finite (N, 3) metres, got shape {points_model.shape}")
+    points_model = as_points(points_model, "points_model (metres)")
     if domain not in DOMAINS:
         raise ValueError(f"domain: expected one of {DOMAINS}, got {domain!r}")
     data = {"input_size": int(input_size), "margin": float(margin), "stride": int(stride),

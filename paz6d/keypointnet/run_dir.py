@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paz6d.backend.checks import as_array, number_field
+from paz6d.backend.checks import as_array, as_points, number_field
 from paz6d.backend.files import load_run_json, null_non_finite, write_json_atomically
 from paz6d.keypointnet.config import KeypointConfig
 from paz6d.run_dir import CropRunDir, RunDir
@@ -44,20 +44,11 @@ class KeypointNetRunDir(CropRunDir):
         """``points_model (N, 3)`` metres and ``usable (N,)`` flags from a run's ``keypoints.json``."""
         path = Path(run_dir) / KEYPOINTS_FILE
         data = load_run_json(path, ("points_model", "usable"), cls.KIND)
-        points = _numeric_array(data["points_model"], path, "points_model")
-        if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
-            raise ValueError(f"{path}: points_model: expected finite (N, 3) metres, got shape {points.shape}")
+        points = as_points(data["points_model"], f"{path}: points_model (metres)")
         usable = np.asarray(data["usable"])
         if usable.shape != (len(points),) or usable.dtype != bool:
             raise ValueError(f"{path}: usable: expected {len(points)} true/false flags, got shape {usable.shape}")
         return points, usable
-
-
-def _numeric_array(value, path: Path, name: str) -> np.ndarray:
-    try:
-        return np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{path}: {name}: expected a list of numeric rows") from None
 
 
 def write_keypoints(run_dir: str | Path, points_model, usable, method: str, error=None, targets=None) -> Path:
@@ -90,9 +81,7 @@ def read_object(run_dir: str | Path) -> dict:
     """``{"diameter": float, "hull_points": (M, 3)}`` (metres) from a run's ``object.json``."""
     path = Path(run_dir) / OBJECT_FILE
     data = load_run_json(path, ("diameter", "hull_points"), KeypointNetRunDir.KIND)
-    hull = _numeric_array(data["hull_points"], path, "hull_points")
-    if hull.ndim != 2 or hull.shape[1] != 3 or len(hull) < 4 or not np.all(np.isfinite(hull)):
-        raise ValueError(f"{path}: hull_points: expected finite (M >= 4, 3) metres, got shape {hull.shape}")
+    hull = as_points(data["hull_points"], f"{path}: hull_points (metres)", min_count=4)
     return {"diameter": number_field(data, "diameter", str(path), positive=True), "hull_points": hull}
 
 

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from paz6d.backend.checks import as_array, number_field
+from paz6d.backend.checks import as_array, as_points, number_field
 from paz6d.backend.files import load_run_json, write_json_atomically
 from paz6d.probabilistic_keypoints.config import ProbabilisticConfig
 from paz6d.run_dir import CropRunDir, RunDir
@@ -49,12 +49,7 @@ class ProbabilisticKeypointsRunDir(CropRunDir):
         """``points_model (N, 3)`` metres and ``covariance_scale`` from ``gaussian_keypoints.json``."""
         path = cls.path_of(run_dir, KEYPOINTS_FILE)
         data = load_run_json(path, ("points_model", "covariance_scale"), cls.KIND)
-        try:
-            points = np.asarray(data["points_model"], dtype=np.float64)
-        except (TypeError, ValueError, OverflowError):
-            raise ValueError(f"{path}: points_model: expected a list of [x, y, z] rows (metres)") from None
-        if points.ndim != 2 or points.shape[1] != 3 or len(points) < 4 or not np.all(np.isfinite(points)):
-            raise ValueError(f"{path}: points_model: expected finite (N >= 4, 3) metres, got shape {points.shape}")
+        points = as_points(data["points_model"], f"{path}: points_model (metres)", min_count=4)
         return points, number_field(data, "covariance_scale", str(path), positive=True)
 
 
