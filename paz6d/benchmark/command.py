@@ -23,7 +23,8 @@ class LmoOptions:
 
     out: Path = option(help="output folder (detector/, pose/obj_XXXXXX/, results/, overlays/, report.json); "
                             "re-run the same command to resume")
-    quick: bool = option(False, "the quick sizes (~45 min on an idle 2-core CPU) instead of the full ones (~3 h)")
+    quick: bool = option(False, "the quick sizes (about 1.5 h on a 2-core CPU, docs/results.md) instead of the full "
+                                "ones (~3 h)")
     method: str = option("aae", "pose model per object (keypointnet runs go to OUT/pose_<method>/)",
                          choices=METHODS)
     object_method: tuple[str, ...] = option((), "OBJ_ID=METHOD: this object's pose model instead of --method's "
