@@ -416,7 +416,7 @@ def _estimate_args(job: Benchmark, condition: str) -> list[str]:
         argv += ["--box", "visib"]
     else:
         # LM-O shows each object once: BOP scores each object's best estimate, so only the best detection per class
-        # needs a pose, and that makes the AAEs' box search cheap (1.2 s per frame; it adds 0.015 to the mean AR)
+        # needs a pose, and that makes the AAEs' box search cheap enough to run on every frame (docs/real_photos.md)
         argv += ["--detector", str(job.out / "detector"), "--flip", "--poses-per-class", "1", "--box-search",
                  "--score-threshold", f"{SCORED_DETECTION_THRESHOLD:g}",
                  "--detections-out", str(job.result(condition, "_detections.json"))]
