@@ -11,7 +11,6 @@ import pytest
 from paz6d.backend.camera import Camera, transform_and_project
 from paz6d.backend.square_crop import square_window, to_full_image
 from paz6d.backend.tensorflow_guard import import_tensorflow
-from paz6d.hrnet import run_dir as run_files
 from paz6d.hrnet.config import QUICK, HRNetTraining
 from paz6d.hrnet.heatmaps import gaussian_heatmaps
 from paz6d.hrnet.run_dir import HRNetRunDir
@@ -59,7 +58,7 @@ def test_tiny_training_lowers_the_loss_writes_a_scored_run_and_resumes(trained, 
     assert evaluation["held_out_crops"] == 4 and 0.0 <= evaluation["pck@0.05"] <= 1.0
     assert set(evaluation["decoders"]) == {"quadratic", "quarter", "soft_argmax", "argmax"}
     assert summary["steps"] == 40 and summary["pck@0.05"] == evaluation["pck@0.05"]
-    description = run_files.read_description(job.out)
+    description = HRNetRunDir.read_description(job.out)
     assert description["points_model"].shape == (5, 3) and description["domain"] == "log"
     # resuming continues from the last checkpoint up to the new total
     resumed = train_hrnet(HRNetTraining(job.out, mesh_path, mesh_scale=1e-3, workers=0, steps=50, progress=False,

@@ -15,7 +15,6 @@ from paz6d.abstract import Box2D
 from paz6d.cli import main
 from paz6d.datasets.coco import mask_from_counts
 from paz6d.run_dirs import method_of
-from paz6d.segmentation import run_dir as run_files
 from paz6d.segmentation.config import QUICK, SegmentationTraining
 from paz6d.segmentation.dataset import crop_batch, load_mask_set
 from paz6d.segmentation.masks import blank_background, jitter_box, paste_mask, rle_from_mask
@@ -122,7 +121,7 @@ def test_tiny_training_lowers_the_loss(trained):
     losses = [float(row["loss"]) for row in rows]
     assert len(losses) == 4 and losses[-1] < 0.8 * losses[0]
     assert method_of(trained) == "segmentation"
-    assert run_files.read_segmenter(trained)["class_names"] == ["obj_000005", "obj_000008"]
+    assert SegmentationRunDir.read_description(trained)["class_names"] == ["obj_000005", "obj_000008"]
     assert (trained / "samples" / "step_00000040.png").is_file()
     assert json.loads((trained / "metrics.json").read_text())["steps"] == 40
 

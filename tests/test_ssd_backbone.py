@@ -122,7 +122,7 @@ def test_tiny_backbone_training_lowers_the_loss_and_loads_through_the_pipeline(t
     with (trained / "log.csv").open() as handle:
         losses = [float(row["loss"]) for row in csv.DictReader(handle)]
     assert len(losses) == 2 and losses[-1] < 0.8 * losses[0]
-    detector = run_files.read_detector(trained)
+    detector = SSDRunDir.read_description(trained)
     np.testing.assert_allclose(detector["normalization"]["mean"], [127 / 255] * 3)
     np.testing.assert_allclose(detector["normalization"]["std"], [128 / 255] * 3)
     config = json.loads((trained / "config.json").read_text())
@@ -144,9 +144,9 @@ def test_detector_normalization_is_checked(tmp_path):
 
     priors = paper_priors("light", 128).to_dict()
     run_files.write_detector(tmp_path, "light", ["a"], priors, normalization={"mean": [0.5] * 3, "std": [0.5] * 3})
-    assert run_files.read_detector(tmp_path)["normalization"] == {"mean": [0.5] * 3, "std": [0.5] * 3}
+    assert SSDRunDir.read_description(tmp_path)["normalization"] == {"mean": [0.5] * 3, "std": [0.5] * 3}
     data = json.loads((tmp_path / "detector.json").read_text())
     for bad in ({"mean": [0.5] * 3, "std": [0.0] * 3}, {"mean": [0.5] * 2, "std": [0.5] * 3}, [0.5, 0.5]):
         (tmp_path / "detector.json").write_text(json.dumps({**data, "normalization": bad}))
         with pytest.raises(ValueError, match="detector.json: normalization: expected"):
-            run_files.read_detector(tmp_path)
+            SSDRunDir.read_description(tmp_path)

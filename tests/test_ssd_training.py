@@ -15,7 +15,7 @@ from paz6d.abstract import Box2D
 from paz6d.cli import build_parser, main
 from paz6d.datasets.bop.coco_ground_truth import bop_split_to_coco, coco_image_id
 from paz6d.run_dirs import method_of
-from paz6d.ssd import run_dir as run_files
+from paz6d.ssd.run_dir import SSDRunDir
 from paz6d.ssd.dataset import load_detection_set
 from paz6d.ssd.config import FULL, QUICK, SSDTraining
 from paz6d.ssd.train import augmentation_factory, image_scale, train_ssd
@@ -66,7 +66,7 @@ def test_scale_crops_train_on_windows_and_detect_on_whole_images(generated, tmp_
     out = tmp_path / "run"
     train_ssd(SSDTraining(dataset=generated, out=out, steps=20, batch_size=4, progress=False,
                           settings=settings.replace(checkpoint_every=20, sample_every=20)))
-    assert run_files.read_detector(out)["image_scale"] == pytest.approx(1.0)
+    assert SSDRunDir.read_description(out)["image_scale"] == pytest.approx(1.0)
     detect = DetectSingleShot(out, score_threshold=0.0, max_detections=5)
     assert detect.names == ["check", "resize", "normalize", "predict", "decode", "nms", "to_pixels", "to_boxes2d"]
     image = load_image(next((generated / "train" / "000000" / "rgb").iterdir()))  # 160 x 120
@@ -99,7 +99,7 @@ def test_training_lowers_the_loss_and_writes_the_run_directory(trained):
         losses = [float(row["loss"]) for row in csv.DictReader(handle)]
     assert len(losses) == 6
     assert np.mean(losses[-2:]) < 0.7 * losses[0]
-    detector = run_files.read_detector(trained)
+    detector = SSDRunDir.read_description(trained)
     assert detector["class_names"] == ["obj_000005", "obj_000008"]
     assert detector["architecture"] == "light"
     assert sorted(path.name for path in (trained / "samples").iterdir()) == ["step_00000030.png", "step_00000060.png"]

@@ -217,7 +217,7 @@ def test_corrupt_run_directories_are_reported_by_file(tmp_path):
                                        "class_names": ["a", "a"]}), "class_names")):
         path.write_text(text)
         with pytest.raises(ValueError, match=message):
-            run_files.read_classifier(tmp_path)
+            STNRunDir.read_description(tmp_path)
     assert is_run_dir(tmp_path, "stn") and not is_run_dir(tmp_path / "nothing", "stn")
 
 

@@ -113,10 +113,6 @@ def _positive(data: dict, name: str, path: Path, integer: bool) -> float:
     return value
 
 
-def read_description(run_dir: str | Path) -> dict[str, Any]:
-    """``hrnet.json``, checked (:meth:`HRNetRunDir.read_description`)."""
-    return HRNetRunDir.read_description(run_dir)
-
 
 def write_evaluation(run_dir: str | Path, evaluation: dict[str, Any]) -> Path:
     """Writes ``evaluation.json`` (PCK on held-out renders)."""
@@ -131,7 +127,7 @@ def read_model(run_dir: str | Path, description: dict[str, Any] | None = None):
     """
     from paz6d.hrnet.model import load_hrnet
 
-    description = read_description(run_dir) if description is None else description
+    description = HRNetRunDir.read_description(run_dir) if description is None else description
     path = HRNetRunDir.model_path(run_dir)
     model = load_hrnet(path)
     size = model.input_shape[1]

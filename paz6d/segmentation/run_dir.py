@@ -63,10 +63,6 @@ def write_segmenter(run_dir: str | Path, input_size: int, margin: float, class_n
     return write_json_atomically(Path(run_dir) / SEGMENTER_FILE, data, indent=2)
 
 
-def read_segmenter(run_dir: str | Path) -> dict[str, Any]:
-    """``segmenter.json``, checked (:meth:`SegmentationRunDir.read_description`)."""
-    return SegmentationRunDir.read_description(run_dir)
-
 
 def read_model(run_dir: str | Path):
     """``(model, segmenter)``: the trained network (imports TensorFlow) and ``segmenter.json``.

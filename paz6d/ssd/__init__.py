@@ -6,7 +6,7 @@
 from __future__ import annotations
 
 from paz6d.method import Method, NetworkSpec
-from paz6d.ssd.run_dir import SSDRunDir, read_detector, read_model
+from paz6d.ssd.run_dir import SSDRunDir, read_model
 
 
 def load_pipeline(run_dir, score_threshold: float = 0.3, flip: bool = False):
@@ -24,7 +24,7 @@ def load_network(run_dir):
 
 def training_input_size(run_dir) -> int:
     """The input side (pixels) the run's network was trained at (``detector.json``)."""
-    return int(read_detector(run_dir)["priors"]["input_size"])
+    return int(SSDRunDir.read_description(run_dir)["priors"]["input_size"])
 
 
 #: The SSD's record in :mod:`paz6d.methods`: a detector built for any image size is exported with free sides

@@ -173,10 +173,6 @@ def check_detector(data: dict, where: str | Path) -> dict:
     return data
 
 
-def read_detector(run_dir: str | Path) -> dict[str, Any]:
-    """``detector.json``, checked by :func:`check_detector` (:meth:`SSDRunDir.read_description`)."""
-    return SSDRunDir.read_description(run_dir)
-
 
 def read_model(run_dir: str | Path):
     """``(model, detector)``: the trained network (Keras safe mode; imports TensorFlow) and

@@ -138,7 +138,7 @@ def train_ssd(job: SSDTraining) -> dict:
     sample_images = [load_image(sample.path) for sample in data.samples[:4]]
     trainer = Trainer(model, optimizer, loss_fn, make_batch, job.out, settings.steps,
                       checkpoint_every=settings.checkpoint_every, log_every=10, sample_every=settings.sample_every,
-                      sample_callback=_sample_drawer(sample_images, run_files.read_detector(job.out)),
+                      sample_callback=_sample_drawer(sample_images, SSDRunDir.read_description(job.out)),
                       progress=job.progress, prefetch=2, prefetch_workers=1)
     training = trainer.fit()
     save_ssd(model, SSDRunDir.model_path(job.out))

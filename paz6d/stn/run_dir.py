@@ -70,10 +70,6 @@ def write_classifier(run_dir: str | Path, canvas_size: int, crop_size: int, tran
     return write_json_atomically(Path(run_dir) / CLASSIFIER_FILE, data, indent=2)
 
 
-def read_classifier(run_dir: str | Path) -> dict[str, Any]:
-    """``classifier.json``, checked (:meth:`STNRunDir.read_description`)."""
-    return STNRunDir.read_description(run_dir)
-
 
 def read_model(run_dir: str | Path):
     """``(model, classifier)``: the trained network (Keras safe mode; imports TensorFlow) and
