@@ -86,9 +86,11 @@ def load_pose_estimator(run_dir: str | Path, camera=None, class_name: str | None
                                     box_variants=box_variants, viewpoints=viewpoints)
 
 
-def load_detector(run_dir: str | Path, score_threshold: float = 0.3, flip: bool = False):
+def load_detector(run_dir: str | Path, score_threshold: float = 0.3, flip: bool = False,
+                  vote_iou: float | None = None):
     """The detector pipeline (``image -> [Box2D]`` with class names) of a run directory of a detection method
-    (:func:`paz6d.methods.method_of`); ``flip``: it also sees the mirror image.
+    (:func:`paz6d.methods.method_of`); ``flip``: it also sees the mirror image; ``vote_iou``: box voting
+    (``DetectSingleShot``'s).
 
     Raises:
         ValueError: not a directory, not a detector's run directory or a corrupt one (naming the file).
@@ -97,7 +99,7 @@ def load_detector(run_dir: str | Path, score_threshold: float = 0.3, flip: bool 
     if method.task != "detection":
         names = " or ".join(detector.name for detector in methods("detection"))
         raise ValueError(f"detector: {run_dir} is a {method.name} run directory, not a detector ({names})")
-    return method.load(run_dir, score_threshold=score_threshold, flip=flip)
+    return method.load(run_dir, score_threshold=score_threshold, flip=flip, vote_iou=vote_iou)
 
 
 def run_mesh(run_dir: str | Path) -> tuple[Path, float] | None:
@@ -313,8 +315,8 @@ class DetectAndEstimatePose6D(SequentialProcessor):
     def from_run_dirs(cls, detector_dir: str | Path, pose_dirs: Mapping[str | int, str | Path], camera=None,
                       score_threshold: float = 0.3, strict: bool = False, load_meshes: bool = True,
                       verify: bool = False, flip: bool = False, box_variants: BoxVariants | None = None,
-                      poses_per_class: int | None = None,
-                      viewpoints: ViewpointRange | None = None) -> "DetectAndEstimatePose6D":
+                      poses_per_class: int | None = None, viewpoints: ViewpointRange | None = None,
+                      vote_iou: float | None = None) -> "DetectAndEstimatePose6D":
         """Loads a detector run (an SSD's) and one pose run directory per class (methods found by themselves).
 
         Args:
@@ -326,6 +328,7 @@ class DetectAndEstimatePose6D(SequentialProcessor):
                 (:class:`~paz6d.processors.crops.BoxVariants`, ``ImplicitPose6D``'s ``box_variants``).
             poses_per_class: poses only for each class's best detections (see the class).
             viewpoints: the AAE runs answer only with views in this range (``ImplicitPose6D``'s ``viewpoints``).
+            vote_iou: the detector's box voting (``DetectSingleShot``'s ``vote_iou``; ``None``: off).
         """
         estimators, meshes = {}, {}
         for key, run_dir in pose_dirs.items():
@@ -338,7 +341,7 @@ class DetectAndEstimatePose6D(SequentialProcessor):
 
                 mesh = load_mesh(found[0], found[1])
                 meshes[name] = (np.asarray(mesh.vertices), np.asarray(mesh.faces))
-        detector = load_detector(detector_dir, score_threshold, flip)
+        detector = load_detector(detector_dir, score_threshold, flip, vote_iou)
         return cls(detector, estimators, camera, strict, meshes, verify, poses_per_class)
 
     def run(self, image, camera=None, depth=None) -> dict:

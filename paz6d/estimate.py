@@ -92,6 +92,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--flip", action="store_true",
                         help="with --detector: also detect on each image's mirror image and average (a second "
                              "network pass; see DetectSingleShot's flip)")
+    parser.add_argument("--vote-iou", type=float, default=None, metavar="IOU",
+                        help="with --detector: each detection's box is the score-weighted mean of the boxes of its "
+                             "class overlapping it by at least this IoU (box voting; default: off, the NMS winner's "
+                             "own box; see DetectSingleShot's vote_iou)")
     parser.add_argument("--box-search", action="store_true",
                         help="with --detector: each AAE run tries its detection's box shifted by 0, 5 and 10 %% of "
                              "its sides either way along x and y and scaled by 0.9/1/1.1 (75 crops), and keeps the "
@@ -314,6 +318,10 @@ def check_arguments(args: argparse.Namespace) -> tuple[dict[int, tuple[Path, str
         raise ValueError("--verify: only with --detector (ground-truth boxes have no detection score)")
     if args.flip and args.detector is None:
         raise ValueError("--flip: only with --detector (it is how the detector sees the image)")
+    if args.vote_iou is not None and args.detector is None:
+        raise ValueError("--vote-iou: only with --detector (it is how the detector's boxes are merged)")
+    if args.vote_iou is not None and not 0.0 <= args.vote_iou <= 1.0:
+        raise ValueError(f"--vote-iou: expected an IoU in [0, 1], got {args.vote_iou}")
     if args.box_search and args.detector is None:
         raise ValueError("--box-search: only with --detector (with exact ground-truth boxes it lowers the scores)")
     if args.poses_per_class is not None:
@@ -362,7 +370,7 @@ def box_source(args: argparse.Namespace, runs, viewpoints: ViewpointRange | None
     if args.detector is None:
         return GroundTruthBoxes(runs, **options)
     return DetectorBoxes(runs, args.detector, args.score_threshold, args.flip, args.verify, args.poses_per_class,
-                         args.box_search, **options)
+                         args.box_search, args.vote_iou, **options)
 
 
 def write_folder_outputs(args: argparse.Namespace, frames: FolderFrames, found: dict, summary: dict) -> None:

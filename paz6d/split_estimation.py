@@ -286,6 +286,7 @@ class DetectorBoxes:
         verify: scores of the detections with a pose model times their pose's score (``VerifyBoxes``).
         poses_per_class: poses only for each class's best detections (``KeepTopPerClass``).
         box_search: the AAE runs choose among the default :class:`~paz6d.processors.crops.BoxVariants` of each box.
+        vote_iou: the detector's box voting (``DetectSingleShot``'s ``vote_iou``; ``None``: off).
         options: ``keypoint_crops``, ``viewpoints`` of :func:`load_estimators`.
     """
 
@@ -293,10 +294,11 @@ class DetectorBoxes:
 
     def __init__(self, runs: dict[int, tuple[Path, str]], detector_dir: Path,
                  score_threshold: float = DEFAULT_SCORE_THRESHOLD, flip: bool = False, verify: bool = False,
-                 poses_per_class: int | None = None, box_search: bool = False, **options):
+                 poses_per_class: int | None = None, box_search: bool = False, vote_iou: float | None = None,
+                 **options):
         from paz6d.detect_and_estimate import DetectAndEstimatePose6D, load_detector
 
-        detector = load_detector(detector_dir, score_threshold, flip)
+        detector = load_detector(detector_dir, score_threshold, flip, vote_iou)
         self.estimators, self.unusable = load_estimators(runs, box_variants=BoxVariants() if box_search else None,
                                                          **options)
         self.pipeline = DetectAndEstimatePose6D(detector, self.estimators, verify=verify,

@@ -869,6 +869,7 @@ def estimate_cases() -> list[Case]:
         "--keypoint-crops": [(("0",), "--keypoint-crops"), (("14",), "--keypoint-crops")],
         "--detector": [(("{case}/none",), "none"), (("{world}/runs/aae",), "aae run directory")],
         "--detections-out": [(("{out}/d.json",), "only with --detector")],
+        "--vote-iou": [(("0.5",), "--vote-iou: only with --detector")],
         "--elevation-degrees": [(("50", "10"), "--elevation-degrees"), (("nan", "90"), "--elevation-degrees"),
                                 (("-100", "90"), "--elevation-degrees"), (("x", "9"), "")],
         "--inplane-degrees": [(("200",), "--inplane-degrees"), (("-1",), "--inplane-degrees"), (("nan",), "")],
@@ -1646,6 +1647,8 @@ def run_directory_cases() -> list[Case]:
     opened (``detect``, ``estimate``, ``train <method>`` resuming), naming the file and the field."""
     detector = ("detector.json",)
     found = [Case("detect-ssd-run-model-garbage", DETECT, _ssd_run(lambda detector: None), ("model.keras",))]
+    found += _flag_cases("detect-", DETECT, {"--vote-iou": [(("1.5",), "--vote-iou: expected a value in [0, 1]"),
+                                                            (("nan",), "--vote-iou")]}, _ssd_run(lambda detector: None))
     found += [Case(f"detect-ssd-run-{name}", DETECT, _ssd_run(change), detector + expect) for name, change, expect in (
         ("steps-0", _priors("steps", [0, 0, 0, 0, 0, 0]), ("steps",)),
         ("aspect-ratio-0", _priors("aspect_ratios", [[0.0]] * 6), ("aspect_ratios",)),

@@ -357,6 +357,13 @@ def test_estimate_with_several_runs_and_with_the_detector_through_evaluate_bop(w
     assert main(["estimate", *runs, "--dataset", str(world / "set"), "--out", str(tmp_path / "x.csv"),
                  "--flip"]) == 2
     assert "--flip: only with --detector" in capsys.readouterr().err
+    # --vote-iou: the same detections and scores, each box the score-weighted mean of its neighbours
+    assert main(["estimate", "--detector", str(world / "ssd"), *runs, "--dataset", str(world / "set"),
+                 "--out", str(tmp_path / "voted.csv"), "--score-threshold", "0", "--vote-iou", "0.3",
+                 "--no-progress"]) == 0
+    voted = json.loads((tmp_path / "voted_detections.json").read_text())
+    ranked = lambda entries: sorted((e["image_id"], e["category_id"], round(e["score"], 4)) for e in entries)  # noqa: E731
+    assert ranked(voted) == ranked(coco) and sorted(map(key, voted)) != sorted(map(key, coco))
     # --box-search: the same detections; the AAEs pick among shifted and scaled copies of each box
     assert main(["estimate", "--detector", str(world / "ssd"), *runs, "--dataset", str(world / "set"),
                  "--out", str(tmp_path / "searched.csv"), "--score-threshold", "0", "--box-search",

@@ -134,6 +134,38 @@ def test_select_detections_matches_a_brute_force_loop(seed, count, threshold):
         np.testing.assert_allclose(box, box_e)
 
 
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1), st.integers(1, 40), st.sampled_from([0.3, 0.5, 0.7]))
+def test_box_voting_averages_each_winners_class_neighbours_by_score(seed, count, vote_iou):
+    generator = np.random.default_rng(seed)
+    corners = generator.uniform(0, 0.8, (count, 2))
+    boxes = np.concatenate([corners, corners + generator.uniform(0.02, 0.2, (count, 2))], axis=1)
+    probabilities = softmax(generator.normal(size=(count, 4)) * 2)
+    plain = select_detections(boxes, probabilities, 0.05, 0.45, max_detections=1000)
+    voted = select_detections(boxes, probabilities, 0.05, 0.45, max_detections=1000, vote_iou=vote_iou)
+    np.testing.assert_array_equal(voted[1], plain[1])  # the same winners, scores and classes
+    np.testing.assert_array_equal(voted[2], plain[2])
+    for box, winner, class_id in zip(voted[0], plain[0], plain[2]):  # the weighted mean, written out
+        total, weight = np.zeros(4), 0.0
+        for i in range(count):
+            score = probabilities[i, class_id]
+            overlap = boxes_backend.iou_matrix(boxes[[i]], winner[None])[0, 0]
+            if score >= 0.05 and (overlap >= vote_iou or np.array_equal(boxes[i], winner)):
+                total, weight = total + score * boxes[i], weight + score
+        np.testing.assert_allclose(box, total / weight)
+
+
+def test_box_voting_moves_a_winner_towards_its_neighbours_only():
+    boxes = np.array([[0.1, 0.1, 0.3, 0.3], [0.12, 0.12, 0.32, 0.32], [0.6, 0.6, 0.8, 0.8]])
+    probabilities = np.array([[0.2, 0.8], [0.4, 0.6], [0.3, 0.7]])
+    kept, scores, _ = select_detections(boxes, probabilities, 0.1, 0.45, vote_iou=0.5)
+    np.testing.assert_allclose(scores, [0.8, 0.7])
+    np.testing.assert_allclose(kept[0], (0.8 * boxes[0] + 0.6 * boxes[1]) / 1.4)
+    np.testing.assert_allclose(kept[1], boxes[2])  # nothing overlaps it
+    with pytest.raises(ValueError, match="iou_threshold: expected a value in"):
+        boxes_backend.vote_boxes([0], boxes, [1.0, 1.0, 1.0], [0, 0, 0], 1.5)
+
+
 def test_decode_outputs_inverts_the_encoding_and_checks_shapes():
     priors = priors_for(paper_priors("light", 128))
     truth = np.array([[0.2, 0.2, 0.5, 0.6]])

@@ -246,6 +246,32 @@ def nms_per_class(boxes, scores, class_ids, iou_threshold: float = 0.45, score_t
     return nms(shifted, scores, iou_threshold, score_threshold, max_outputs)
 
 
+def vote_boxes(kept, boxes, scores, class_ids, iou_threshold: float = 0.5) -> np.ndarray:
+    """Box voting (Gidaris & Komodakis 2015): each kept box ``(K, 4)`` replaced by the score-weighted mean of
+    the candidate ``boxes`` ``(N, 4)`` of its class (``class_ids`` ``(N,)``, one per kept box given as
+    ``kept`` ``(K,)`` indices into ``boxes``) whose IoU with it is at least ``iou_threshold``; the kept box
+    itself always votes. Scores ``(N,)`` weigh the votes (a score of 0 counts as the smallest positive float).
+
+    Returns:
+        ``(K, 4)`` float64 ``xyxy`` boxes, in the order of ``kept``.
+    """
+    boxes = _as_box_list(boxes, "boxes")
+    scores = np.asarray(scores, dtype=np.float64)
+    class_ids, kept = np.asarray(class_ids), np.asarray(kept, dtype=np.int64).reshape(-1)
+    if scores.shape != (len(boxes),) or class_ids.shape != (len(boxes),):
+        raise ValueError(f"scores/class_ids: expected shape ({len(boxes)},) matching boxes, "
+                         f"got {scores.shape} and {class_ids.shape}")
+    if not 0.0 <= iou_threshold <= 1.0:
+        raise ValueError(f"iou_threshold: expected a value in [0, 1], got {iou_threshold}")
+    if len(kept) == 0:
+        return np.zeros((0, 4))
+    overlaps = _iou(boxes[kept][:, None, :], boxes[None, :, :])  # (K, N)
+    voters = (overlaps >= iou_threshold) & (class_ids[kept][:, None] == class_ids[None, :])
+    voters[np.arange(len(kept)), kept] = True
+    weights = np.where(voters, np.maximum(scores, np.finfo(np.float64).tiny)[None, :], 0.0)
+    return weights @ boxes / weights.sum(axis=1, keepdims=True)
+
+
 def prior_boxes(image_size, feature_map_sizes: Sequence, steps: Sequence,
                 min_sizes: Sequence[float], max_sizes: Sequence[float],
                 aspect_ratios: Sequence[Sequence[float]], clip_to_image: bool = True) -> np.ndarray:

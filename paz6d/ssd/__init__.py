@@ -9,11 +9,11 @@ from paz6d.method import Method, NetworkSpec
 from paz6d.ssd.run_dir import SSDRunDir, read_model
 
 
-def load_pipeline(run_dir, score_threshold: float = 0.3, flip: bool = False):
+def load_pipeline(run_dir, score_threshold: float = 0.3, flip: bool = False, vote_iou: float | None = None):
     """The run's :class:`~paz6d.ssd.pipeline.DetectSingleShot` (imports TensorFlow)."""
     from paz6d.ssd.pipeline import DetectSingleShot
 
-    return DetectSingleShot(run_dir, score_threshold=score_threshold, flip=flip)
+    return DetectSingleShot(run_dir, score_threshold=score_threshold, flip=flip, vote_iou=vote_iou)
 
 
 def load_network(run_dir):
@@ -29,5 +29,6 @@ def training_input_size(run_dir) -> int:
 
 #: The SSD's record in :mod:`paz6d.methods`: a detector built for any image size is exported with free sides
 #: and checked at its training input size.
-METHOD = Method("ssd", "SSD", SSDRunDir, load_pipeline, task="detection", options=("score_threshold", "flip"),
+METHOD = Method("ssd", "SSD", SSDRunDir, load_pipeline, task="detection",
+                options=("score_threshold", "flip", "vote_iou"),
                 network=NetworkSpec(load_network, (-2.5, 2.5), input_size=training_input_size))

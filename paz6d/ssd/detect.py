@@ -52,6 +52,8 @@ class Detection:
     max_detections: int = option(100, "most detections per image")
     flip: bool = option(False, "also detect on each image's mirror image and average (test-time augmentation: "
                                "a second network pass; docs/ssd.md)")
+    vote_iou: float | None = option(None, "each box is the score-weighted mean of the boxes of its class overlapping "
+                                          "it by at least this IoU (box voting; default off; docs/ssd.md)")
     progress: bool = option(True, "progress bar")
 
     def __post_init__(self):
@@ -63,6 +65,8 @@ class Detection:
             raise ValueError(f"score_threshold: expected a value in [0, 1], got {self.score_threshold}")
         if self.max_detections < 1:
             raise ValueError(f"max_detections: expected a positive count, got {self.max_detections}")
+        if self.vote_iou is not None and not 0.0 <= self.vote_iou <= 1.0:
+            raise ValueError(f"vote_iou: expected a value in [0, 1], got {self.vote_iou}")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -139,7 +143,7 @@ def detect(job: Detection) -> dict:
 
     check_outputs({"--out": job.out, "--ground-truth": job.ground_truth}, config_inputs(job, ("out", "ground_truth")))
     detector = DetectSingleShot(job.run_dir, score_threshold=job.score_threshold, max_detections=job.max_detections,
-                                flip=job.flip)
+                                flip=job.flip, vote_iou=job.vote_iou)
     if job.dataset is not None:
         coco = bop_split_to_coco(job.dataset, job.split)
         category_ids = {name: bop_category_id(name) for name in detector.class_names}
@@ -154,4 +158,5 @@ def detect(job: Detection) -> dict:
     return {"images": len(files), "detections": len(results), "out": str(job.out),
             "ground_truth": None if job.ground_truth is None else str(job.ground_truth),
             "milliseconds_per_image": round(1000 * seconds, 2),
-            "score_threshold": job.score_threshold, "flip": job.flip, "classes": list(detector.class_names)}
+            "score_threshold": job.score_threshold, "flip": job.flip, "vote_iou": job.vote_iou,
+            "classes": list(detector.class_names)}

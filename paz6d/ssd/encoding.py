@@ -64,7 +64,7 @@ def decode_outputs(outputs, priors, variances=boxes_backend.SSD_VARIANCES) -> tu
 
 
 def select_detections(boxes, probabilities, score_threshold: float = 0.01, iou_threshold: float = 0.45,
-                      max_detections: int = 100, candidates_per_class: int = 200
+                      max_detections: int = 100, candidates_per_class: int = 200, vote_iou: float | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-class non-maximum suppression over every (prior, object class) pair.
 
@@ -74,6 +74,9 @@ def select_detections(boxes, probabilities, score_threshold: float = 0.01, iou_t
         iou_threshold: NMS overlap threshold (within one class).
         max_detections: most detections returned over all classes.
         candidates_per_class: best pairs of each class that enter NMS.
+        vote_iou: ``None`` keeps each NMS winner's own box; a number replaces it by the score-weighted mean of the
+            candidates of its class overlapping it by at least this IoU (box voting,
+            :func:`paz6d.backend.boxes.vote_boxes`).
     Returns:
         ``boxes (K, 4)``, ``scores (K,)``, ``class_ids (K,)`` (1-based) by decreasing score.
     """
@@ -90,4 +93,7 @@ def select_detections(boxes, probabilities, score_threshold: float = 0.01, iou_t
     prior_index, class_index, candidate_scores = prior_index[kept], class_index[kept], candidate_scores[kept]
     chosen = boxes_backend.nms_per_class(boxes[prior_index], candidate_scores, class_index, iou_threshold,
                                          max_outputs=max_detections)
-    return boxes[prior_index[chosen]], candidate_scores[chosen], class_index[chosen] + 1
+    chosen_boxes = boxes[prior_index[chosen]]
+    if vote_iou is not None:
+        chosen_boxes = boxes_backend.vote_boxes(chosen, boxes[prior_index], candidate_scores, class_index, vote_iou)
+    return chosen_boxes, candidate_scores[chosen], class_index[chosen] + 1

@@ -183,21 +183,20 @@ class CanvasToPixels(Processor):
 
 class NonMaximumSuppression(Processor):
     """``(boxes (P, 4), probabilities (P, C)) -> (boxes (K, 4), scores (K,), class_ids (K,))``: per-class
-    NMS (:func:`paz6d.ssd.encoding.select_detections`)."""
+    NMS (:func:`paz6d.ssd.encoding.select_detections`); with ``vote_iou`` each kept box is the score-weighted
+    mean of its class's candidates overlapping it by at least that IoU (box voting)."""
 
     def __init__(self, score_threshold: float = 0.3, iou_threshold: float = 0.45, max_detections: int = 100,
-                 name: str | None = None):
+                 vote_iou: float | None = None, name: str | None = None):
         super().__init__(name)
-        if not 0.0 <= score_threshold <= 1.0 or not 0.0 <= iou_threshold <= 1.0:
-            raise ValueError(f"score_threshold/iou_threshold: expected values in [0, 1], got "
-                             f"{score_threshold}, {iou_threshold}")
-        if int(max_detections) < 1:
-            raise ValueError(f"max_detections: expected a positive count, got {max_detections}")
+        check_detection_settings(score_threshold, iou_threshold, max_detections, vote_iou)
         self.score_threshold, self.iou_threshold = float(score_threshold), float(iou_threshold)
         self.max_detections = int(max_detections)
+        self.vote_iou = None if vote_iou is None else float(vote_iou)
 
     def call(self, boxes, probabilities) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return select_detections(boxes, probabilities, self.score_threshold, self.iou_threshold, self.max_detections)
+        return select_detections(boxes, probabilities, self.score_threshold, self.iou_threshold, self.max_detections,
+                                 vote_iou=self.vote_iou)
 
 
 class DenormalizeBoxes(Processor):
@@ -207,10 +206,12 @@ class DenormalizeBoxes(Processor):
         return boxes_backend.denormalize(np.asarray(boxes, np.float64).reshape(-1, 4), image_size)
 
 
-def check_detection_settings(score_threshold: float, iou_threshold: float, max_detections: int) -> None:
-    """``ValueError`` naming the argument unless both thresholds are numbers in [0, 1] and
-    ``max_detections`` a whole number >= 1 (``"0.5"``, NaN, ``inf`` and ``2.7`` are refused)."""
-    for name, value in (("score_threshold", score_threshold), ("iou_threshold", iou_threshold)):
+def check_detection_settings(score_threshold: float, iou_threshold: float, max_detections: int,
+                             vote_iou: float | None = None) -> None:
+    """``ValueError`` naming the argument unless both thresholds (and ``vote_iou`` unless ``None``) are numbers
+    in [0, 1] and ``max_detections`` a whole number >= 1 (``"0.5"``, NaN, ``inf`` and ``2.7`` are refused)."""
+    values = [("score_threshold", score_threshold), ("iou_threshold", iou_threshold)]
+    for name, value in values + ([("vote_iou", vote_iou)] if vote_iou is not None else []):
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
                 or not 0.0 <= value <= 1.0:
             raise ValueError(f"{name}: expected a number in [0, 1], got {value!r:.40}")
@@ -249,34 +250,37 @@ class DetectSingleShot(SequentialProcessor):
         iou_threshold: per-class NMS threshold.
         max_detections: most boxes per image.
         flip: average with the detections of the mirror image (test-time augmentation).
+        vote_iou: ``None`` keeps each NMS winner's box; a number in [0, 1] makes it the score-weighted mean of the
+            boxes of its class overlapping it by at least this IoU (box voting, ``docs/ssd.md``).
     Raises:
         ValueError: missing or corrupt run directory (message names the file); a threshold that is no
             number in [0, 1] or a ``max_detections`` that is no whole number >= 1 (checked first).
     """
 
     def __init__(self, run_dir: str | Path, score_threshold: float = 0.3, iou_threshold: float = 0.45,
-                 max_detections: int = 100, flip: bool = False):
-        check_detection_settings(score_threshold, iou_threshold, max_detections)
+                 max_detections: int = 100, flip: bool = False, vote_iou: float | None = None):
+        check_detection_settings(score_threshold, iou_threshold, max_detections, vote_iou)
         if not isinstance(run_dir, (str, Path)) or not str(run_dir):
             raise ValueError(f"run_dir: expected the path of an SSD run directory, got {run_dir!r:.60}")
         model, detector = run_files.read_model(run_dir)
         self.run_dir = Path(run_dir)
-        self._build(model, detector, score_threshold, iou_threshold, max_detections, flip)
+        self._build(model, detector, score_threshold, iou_threshold, max_detections, flip, vote_iou)
 
     @classmethod
     def from_model(cls, model, detector: dict, score_threshold: float = 0.3, iou_threshold: float = 0.45,
-                   max_detections: int = 100, flip: bool = False) -> "DetectSingleShot":
+                   max_detections: int = 100, flip: bool = False, vote_iou: float | None = None
+                   ) -> "DetectSingleShot":
         """The pipeline of a network in memory (e.g. during training) and its ``detector.json`` contents
         (checked by :func:`paz6d.ssd.run_dir.check_detector`)."""
-        check_detection_settings(score_threshold, iou_threshold, max_detections)
+        check_detection_settings(score_threshold, iou_threshold, max_detections, vote_iou)
         run_files.check_detector(detector, "detector")
         pipeline = cls.__new__(cls)
         pipeline.run_dir = None
-        pipeline._build(model, detector, score_threshold, iou_threshold, max_detections, flip)
+        pipeline._build(model, detector, score_threshold, iou_threshold, max_detections, flip, vote_iou)
         return pipeline
 
     def _build(self, model, detector: dict, score_threshold: float, iou_threshold: float, max_detections: int,
-               flip: bool):
+               flip: bool, vote_iou: float | None):
         from paz6d.ssd.model import PriorSpec, inference_function, input_normalization, priors_for
 
         spec = PriorSpec.from_dict(detector["priors"])
@@ -301,7 +305,7 @@ class DetectSingleShot(SequentialProcessor):
                       name="normalize"),
             KeyedStep(predict, "input", "output", name="predict"),
             KeyedStep(decoder, decode_inputs, ("boxes", "probabilities"), name="decode"),
-            KeyedStep(NonMaximumSuppression(score_threshold, iou_threshold, max_detections),
+            KeyedStep(NonMaximumSuppression(score_threshold, iou_threshold, max_detections, vote_iou),
                       ("boxes", "probabilities"), ("boxes", "scores", "class_ids"), name="nms"),
             to_pixels,
             KeyedStep(ToBoxes2D((BACKGROUND,) + self.class_names), ("boxes", "scores", "class_ids"), "detections",
