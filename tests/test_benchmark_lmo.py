@@ -224,6 +224,8 @@ def test_a_pose_method_per_object_reuses_the_other_models_and_reports_under_its_
     assert parsed.poses_per_class == 1 and parsed.box_search and parsed.flip
     # scored detections are kept down to 0.01: COCO AP and BOP's best-estimate rule rank them by score
     assert parsed.score_threshold == lmo.SCORED_DETECTION_THRESHOLD == 0.01 and "--score-threshold" not in truth
+    # and their boxes are voted (box voting, chosen on the held-out synthetic images)
+    assert parsed.vote_iou == lmo.SCORED_VOTE_IOU == 0.5 and "--vote-iou" not in truth
     # the held-out synthetic images with the detector's boxes: the same flags, scored on their visible-box targets
     synthetic = build_parser().parse_args(lmo._estimate_args(mixed, "synthetic_detections"))
     assert synthetic.detector == parsed.detector and synthetic.poses_per_class == 1 and synthetic.box_search

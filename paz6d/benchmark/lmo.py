@@ -14,12 +14,13 @@ From the 8 LM-O meshes (``<lmo>/models``) only:
    (real inter-object occlusion) besides its own rendered views;
 5. ``estimate_gt`` / ``estimate_detections``: ``paz6d estimate`` on the real RGB frames with the ground-truth
    visible boxes and with the detector's boxes (which reads no ground truth; the detector also sees each frame's
-   mirror image, ``paz6d estimate --flip``, ``docs/ssd.md``; poses for each class's best detection, whose
-   AAE searches around its box, ``--poses-per-class 1 --box-search``); in every condition the AAEs answer only
-   with the training scenes' viewpoints widened by 15 degrees (:func:`viewpoints`); ``estimate_synthetic``: on
-   held-out synthetic images of the training scenes' kind (``validation``, another seed), ground-truth visible
-   boxes: what a user without real labels sees, to pick a method per object; ``estimate_synthetic_detections``:
-   the same images with the detector's boxes (as on the real frames), what the boxes cost without the real photos;
+   mirror image, ``paz6d estimate --flip``, ``docs/ssd.md``, and its boxes are voted, ``--vote-iou``; poses for
+   each class's best detection, whose AAE searches around its box, ``--poses-per-class 1 --box-search``); in
+   every condition the AAEs answer only with the training scenes' viewpoints widened by 15 degrees
+   (:func:`viewpoints`); ``estimate_synthetic``: on held-out synthetic images of the training scenes' kind
+   (``validation``, another seed), ground-truth visible boxes: what a user without real labels sees, to pick a
+   method per object; ``estimate_synthetic_detections``: the same images with the detector's boxes (as on the
+   real frames), what the boxes cost without the real photos;
 6. ``evaluate_*``: ``paz6d evaluate bop`` (AR_MSSD, AR_MSPD, ADD(-S), per object) of each, and
    ``paz6d evaluate coco`` of the detections;
 7. ``report``: ``DIR/report.json``, ``DIR/report.md`` (the table; once two methods were scored on an object,
@@ -76,6 +77,10 @@ CONDITIONS = {"gt": "gt_visible_boxes", "detections": "detections", "synthetic":
 #: BOP scores each object's best estimates only, so a threshold can only drop detections that might match
 #: (0.01, as detectors are commonly scored; `paz6d estimate`'s own default, 0.1, suits an application).
 SCORED_DETECTION_THRESHOLD = 0.01
+#: Box voting in the scored detection conditions (``paz6d estimate --vote-iou``): each detection's box is the
+#: score-weighted mean of its class's boxes overlapping it by at least this IoU (chosen on the held-out synthetic
+#: images: docs/experiments/2026-12-07-lmo-detector-box-voting.md).
+SCORED_VOTE_IOU = 0.5
 #: The conditions whose boxes come from the benchmark's detector.
 DETECTOR_CONDITIONS = ("detections", "synthetic_detections")
 #: Seed offset of the held-out synthetic images (image i of seed s + 1000 shares nothing with the training set's).
@@ -418,7 +423,7 @@ def _estimate_args(job: Benchmark, condition: str) -> list[str]:
         # LM-O shows each object once: BOP scores each object's best estimate, so only the best detection per class
         # needs a pose, and that makes the AAEs' box search cheap enough to run on every frame (docs/real_photos.md)
         argv += ["--detector", str(job.out / "detector"), "--flip", "--poses-per-class", "1", "--box-search",
-                 "--score-threshold", f"{SCORED_DETECTION_THRESHOLD:g}",
+                 "--score-threshold", f"{SCORED_DETECTION_THRESHOLD:g}", "--vote-iou", f"{SCORED_VOTE_IOU:g}",
                  "--detections-out", str(job.result(condition, "_detections.json"))]
     return argv + ([] if job.progress else ["--no-progress"])
 
@@ -887,8 +892,9 @@ def write_report(job: Benchmark, timings: dict[str, float], wall_seconds: float 
     header = (f"# paz6d benchmark lmo ({'quick' if job.quick else 'full'})\n\n"
               f"Synthetic training only; {len(job.objects)} LM-O objects; scored on the real RGB frames of "
               f"{job.lmo} with `paz6d evaluate bop`; `detections`: the benchmark's detector, which also sees each "
-              f"frame's mirror image, and whose best box per object is searched around by its AAE (`paz6d estimate "
-              f"--flip --poses-per-class 1 --box-search`); in every condition the AAEs answer only with views of "
+              f"frame's mirror image, whose boxes are voted, and whose best box per object is searched around by its "
+              f"AAE (`paz6d estimate --flip --vote-iou {SCORED_VOTE_IOU:g} --poses-per-class 1 --box-search`); in "
+              f"every condition the AAEs answer only with views of "
               f"{viewpoints(job).describe()} (the training scenes' range widened by {VIEWPOINT_MARGIN_DEGREES:g}); "
               f"`synthetic_gt_visible_boxes`: the same models on "
               f"{job.settings.validation_images} held-out synthetic images (what a user without real labels can "
