@@ -109,13 +109,18 @@ def test_encode_targets_marks_matched_priors_and_decodes_back():
         encode_targets(truth, [0, 1], priors, 3)
 
 
-@settings(max_examples=25, deadline=None)
-@given(st.integers(0, 2 ** 31 - 1), st.integers(1, 40), st.sampled_from([0.3, 0.45, 0.7]))
-def test_select_detections_matches_a_brute_force_loop(seed, count, threshold):
+def _random_candidates(seed: int, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` random normalised boxes ``(count, 4)`` and class probabilities ``(count, 4)`` (background first)."""
     generator = np.random.default_rng(seed)
     corners = generator.uniform(0, 0.8, (count, 2))
     boxes = np.concatenate([corners, corners + generator.uniform(0.02, 0.2, (count, 2))], axis=1)
-    probabilities = softmax(generator.normal(size=(count, 4)) * 2)
+    return boxes, softmax(generator.normal(size=(count, 4)) * 2)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1), st.integers(1, 40), st.sampled_from([0.3, 0.45, 0.7]))
+def test_select_detections_matches_a_brute_force_loop(seed, count, threshold):
+    boxes, probabilities = _random_candidates(seed, count)
     kept_boxes, scores, class_ids = select_detections(boxes, probabilities, 0.05, threshold, max_detections=1000)
     expected = []
     for class_id in range(1, 4):  # greedy NMS per class, written out
@@ -137,10 +142,7 @@ def test_select_detections_matches_a_brute_force_loop(seed, count, threshold):
 @settings(max_examples=25, deadline=None)
 @given(st.integers(0, 2 ** 31 - 1), st.integers(1, 40), st.sampled_from([0.3, 0.5, 0.7]))
 def test_box_voting_averages_each_winners_class_neighbours_by_score(seed, count, vote_iou):
-    generator = np.random.default_rng(seed)
-    corners = generator.uniform(0, 0.8, (count, 2))
-    boxes = np.concatenate([corners, corners + generator.uniform(0.02, 0.2, (count, 2))], axis=1)
-    probabilities = softmax(generator.normal(size=(count, 4)) * 2)
+    boxes, probabilities = _random_candidates(seed, count)
     plain = select_detections(boxes, probabilities, 0.05, 0.45, max_detections=1000)
     voted = select_detections(boxes, probabilities, 0.05, 0.45, max_detections=1000, vote_iou=vote_iou)
     np.testing.assert_array_equal(voted[1], plain[1])  # the same winners, scores and classes
