@@ -166,6 +166,13 @@ def test_box_voting_moves_a_winner_towards_its_neighbours_only():
     np.testing.assert_allclose(kept[1], boxes[2])  # nothing overlaps it
     with pytest.raises(ValueError, match="iou_threshold: expected a value in"):
         boxes_backend.vote_boxes([0], boxes, [1.0, 1.0, 1.0], [0, 0, 0], 1.5)
+    from paz6d.ssd.pipeline import NonMaximumSuppression
+
+    voting = NonMaximumSuppression(0.1, vote_iou=0.5)  # the pipeline's step votes as select_detections does
+    np.testing.assert_allclose(voting(boxes, probabilities)[0], kept)
+    for bad in (1.5, float("nan"), "0.5", True):
+        with pytest.raises(ValueError, match="vote_iou: expected a number in"):
+            NonMaximumSuppression(vote_iou=bad)
 
 
 def test_decode_outputs_inverts_the_encoding_and_checks_shapes():
