@@ -91,9 +91,9 @@ def select_detections(boxes, probabilities, score_threshold: float = 0.01, iou_t
     candidate_scores = scores[prior_index, class_index]
     kept = candidate_scores >= score_threshold
     prior_index, class_index, candidate_scores = prior_index[kept], class_index[kept], candidate_scores[kept]
-    chosen = boxes_backend.nms_per_class(boxes[prior_index], candidate_scores, class_index, iou_threshold,
+    candidates = boxes[prior_index]
+    chosen = boxes_backend.nms_per_class(candidates, candidate_scores, class_index, iou_threshold,
                                          max_outputs=max_detections)
-    chosen_boxes = boxes[prior_index[chosen]]
-    if vote_iou is not None:
-        chosen_boxes = boxes_backend.vote_boxes(chosen, boxes[prior_index], candidate_scores, class_index, vote_iou)
+    chosen_boxes = candidates[chosen] if vote_iou is None else \
+        boxes_backend.vote_boxes(chosen, candidates, candidate_scores, class_index, vote_iou)
     return chosen_boxes, candidate_scores[chosen], class_index[chosen] + 1
