@@ -57,6 +57,27 @@ def test_backbone_flag_brings_its_settings_and_leaves_the_light_defaults_alone()
         build_parser().parse_args(["train", "ssd", "--dataset", "d", "--out", "o", "--backbone", "resnet50"])
 
 
+def test_top_down_flag_replaces_the_config_and_builds_on_the_backbone(tmp_path):
+    from paz6d.ssd.model import build_ssd, load_ssd, save_ssd
+
+    parse = build_parser().parse_args
+    for flags, expected in (([], False), (["--top-down"], True), (["--no-top-down"], False)):
+        args = parse(["train", "ssd", "--dataset", "d", "--out", "o", "--backbone", BACKBONE, *flags])
+        settings = config_from_args(SSDTraining, args, exclude=("settings",)).model_config
+        assert settings.top_down is expected and settings.backbone == BACKBONE
+    on = QUICK.replace(top_down=True)
+    assert SSDTraining(dataset="d", out="o", settings=on).model_config.top_down  # the flag off keeps the settings'
+    with pytest.raises(ValueError, match="top_down: only the light network"):
+        SSDTraining(dataset="d", out="o", config="full", top_down=True)
+    model, spec = build_ssd(3, "light", 128, width=0.25, backbone=BACKBONE, top_down=True)
+    fused = [layer for layer in model.layers if layer.name.startswith("topdown_") and layer.name.endswith("pw_relu")]
+    assert len(fused) == 3 and all(layer.output.shape[-1] == 32 for layer in fused)  # 128 channels x width 0.25
+    image = np.random.default_rng(1).normal(size=(1, 128, 128, 3)).astype(np.float32)
+    save_ssd(model, tmp_path / "model.keras")
+    np.testing.assert_allclose(np.asarray(load_ssd(tmp_path / "model.keras", spec, 3)(image)), np.asarray(model(image)),
+                               rtol=1e-5, atol=1e-5)
+
+
 def test_backbone_ssd_maps_match_the_priors_its_body_is_partly_frozen_and_it_loads_back(tmp_path):
     from paz6d.pipelines import DetectSingleShot
     from paz6d.ssd.model import (BACKBONE_LAYER, backbone_variables, build_ssd, input_normalization, priors_for,

@@ -151,6 +151,8 @@ class SSDTraining:
         None, "light network only: train on input-sized windows of images rescaled by a factor in [LOW, HIGH] "
               "and detect on whole images at the factors' geometric mean (default: the config's)",
         metavar=("LOW", "HIGH"))
+    top_down: bool = option(False, "light network only: add a feature-pyramid top-down path over the stride-8, 16 "
+                                   "and 32 maps before the heads (docs/ssd.md; without it: the config's)")
     backbone: str | None = option(None, "body of the light network: efficientnet-lite0 (pretrained on ImageNet, "
                                         "docs/backbones.md; brings its input size, batch size and learning rates "
                                         "unless given) or none (its own, from scratch; default: the config's)",
@@ -165,7 +167,7 @@ class SSDTraining:
     @property
     def model_config(self) -> SSDConfig:
         """``settings`` (default: the preset ``config``) with the backbone's (:data:`BACKBONE_SETTINGS`), then
-        ``steps``, ``batch_size``, ``input_size`` and ``scale_crops`` applied.
+        ``steps``, ``batch_size``, ``input_size`` and ``scale_crops`` applied, and ``top_down`` when set.
 
         Raises:
             ValueError: a bad flag value, an ``input_size`` the network cannot take, or a backbone, top-down
@@ -175,4 +177,4 @@ class SSDTraining:
         if self.backbone is not None:
             settings = settings.replace(**BACKBONE_SETTINGS.get(self.backbone, {"backbone": self.backbone}))
         return with_flags(settings, steps=self.steps, batch_size=self.batch_size, input_size=self.input_size,
-                          scale_crops=self.scale_crops)
+                          scale_crops=self.scale_crops, top_down=True if self.top_down else None)
