@@ -1118,6 +1118,9 @@ def train_cases() -> list[Case]:
     })
     found.append(Case("train-ssd-backbone-full-config", (*TRAIN_SSD, "--config", "full", "--backbone",
                                                          "efficientnet-lite0"), None, ("backbone", "light network")))
+    found.append(Case("train-keypointnet-backbone-full-config", (*TRAIN_KEYPOINTNET, "--config", "full", "--backbone",
+                                                                  "efficientnet-lite0"), None,
+                      ("backbone", "strides 2 to 8")))
     found.append(Case("train-ssd-top-down-full-config", (*TRAIN_SSD, "--config", "full", "--top-down"), None,
                       ("--top-down", "light network")))
     found.append(Case("train-ssd-input-size-full-config", (*TRAIN_SSD, "--config", "full", "--input-size", "512"),

@@ -61,6 +61,36 @@ def test_context_stack_runs_coarse_and_maps_come_back_at_downsample(tmp_path):
     np.testing.assert_allclose(np.asarray(loaded(images, training=False)["uv"]), np.asarray(outputs["uv"]), atol=1e-5)
 
 
+def test_pretrained_body_is_frozen_feeds_the_stack_at_stride_8_and_loads_back(tmp_path):
+    from paz6d.backbones import efficientnet_lite0 as lite0
+
+    model, forcing = kp.build_keypointnet(num_keypoints=3, input_size=64, filters=8, downsample=4, dilations=(1, 2),
+                                          context_stride=8, orientation=True, backbone="efficientnet-lite0")
+    names = {layer.name for layer in model.layers}
+    assert "stem_conv" not in names and "down0_conv" not in names  # the own stem and strided convs are gone
+    body = model.get_layer(kp.BACKBONE_LAYER)
+    assert not body.trainable and not body.trainable_weights
+    assert body.count_params() > 0 and forcing.get_layer(kp.BACKBONE_LAYER) is body  # one body for both passes
+    assert tuple(model.get_layer("dilated0_conv").output.shape[1:3]) == (8, 8)  # 64 / 8
+    assert [tuple(output.shape[1:]) for output in body.outputs] == [(16, 16, 24), (8, 8, 40)]  # strides 4, 8
+    images = np.random.default_rng(4).integers(0, 256, (2, 64, 64, 3)).astype(np.float32)
+    # the body reads the backbone's input scaling: the frozen features equal the feature extractor's
+    extractor = lite0.build_features((64, 64, 3), frozen_stages=len(lite0.STAGES))
+    stride8 = extractor(lite0.preprocess(images.astype(np.uint8)))[0]
+    preprocess = model.get_layer("backbone_preprocess")
+    np.testing.assert_allclose(np.asarray(body(preprocess(images))[1]), np.asarray(stride8), rtol=1e-4, atol=1e-4)
+    outputs = model(images, training=False)
+    assert tuple(outputs["probabilities"].shape) == (2, 16, 16, 3) and tuple(outputs["chart"].shape) == (2, 3)
+    loaded = kp.load_keypointnet(kp.save_keypointnet(model, tmp_path / "lite0.keras"))
+    np.testing.assert_allclose(np.asarray(loaded(images, training=False)["uv"]), np.asarray(outputs["uv"]),
+                               rtol=1e-5, atol=1e-4)
+    for kwargs in ({"downsample": 4, "context_stride": 4}, {"downsample": 1, "context_stride": 8}):
+        with pytest.raises(ValueError, match="backbone: efficientnet-lite0 gives the maps of strides 2 to 8"):
+            kp.build_keypointnet(input_size=64, backbone="efficientnet-lite0", **kwargs)
+    with pytest.raises(ValueError, match="backbone: expected one of"):
+        kp.build_keypointnet(backbone="resnet50")
+
+
 def test_bfloat16_body_with_float32_heads_survives_save_and_load(tmp_path):
     model = kp.build_keypointnet(num_keypoints=3, input_size=32, filters=8, downsample=2, dilations=(1,),
                                  context_stride=4, compute_dtype="bfloat16")

@@ -235,6 +235,25 @@ def test_tiny_training_lowers_the_loss_and_writes_a_loadable_run(mode, mesh_path
         assert resumed["steps"] == 50 and len(_losses(job.out)) == 5
 
 
+@pytest.mark.slow  # the backbone's weights and gradients through its frozen maps; the model test runs by default
+def test_tiny_training_on_the_pretrained_body_lowers_the_loss_and_loads(mesh_path, tmp_path):
+    from paz6d.keypointnet.config import KeypointTraining
+    from paz6d.keypointnet.model import BACKBONE_LAYER, load_keypointnet
+    from paz6d.keypointnet.train import train_keypointnet
+
+    job = KeypointTraining(tmp_path / "lite0", mesh_path, mesh_scale=1e-3, seed=0, workers=0, steps=40,
+                           progress=False, settings=TINY, backbone="efficientnet-lite0")
+    train_keypointnet(job)
+    losses = _losses(job.out)
+    assert len(losses) == 4 and np.mean(losses[-2:]) < np.mean(losses[:2])
+    assert json.loads((job.out / "config.json").read_text())["settings"]["backbone"] == "efficientnet-lite0"
+    model = load_keypointnet(job.out / "model.keras")
+    assert not model.get_layer(BACKBONE_LAYER).trainable_weights
+    with pytest.raises(ValueError, match="backbone"):  # the body is fixed for a run: resuming with the own refused
+        train_keypointnet(KeypointTraining(job.out, mesh_path, mesh_scale=1e-3, workers=0, steps=50, progress=False,
+                                           settings=TINY))
+
+
 @pytest.mark.slow  # the preset's photos and lights; the training loop itself runs in the tiny training tests
 def test_the_robust_preset_trains_on_photos_and_mixed_lights(mesh_path, tmp_path, monkeypatch):
     from paz6d.keypointnet.config import ROBUST, KeypointTraining
@@ -351,6 +370,26 @@ def test_cli_arguments_and_clear_errors(tmp_path, capsys):
     assert "missing.ply" in capsys.readouterr().err
     assert main(["train", "keypointnet", "--dataset", str(tmp_path), "--out", str(tmp_path / "r")]) == 2
     assert "models_info.json" in capsys.readouterr().err
+
+
+def test_backbone_flag_replaces_the_config_and_is_checked_against_its_strides():
+    from paz6d.keypointnet.config import QUICK, KeypointConfig, KeypointTraining
+    from paz6d.keypointnet.command import configure
+
+    parser = argparse.ArgumentParser()
+    configure(parser)
+    args = parser.parse_args(["--mesh", "m.ply", "--out", "run", "--backbone", "efficientnet-lite0"])
+    assert args.backbone == "efficientnet-lite0"
+    settings = KeypointTraining(out="run", mesh="m.ply", backbone="efficientnet-lite0").model_config
+    assert settings == QUICK.replace(backbone="efficientnet-lite0")
+    assert KeypointTraining(out="run", mesh="m.ply").model_config.backbone == "none"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--mesh", "m.ply", "--out", "run", "--backbone", "resnet50"])
+    with pytest.raises(ValueError, match="backbone: efficientnet-lite0 gives the maps of strides 2 to 8"):
+        KeypointTraining(out="run", mesh="m.ply", config="full", backbone="efficientnet-lite0")  # stack at stride 2
+    recorded = QUICK.to_dict()
+    del recorded["backbone"]  # a run directory from before the setting: its own body
+    assert KeypointConfig.from_dict(recorded).backbone == "none"
 
 
 def _write_bop_set(root, mesh_path, count: int = 3):

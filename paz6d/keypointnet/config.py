@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from paz6d.backbones import BACKBONES
 from paz6d.cli_options import option
 from paz6d.datasets.pose_format import POSE_FORMATS, checked_pose_source
 from paz6d.keypointnet.orientation import ChartSymmetry, mesh_symmetry
@@ -121,6 +122,9 @@ class KeypointConfig(KeypointNetwork):
         discovery_weights: weights of the discovery losses.
         lighting: light styles of the training views (:class:`~paz6d.keypointnet.views.ViewSampling`).
         augmentation: batch-time augmentation strengths.
+        backbone: the network's stem and strided convolutions: ``"none"`` (its own) or ``"efficientnet-lite0"``
+            (frozen, pretrained on ImageNet: ``docs/keypointnet.md``, "Pretrained body"; needs
+            ``context_stride`` 8 and ``downsample`` of at least 2).
     """
 
     views: int = positive(4000)
@@ -147,6 +151,20 @@ class KeypointConfig(KeypointNetwork):
     discovery_weights: DiscoveryWeights = DiscoveryWeights()
     lighting: tuple[str, ...] = setting(("key-fill",), choices=LIGHTING_STYLES)
     augmentation: Augmentation = Augmentation()
+    backbone: str = setting("none", choices=BACKBONES)
+
+    def check(self):
+        super().check()
+        check_backbone_strides(self.backbone, self.context_stride, self.downsample)
+
+
+def check_backbone_strides(backbone: str, context_stride: int | None, downsample: int) -> None:
+    """A pretrained ``backbone`` (not ``"none"``) gives KeypointNet the maps of strides 2 to 8: ValueError unless
+    the dilated stack runs at stride 8 (``context_stride``, ``None``: ``downsample``) and ``downsample`` >= 2."""
+    context = downsample if context_stride is None else context_stride
+    if backbone != "none" and (context != 8 or downsample < 2):
+        raise ValueError(f"backbone: {backbone} gives the maps of strides 2 to 8; expected context_stride 8 and "
+                         f"downsample at least 2, got {context} and {downsample}")
 
 
 #: Demo budget (`paz6d demo --keypoints` under 15 minutes on 2 CPU cores): see docs/keypointnet.md.
@@ -229,6 +247,9 @@ class KeypointTraining:
     seed: int = option(0, "seed of every random choice")
     workers: int = option(2, "rendering worker processes (0: render in this process)")
     steps: int | None = option(None, "training steps (default: the config's)")
+    backbone: str | None = option(None, "the network's stem and strided convolutions: efficientnet-lite0 (frozen, "
+                                        "pretrained on ImageNet; docs/keypointnet.md) or none (its own; default: "
+                                        "the config's)", choices=BACKBONES)
     progress: bool = option(True, "progress bars")
     settings: KeypointConfig | None = field(default=None)  # replaces the config's preset (e.g. a tiny network)
 
@@ -250,10 +271,11 @@ class KeypointTraining:
 
     @property
     def model_config(self) -> KeypointConfig:
-        """``settings`` (default: the preset ``config``) with ``steps`` applied, made for ``mode``."""
+        """``settings`` (default: the preset ``config``) with ``steps`` and ``backbone`` applied, made for
+        ``mode``."""
         if self.mode not in MODES:
             raise ValueError(f"mode: expected one of {MODES}, got {self.mode!r}")
-        settings = run_settings(CONFIGS, self.config, self.settings, steps=self.steps)
+        settings = run_settings(CONFIGS, self.config, self.settings, steps=self.steps, backbone=self.backbone)
         if settings.mode not in (None, self.mode):
             raise ValueError(f"config: {self.config!r} is a {settings.mode} preset; pass --mode {settings.mode} "
                              f"(got --mode {self.mode})")

@@ -30,7 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
+from paz6d.backbones import check_backbone
 from paz6d.backend.files import save_keras_model_atomically
+from paz6d.keypointnet.config import check_backbone_strides
 from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
                                             output_names)
 from paz6d.training.precision import body_policy
@@ -41,6 +43,11 @@ keras = import_keras()
 PACKAGE = "paz6d"
 OUTPUT_NAMES = ("uv", "depth", "probabilities")
 ORIENTATION_OUTPUTS = ("chart_logits", "chart")
+#: The pretrained backbone's maps a KeypointNet on it reads, by stride: EfficientNet-Lite0's stage ends (16, 24
+#: and 40 channels).
+BACKBONE_SKIPS = {2: "block0_out", 4: "block2_out", 8: "block4_out"}
+#: Name of the frozen backbone's nested model.
+BACKBONE_LAYER = "keypointnet_backbone"
 
 
 class KeypointNetError(ValueError):
@@ -133,7 +140,7 @@ class ChartCondition(keras.layers.Layer):
 def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: int = 32,
                       downsample: int = 4, dilations: tuple[int, ...] = (1, 2, 4, 8, 1, 2, 4),
                       depth_prior: float = 1.3, context_stride: int | None = None, compute_dtype: str = "float32",
-                      orientation: bool = False, name: str = "keypointnet"):
+                      orientation: bool = False, backbone: str = "none", name: str = "keypointnet"):
     """Builds the KeypointNet Keras model.
 
     Args:
@@ -156,6 +163,11 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
             (:mod:`paz6d.keypointnet.orientation`): three strided convolutions on the stem's features,
             pooled, predict ``chart_logits (B, 3)``; the chosen ``chart (B, 3)`` conditions the dilated
             stack (:class:`ChartCondition`).
+        backbone: ``"efficientnet-lite0"``: the stem and the strided convolutions are the frozen ImageNet
+            EfficientNet-Lite0 (:mod:`paz6d.backbones`) instead: its maps of the strides from ``downsample``
+            to 8 (:data:`BACKBONE_SKIPS`), each through a 3×3 convolution to ``filters`` channels, feed the
+            dilated stack (stride 8) and the decoder's skips. Needs ``context_stride`` 8 and ``downsample``
+            of at least 2.
     Returns:
         ``keras.Model`` with outputs ``{"uv": (B, N, 2), "depth": (B, N), "probabilities": (B, h, w, N)}``.
         With ``orientation``: ``(model, forcing)``, ``model`` adding outputs ``"chart_logits"`` and
@@ -163,6 +175,7 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
         whose ``chart (B, 3)`` one-hot replaces the predicted chart (for training).
     """
     context_stride = downsample if context_stride is None else int(context_stride)
+    check_backbone(backbone)
     if num_keypoints < 1:
         raise ValueError(f"num_keypoints: expected a positive integer, got {num_keypoints}")
     if downsample not in (1, 2, 4, 8):
@@ -175,6 +188,7 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
     if filters < 1 or not dilations or any(int(rate) < 1 for rate in dilations):
         raise ValueError(f"filters/dilations: expected filters >= 1 and positive dilation rates, "
                          f"got {filters}, {dilations}")
+    check_backbone_strides(backbone, context_stride, downsample)
     body = body_policy(compute_dtype)
     layers = keras.layers
     made = {}
@@ -191,22 +205,47 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
         x = layer(f"{name}_bn", lambda: layers.BatchNormalization(name=f"{name}_bn", dtype=body))(x)
         return layer(f"{name}_relu", lambda: layers.ReLU(name=f"{name}_relu", dtype=body))(x)
 
-    def forward(image, forced_chart=None):
+    def own_body(image):
+        """The stem and the strided convolutions: ``(map at context_stride, {stride: skip map})``."""
         x = layer("scale", lambda: layers.Rescaling(1.0 / 127.5, offset=-1.0, name="scale", dtype=body))(image)
         stride = min(context_stride, 2)
         x = conv_bn_relu(x, "stem", stride)
         skips = {stride: x}
-        chart_outputs = {}
-        if orientation:
-            o = skips[stride]
-            for level in range(3):
-                o = conv_bn_relu(o, f"orient{level}", 2)
-            o = layer("orient_pool", lambda: layers.GlobalAveragePooling2D(name="orient_pool", dtype=body))(o)
-            chart_logits = layer("chart_logits", lambda: layers.Dense(3, name="chart_logits", dtype="float32"))(o)
         for level in range(int(math.log2(context_stride // stride))):
             x = conv_bn_relu(x, f"down{level}", 2)
             stride *= 2
             skips[stride] = x
+        return x, skips
+
+    def pretrained_body(image):
+        """The frozen backbone's maps of strides ``downsample`` to 8, each projected to ``filters`` channels."""
+        from paz6d.backbones import efficientnet_lite0 as lite0
+
+        strides = [stride for stride in sorted(BACKBONE_SKIPS) if stride >= downsample]
+
+        def make():
+            features = lite0.build_features((input_size, input_size, 3), frozen_stages=len(lite0.STAGES))
+            maps = [features.get_layer(BACKBONE_SKIPS[stride]).output for stride in strides]
+            frozen = keras.Model(features.input, maps, name=BACKBONE_LAYER)
+            frozen.trainable = False
+            return frozen
+
+        x = layer("backbone_preprocess", lambda: layers.Rescaling(
+            1.0 / lite0.PIXEL_SCALE, offset=-lite0.PIXEL_MEAN / lite0.PIXEL_SCALE, name="backbone_preprocess"))(image)
+        maps = layer(BACKBONE_LAYER, make)(x, training=False)
+        skips = {stride: conv_bn_relu(feature, f"project{stride}") for stride, feature in zip(strides, maps)}
+        return skips[8], skips
+
+    def forward(image, forced_chart=None):
+        x, skips = own_body(image) if backbone == "none" else pretrained_body(image)
+        stride = context_stride
+        chart_outputs = {}
+        if orientation:
+            o = skips[min(skips)]
+            for level in range(3):
+                o = conv_bn_relu(o, f"orient{level}", 2)
+            o = layer("orient_pool", lambda: layers.GlobalAveragePooling2D(name="orient_pool", dtype=body))(o)
+            chart_logits = layer("chart_logits", lambda: layers.Dense(3, name="chart_logits", dtype="float32"))(o)
         if orientation:
             condition = layer("chart", lambda: ChartCondition(name="chart", dtype=body))
             x, chart = condition([x, chart_logits] if forced_chart is None else [x, chart_logits, forced_chart])

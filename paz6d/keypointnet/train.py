@@ -456,7 +456,8 @@ def train_keypointnet(job: KeypointTraining, views=None) -> dict:
     keras.utils.set_random_seed(job.seed)
     built = kp.build_keypointnet(settings.num_keypoints, settings.input_size, settings.filters, settings.downsample,
                                  settings.dilations, context_stride=settings.context_stride,
-                                 compute_dtype=settings.precision, orientation=symmetry is not None)
+                                 compute_dtype=settings.precision, orientation=symmetry is not None,
+                                 backbone=settings.backbone)
     model, trained = built if symmetry is not None else (built, built)  # trained: the chart-forcing twin
     schedule = keras.optimizers.schedules.CosineDecay(settings.learning_rate, settings.steps, alpha=0.05)
     ema = settings.ema_momentum
