@@ -163,6 +163,9 @@ def test_preprocess_scales_uint8_rgb():
     out = lite0.preprocess(images)
     assert out.dtype == np.float32
     np.testing.assert_allclose(out, [[[[-127 / 128, 0.0, 1.0]]]])
+    pixels = images.astype(np.float32)  # the Keras layer scales alike, from 0..255 or from [0, 1]
+    np.testing.assert_allclose(np.asarray(lite0.preprocess_layer("p")(pixels)), out, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(lite0.preprocess_layer("p", pixel_max=1.0)(pixels / 255.0)), out, atol=1e-6)
 
 
 def test_keras_round_trip_in_safe_mode_gives_identical_outputs(classifier, tmp_path):

@@ -93,8 +93,7 @@ def _pretrained_features(keras, crops, input_size: int):
 
     side = 2 * input_size
     x = keras.layers.Resizing(side, side, interpolation="bilinear", name="encoder_upsample")(crops)
-    x = keras.layers.Rescaling(255.0 / lite0.PIXEL_SCALE, offset=-lite0.PIXEL_MEAN / lite0.PIXEL_SCALE,
-                               name="encoder_preprocess")(x)
+    x = lite0.preprocess_layer("encoder_preprocess", pixel_max=1.0)(x)
     features = lite0.build_features((side, side, 3), frozen_stages=len(lite0.STAGES), name="encoder_backbone")
     stride_16 = [name for name, stride, _ in lite0.FEATURES].index(STRIDE_16_FEATURES)
     body = keras.Model(features.input, features.outputs[stride_16], name="encoder_backbone_stride16")

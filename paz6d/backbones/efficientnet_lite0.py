@@ -70,6 +70,12 @@ def preprocess(images: np.ndarray) -> np.ndarray:
     return ((np.asarray(images, np.float32) - PIXEL_MEAN) / PIXEL_SCALE).astype(np.float32)
 
 
+def preprocess_layer(name: str, pixel_max: float = 255.0):
+    """:func:`preprocess` as a Keras ``Rescaling`` layer for RGB values in ``[0, pixel_max]`` (255: 0..255 pixels,
+    1: images in [0, 1])."""
+    return keras.layers.Rescaling(255.0 / pixel_max / PIXEL_SCALE, offset=-PIXEL_MEAN / PIXEL_SCALE, name=name)
+
+
 def _conv(x, filters: int | None, kernel: int, stride: int, name: str):
     """Bias-free ``"same"``-padded convolution: ``Conv2D``, or ``DepthwiseConv2D`` when ``filters`` is None."""
     if filters is None:

@@ -32,9 +32,9 @@ import numpy as np
 
 from paz6d.backbones import check_backbone
 from paz6d.backend.files import save_keras_model_atomically
-from paz6d.keypointnet.config import check_backbone_strides
 from paz6d.backend.tensorflow_guard import (compiled_inference, import_keras, import_tensorflow, load_keras_model,
                                             output_names)
+from paz6d.keypointnet.config import check_backbone_strides
 from paz6d.training.precision import body_policy
 
 tf = import_tensorflow()
@@ -230,8 +230,7 @@ def build_keypointnet(num_keypoints: int = 10, input_size: int = 128, filters: i
             frozen.trainable = False
             return frozen
 
-        x = layer("backbone_preprocess", lambda: layers.Rescaling(
-            1.0 / lite0.PIXEL_SCALE, offset=-lite0.PIXEL_MEAN / lite0.PIXEL_SCALE, name="backbone_preprocess"))(image)
+        x = layer("backbone_preprocess", lambda: lite0.preprocess_layer("backbone_preprocess"))(image)
         maps = layer(BACKBONE_LAYER, make)(x, training=False)
         skips = {stride: conv_bn_relu(feature, f"project{stride}") for stride, feature in zip(strides, maps)}
         return skips[8], skips
